@@ -1,0 +1,172 @@
+"""Closed-form learning filters of the Theorem (paper Sec. III; design notes section 2).
+
+System j learns from system j-1::
+
+    d_f,j = L1_j{e_{j-1}} + L2_j{d_f,{j-1}}
+    L1_j  = (Gf_j Gd_{j-1})^{-1} Gd_j = -(1 - Q_j) Gd_{j-1}^{-1}
+    L2_j  = L1_j Gf_{j-1}
+
+(hats on the j-1 maps: they are built from system j-1's *model*). Because the factors
+commute, ``d_f,j = L1_j{e'_{j-1}}`` with ``e'_{j-1} = e_{j-1} + Gf_{j-1}{d_f,{j-1}}`` the
+error system j-1 would have had without learning; this is how :meth:`LearningFilters.apply`
+computes it (one inversion instead of two).
+
+Zeros and poles of ``L1_j`` come from the blocks, never from a quotient of polynomials::
+
+    Gd^{-1} = D / (P (1 - Q))  -> zeros: closed-loop poles of j-1 (eigenvalues of the
+                                  interconnection); poles: zeros of P_hat, of (1 - Q),
+                                  poles of M and of C
+    (1 - Q_j)/(1 - Q_{j-1}): the common zero at z = 1 is cancelled analytically (the
+                              root z = 1 is removed from both zero sets).
+
+One integrator (the PID's) remains: the loop rejects constant disturbances, so the error
+carries their derivative only. The ZOH sampling zero of P_hat outside the unit circle
+becomes an anti-causal pole (stable inversion, :mod:`ilcdob.design.noncausal`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import control as ct
+import numpy as np
+
+from ilcdob.errors import IlcdobError, SpecError
+from ilcdob.loop import LoopSystem, freqresp
+
+from .noncausal import ZPKFilter, as_signal
+
+__all__ = ["LearningFilters", "closed_form_filters", "simulate_map"]
+
+_GAIN_CHECK_W = np.array([0.37, 1.3, 5.1, 17.0])  # rad/s, points where the zpk form is checked
+
+
+def simulate_map(sys: ct.StateSpace, u: np.ndarray) -> np.ndarray:
+    """Causal response of a discrete SISO system to ``u`` from rest."""
+    resp = ct.forced_response(sys, U=np.asarray(u, dtype=float))
+    return np.asarray(resp.outputs, dtype=float).reshape(-1)
+
+
+def _one_minus(sys: ct.StateSpace) -> ct.StateSpace:
+    return ct.ss(sys.A, sys.B, -sys.C, 1.0 - sys.D, sys.dt)
+
+
+def _zeros_without_one(sys: ct.StateSpace, what: str) -> np.ndarray:
+    z = np.asarray(sys.zeros(), dtype=complex)
+    z = z[np.isfinite(z)]
+    i = int(np.argmin(np.abs(z - 1.0)))
+    if abs(z[i] - 1.0) > 1e-5:
+        raise SpecError(f"{what}: 1 - Q has no zero at z = 1 (nearest {z[i]:.6g}); Q must have unit DC gain")
+    return np.delete(z, i)
+
+
+def _l1_exact(prev: LoopSystem, nxt: LoopSystem, w: np.ndarray) -> np.ndarray:
+    """``-(1 - Q_j) (1/P_hat + (M + C)/(1 - Q_{j-1}))`` evaluated from block responses."""
+    q_j = freqresp(nxt.Q, w)
+    p = freqresp(prev.P, w)
+    m = freqresp(prev.M, w)
+    c = freqresp(prev.C, w)
+    q = freqresp(prev.Q, w)
+    return -(1 - q_j) * (1.0 / p + (m + c) / (1 - q))
+
+
+@dataclass(frozen=True)
+class LearningFilters:
+    """The pair (L1, L2) for system ``target`` learning from system ``source``.
+
+    Attributes
+    ----------
+    source : LoopSystem
+        System j-1's *nominal* loop (its model), whose data are learned from.
+    target : LoopSystem
+        System j (its Q is known exactly: it is software).
+    L1 : ZPKFilter
+        ``-(1 - Q_j) Gd_{j-1}^{-1}`` applied non-causally.
+    """
+
+    source: LoopSystem
+    target: LoopSystem
+    L1: ZPKFilter
+
+    def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
+        """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem).
+
+        Computed as ``L1{e_{j-1} + Gf_{j-1}{d_f,{j-1}}}`` (identical, since L2 = L1 Gf_{j-1}).
+
+        Parameters
+        ----------
+        e_prev : array, m
+            Tracking error of system j-1 over the trial.
+        df_prev : array, m/s^2
+            Learning signal system j-1 flew with (zeros if none).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j`` in m/s^2, same length.
+        """
+        e = as_signal(e_prev, "e_prev")
+        df = as_signal(df_prev, "df_prev", e.size)
+        e_virtual = e + simulate_map(self.source.G_f, df) if np.any(df) else e
+        return self.L1.apply(e_virtual, "e_prev")
+
+    def l1_response(self, w: np.ndarray) -> np.ndarray:
+        """Frequency response of L1 at ``w`` rad/s."""
+        return self.L1.freqresp(w)
+
+    def l2_response(self, w: np.ndarray) -> np.ndarray:
+        """Frequency response of ``L2 = L1 Gf_{j-1}`` at ``w`` rad/s."""
+        return self.L1.freqresp(w) * freqresp(self.source.G_f, w)
+
+    def te_responses(self, w: np.ndarray, source_true: LoopSystem | None = None,
+                     target_true: LoopSystem | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Error-propagation maps ``e_j = Te1{e_{j-1}} + Te2{d_f,{j-1}}`` with learning.
+
+        ``Te1 = Gd_j Gd_{j-1}^{-1} - Gf_j L1`` and ``Te2 = Te1 Gf_{j-1}``, with the *true*
+        loops (defaults: the models, for which both vanish, Case I of the Theorem).
+        """
+        src = source_true if source_true is not None else self.source
+        tgt = target_true if target_true is not None else self.target
+        gd_j, gd_p = freqresp(tgt.G_d, w), freqresp(src.G_d, w)
+        te1 = gd_j / gd_p - freqresp(tgt.G_f, w) * self.l1_response(w)
+        return te1, te1 * freqresp(src.G_f, w)
+
+
+def closed_form_filters(prev: LoopSystem, nxt: LoopSystem) -> LearningFilters:
+    """Build the closed-form filters for system ``nxt`` learning from ``prev``.
+
+    ``prev``'s nominal loop (its model ``P_hat``) is used; ``nxt`` contributes its Q only.
+
+    Raises
+    ------
+    SpecError
+        Different sample times, or a Q without unit DC gain.
+    IlcdobError
+        The zero-pole-gain form disagrees with the block formula (numerical trouble).
+    """
+    if abs(prev.ts - nxt.ts) > 1e-12:
+        raise SpecError(f"`sample_time`: systems {prev.name!r} ({prev.ts} s) and {nxt.name!r} "
+                        f"({nxt.ts} s) must share one sample time")
+    src = prev.nominal
+    zeros = np.concatenate([
+        _zeros_without_one(_one_minus(nxt.Q), f"system {nxt.name!r}"),
+        np.linalg.eigvals(src.closed_loop.A),
+    ])
+    p_zeros = np.asarray(src.P.zeros(), dtype=complex)
+    poles = np.concatenate([
+        np.linalg.eigvals(nxt.Q.A),
+        p_zeros[np.isfinite(p_zeros)],
+        _zeros_without_one(_one_minus(src.Q), f"system {prev.name!r}"),
+        np.linalg.eigvals(src.M.A),
+        np.linalg.eigvals(src.C.A),
+    ])
+    unit = ZPKFilter(zeros, poles, 1.0, src.ts)
+    exact = _l1_exact(src, nxt, _GAIN_CHECK_W)
+    ratio = exact / unit.freqresp(_GAIN_CHECK_W)
+    gain = float(np.real(np.mean(ratio)))
+    if np.max(np.abs(ratio / gain - 1)) > 1e-5:
+        raise IlcdobError(
+            f"learning filter {prev.name!r} -> {nxt.name!r}: zero-pole form does not match the block "
+            f"formula (gain ratios {ratio}); the loop is probably badly conditioned. Report this fleet."
+        )
+    return LearningFilters(source=src, target=nxt, L1=ZPKFilter(zeros, poles, gain, src.ts))

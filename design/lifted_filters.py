@@ -1,0 +1,99 @@
+"""The closed-form learning filters in lifted (matrix) form, regularised.
+
+``L1 = -T(1 - Q_j) Gd_{j-1}^+`` and ``L2 = L1 T(Gf_{j-1})`` over an N-sample trial, where
+``Gd^+`` is the Tikhonov-regularised inverse of the lifted ``Gd_{j-1}`` after shifting out
+its relative degree ``m`` (design notes section 3)::
+
+    Gd^+ = Z (H_s^T H_s + alpha I)^{-1} H_s^T S,   alpha = regularisation * sigma_max(H_s)^2
+
+``S`` drops the first ``m`` error samples (they do not depend on the input), ``Z`` pads the
+last ``m`` inputs with zeros. The lifted ``Gd`` of a non-minimum-phase ZOH plant is
+ill-conditioned (its smallest singular value decays like ``|z_nmp|^-N``), hence the
+regularisation and the reported conditioning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve, svdvals
+
+from ilcdob.errors import SpecError
+from ilcdob.lifted import lifted_operator, markov_parameters, relative_degree
+from ilcdob.loop import LoopSystem
+
+from .closed_form import _one_minus
+from .noncausal import as_signal
+
+__all__ = ["LiftedLearningFilters", "lifted_filters"]
+
+
+@dataclass(frozen=True)
+class LiftedLearningFilters:
+    """Lifted learning matrices for one pair.
+
+    Attributes
+    ----------
+    L1, L2 : numpy.ndarray
+        N x N matrices: ``d_f,j = L1 e_{j-1} + L2 d_f,{j-1}``.
+    shift : int
+        Relative degree of ``Gd_{j-1}`` in samples, shifted out before inverting.
+    condition_number : float
+        ``sigma_max / sigma_min`` of the shifted lifted ``Gd_{j-1}``.
+    regularised_condition : float
+        Condition number of the regularised normal matrix ``H_s^T H_s + alpha I``.
+    regularisation : float
+        Relative Tikhonov weight (alpha / sigma_max^2).
+    """
+
+    L1: np.ndarray
+    L2: np.ndarray
+    shift: int
+    condition_number: float
+    regularised_condition: float
+    regularisation: float
+
+    def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
+        """``d_f,j = L1 e_{j-1} + L2 d_f,{j-1}`` (m/s^2)."""
+        n = self.L1.shape[0]
+        e = as_signal(e_prev, "e_prev", n)
+        df = as_signal(df_prev, "df_prev", n)
+        return self.L1 @ e + self.L2 @ df
+
+
+def lifted_filters(prev: LoopSystem, nxt: LoopSystem, n: int,
+                   regularisation: float = 1e-12) -> LiftedLearningFilters:
+    """Lifted, regularised form of the closed-form filters over ``n`` samples.
+
+    Parameters
+    ----------
+    prev, nxt : LoopSystem
+        System j-1 (its model is used) and system j.
+    n : int
+        Trial length in samples. Cost: O(n^3) (dense SVD and Cholesky); n of a few
+        thousand takes seconds.
+    regularisation : float
+        Relative Tikhonov weight, > 0.
+    """
+    if not regularisation > 0:
+        raise SpecError(f"`regularisation`: got {regularisation!r}, expected a number > 0")
+    src = prev.nominal
+    h_gd = markov_parameters(src.G_d, n)
+    m = relative_degree(h_gd)
+    hs = lifted_operator(h_gd[m:])
+    sv = svdvals(hs)
+    alpha = regularisation * sv[0] ** 2
+    normal = hs.T @ hs + alpha * np.eye(n - m)
+    inv = cho_solve(cho_factor(normal), hs.T)  # (n-m) x (n-m)
+    gd_pinv = np.zeros((n, n))
+    gd_pinv[: n - m, m:] = inv
+    t_1mq = lifted_operator(markov_parameters(_one_minus(nxt.Q), n))
+    l1 = -t_1mq @ gd_pinv
+    l2 = l1 @ lifted_operator(markov_parameters(src.G_f, n))
+    return LiftedLearningFilters(
+        L1=l1, L2=l2, shift=m,
+        condition_number=float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
+        regularised_condition=float((sv[0] ** 2 + alpha) / (sv[-1] ** 2 + alpha)),
+        regularisation=float(regularisation),
+    )

@@ -1,0 +1,113 @@
+"""Non-causal application of rational discrete filters to whole trials (stable inversion).
+
+ILC runs between flights, so a learning filter may look ahead. A discrete filter
+``F(z) = k * prod(z - z_i) / prod(z - p_i)`` with poles outside the unit circle and more
+zeros than poles (the inverse of a ZOH plant with relative degree and sampling zeros) is
+applied as the exact stable inversion of design notes section 2:
+
+* poles with ``|p| <= 1`` (stable, plus the integrator at z = 1) form a causal part run
+  forwards from rest, in second-order sections (robust for clustered poles);
+* poles with ``|p| > 1`` form an anti-causal part ``prod 1/(z - p)`` run backwards from
+  the end of the trial (stable in reversed time);
+* surplus zeros become an advance of ``k`` samples (non-causal lead).
+
+Boundary effects: the causal part assumes the system was at rest before ``t = 0``; the
+anti-causal and advance parts assume zero input after the trial, which affects the last few
+samples only (the anti-causal poles decay as ``1/|p|`` per sample).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from ilcdob.errors import SignalError, SpecError
+
+__all__ = ["ZPKFilter", "as_signal"]
+
+_CIRCLE_TOL = 1e-8
+
+
+def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
+    """Check the signal convention: 1-D finite float array (of length ``n`` if given)."""
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim != 1:
+        raise SignalError(f"`{name}`: expected a 1-D array of samples, got shape {arr.shape}")
+    if n is not None and arr.size != n:
+        raise SignalError(f"`{name}`: expected {n} samples, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+        raise SignalError(f"`{name}`: non-finite value {arr[bad]!r} at sample {bad}")
+    return arr
+
+
+@dataclass(frozen=True)
+class ZPKFilter:
+    """A (possibly improper, non-causal) discrete filter in zero-pole-gain form.
+
+    Attributes
+    ----------
+    zeros, poles : numpy.ndarray
+        Complex roots in the z-plane (conjugate pairs complete).
+    gain : float
+        Real gain ``k``.
+    ts : float
+        Sample time, s.
+    """
+
+    zeros: np.ndarray
+    poles: np.ndarray
+    gain: float
+    ts: float
+
+    def __post_init__(self) -> None:
+        on_circle = [p for p in self.poles if abs(abs(p) - 1) < _CIRCLE_TOL and abs(p - 1) > 1e-6]
+        if on_circle:
+            raise SpecError(f"`poles`: {on_circle} lie on the unit circle away from z = 1; "
+                            "such a filter has no bounded non-causal realisation")
+
+    @property
+    def causal_poles(self) -> np.ndarray:
+        return self.poles[np.abs(self.poles) <= 1 + _CIRCLE_TOL]
+
+    @property
+    def anticausal_poles(self) -> np.ndarray:
+        return self.poles[np.abs(self.poles) > 1 + _CIRCLE_TOL]
+
+    @property
+    def advance(self) -> int:
+        """Samples of non-causal lead of the causal part (surplus zeros over causal poles)."""
+        return max(0, len(self.zeros) - len(self.causal_poles))
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        """Evaluate ``F(z)`` at complex points ``z``."""
+        z = np.asarray(z, dtype=complex)
+        num = np.prod(z[..., None] - self.zeros, axis=-1) if len(self.zeros) else np.ones_like(z)
+        den = np.prod(z[..., None] - self.poles, axis=-1) if len(self.poles) else np.ones_like(z)
+        return self.gain * num / den
+
+    def freqresp(self, w: np.ndarray) -> np.ndarray:
+        """Frequency response at ``w`` rad/s."""
+        return self(np.exp(1j * np.asarray(w, dtype=float) * self.ts))
+
+    def apply(self, x: object, name: str = "x") -> np.ndarray:
+        """Apply the filter to a whole trial ``x`` non-causally (see module docstring).
+
+        Returns an array of the same length as ``x``.
+        """
+        x = as_signal(x, name)
+        n = x.size
+        k = self.advance
+        # anti-causal part: prod 1/(z - p) = prod(-1/p) * prod 1/(1 - z/p), run in reversed time
+        pu = self.anticausal_poles
+        if len(pu):
+            sos_u = signal.zpk2sos(np.zeros(len(pu)), 1.0 / pu, 1.0)
+            scale = float(np.real(np.prod(-1.0 / pu)))
+            x = scale * signal.sosfilt(sos_u, x[::-1])[::-1]
+        # causal part with k extra poles at the origin, then advance by k samples
+        pc = np.concatenate([self.causal_poles, np.zeros(k)])
+        sos_c = signal.zpk2sos(self.zeros, pc, self.gain)
+        padded = np.concatenate([x, np.zeros(k)])
+        return signal.sosfilt(sos_c, padded)[k:k + n]

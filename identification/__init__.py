@@ -1,0 +1,3 @@
+"""System identification (issue 3)."""
+
+__all__: list[str] = []

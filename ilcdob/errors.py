@@ -1,0 +1,31 @@
+"""Exception hierarchy of ilcdob.
+
+Every error raised on purpose by ilcdob derives from :class:`IlcdobError`; each also
+derives from the built-in exception a caller would expect (``ValueError`` for bad input),
+so ``except ValueError`` keeps working. Messages name the input, the value received,
+what is valid and, where there is one, the next step.
+"""
+
+from __future__ import annotations
+
+__all__ = ["IlcdobError", "SpecError", "FleetError", "UnstableLoopError", "SignalError"]
+
+
+class IlcdobError(Exception):
+    """Base class of every error ilcdob raises on purpose."""
+
+
+class SpecError(IlcdobError, ValueError):
+    """A system, controller, DOB or scenario parameter is invalid."""
+
+
+class FleetError(IlcdobError, ValueError):
+    """A fleet file is malformed; the message names the file, the system and the key."""
+
+
+class UnstableLoopError(IlcdobError, ValueError):
+    """A closed loop (PID + DOB around the plant) is not asymptotically stable."""
+
+
+class SignalError(IlcdobError, ValueError):
+    """A signal has the wrong shape, length or contains non-finite values."""

@@ -1,0 +1,201 @@
+"""Configuration dataclasses of one system: plant, PID, DOB and its own noise.
+
+Units: time in s, position in m, acceleration in m/s^2, frequency in Hz unless a field
+says rad/s. Transfer functions are continuous-time polynomials in s, highest power first.
+All dataclasses are frozen and validated in ``__post_init__``; a bad value raises
+:class:`~ilcdob.errors.SpecError` naming the field, the value and what is valid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import SpecError
+
+__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "SystemSpec"]
+
+
+def _poly(name: str, values: object) -> tuple[float, ...]:
+    try:
+        arr = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"`{name}`: expected a list of numbers, got {values!r}") from exc
+    if arr.ndim != 1 or arr.size == 0:
+        raise SpecError(f"`{name}`: expected a non-empty 1-D list of numbers, got {values!r}")
+    if not np.all(np.isfinite(arr)):
+        raise SpecError(f"`{name}`: coefficients must be finite, got {values!r}")
+    nz = np.flatnonzero(arr)
+    if nz.size == 0:
+        raise SpecError(f"`{name}`: polynomial is identically zero ({values!r})")
+    return tuple(float(v) for v in arr[nz[0]:])
+
+
+def _positive(name: str, value: float, *, allow_zero: bool = False) -> None:
+    ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
+    if not ok:
+        valid = "a finite number >= 0" if allow_zero else "a finite number > 0"
+        raise SpecError(f"`{name}`: got {value!r}, expected {valid}")
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """Continuous-time plant ``P(s) = num(s)/den(s) * exp(-delay*s)``.
+
+    Attributes
+    ----------
+    num, den : tuple of float
+        Polynomial coefficients in s, highest power first. Input: commanded acceleration
+        (m/s^2); output: position (m).
+    delay : float
+        Input delay in s (>= 0).
+    """
+
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "num", _poly("plant.num", self.num))
+        object.__setattr__(self, "den", _poly("plant.den", self.den))
+        object.__setattr__(self, "delay", float(self.delay))
+        _positive("plant.delay", self.delay, allow_zero=True)
+        if len(self.num) >= len(self.den):
+            raise SpecError(
+                f"`plant`: must be strictly proper (deg num < deg den), got num={list(self.num)}, "
+                f"den={list(self.den)}"
+            )
+
+    @property
+    def relative_degree(self) -> int:
+        """Continuous relative degree, deg(den) - deg(num)."""
+        return len(self.den) - len(self.num)
+
+
+@dataclass(frozen=True)
+class PIDSpec:
+    """Outer-loop PID ``C(s) = kp + ki/s + kd*s/(derivative_filter*s + 1)``.
+
+    Attributes
+    ----------
+    kp : float
+        Proportional gain, (m/s^2)/m = 1/s^2.
+    ki : float
+        Integral gain, 1/s^3 (>= 0).
+    kd : float
+        Derivative gain, 1/s (>= 0).
+    derivative_filter : float
+        Time constant of the derivative low-pass, s (> 0).
+    """
+
+    kp: float
+    ki: float
+    kd: float
+    derivative_filter: float
+
+    def __post_init__(self) -> None:
+        for name in ("kp", "ki", "kd", "derivative_filter"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        _positive("controller.kp", self.kp)
+        _positive("controller.ki", self.ki, allow_zero=True)
+        _positive("controller.kd", self.kd, allow_zero=True)
+        _positive("controller.derivative_filter", self.derivative_filter)
+
+
+@dataclass(frozen=True)
+class DOBSpec:
+    """Disturbance observer low-pass ``Q(s) = 1/(q_time_constant*s + 1)**q_order``.
+
+    Attributes
+    ----------
+    q_order : int
+        Order of Q; must be >= the relative degree of the plant model so that
+        ``M = Q/P_hat`` is proper.
+    q_time_constant : float
+        Time constant in s (> 0); the DOB bandwidth is about 1/q_time_constant rad/s.
+    """
+
+    q_order: int
+    q_time_constant: float
+
+    def __post_init__(self) -> None:
+        if isinstance(self.q_order, bool) or not float(self.q_order).is_integer() or self.q_order < 1:
+            raise SpecError(f"`dob.q_order`: got {self.q_order!r}, expected an integer >= 1")
+        object.__setattr__(self, "q_order", int(self.q_order))
+        object.__setattr__(self, "q_time_constant", float(self.q_time_constant))
+        _positive("dob.q_time_constant", self.q_time_constant)
+
+
+@dataclass(frozen=True)
+class NoiseSpec:
+    """The system's own small sinusoidal process noise, added to the disturbance.
+
+    ``n(t) = amplitude * sin(2*pi*frequency*t + phase)`` in m/s^2 at the plant input
+    (design notes section 4: every system gets its own noise of higher frequency).
+    """
+
+    amplitude: float = 0.0
+    frequency: float = 2.0
+    phase: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("amplitude", "frequency", "phase"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        _positive("noise.amplitude", self.amplitude, allow_zero=True)
+        _positive("noise.frequency", self.frequency)
+        if not math.isfinite(self.phase):
+            raise SpecError(f"`noise.phase`: got {self.phase!r}, expected a finite number (rad)")
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        """Noise samples at times ``t`` (s), m/s^2."""
+        return self.amplitude * np.sin(2.0 * np.pi * self.frequency * np.asarray(t) + self.phase)
+
+
+@dataclass(frozen=True)
+class SystemSpec:
+    """One vehicle: its true plant, the model its DOB and learning filters use, PID, DOB.
+
+    Attributes
+    ----------
+    name : str
+        Unique name in the fleet.
+    plant : PlantSpec
+        The true plant (what the simulation flies).
+    controller : PIDSpec
+    dob : DOBSpec
+    model : PlantSpec or None
+        The nominal model ``P_hat`` used by ``M = Q/P_hat`` and by the learning filters;
+        ``None`` means the model is exact (``P_hat = P``), as in the paper's simulations.
+    noise : NoiseSpec
+        The system's own process noise.
+    """
+
+    name: str
+    plant: PlantSpec
+    controller: PIDSpec
+    dob: DOBSpec
+    model: PlantSpec | None = None
+    noise: NoiseSpec = field(default_factory=NoiseSpec)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise SpecError(f"`name`: got {self.name!r}, expected a non-empty string")
+        rel = self.nominal_plant.relative_degree
+        if self.dob.q_order < rel:
+            raise SpecError(
+                f"system {self.name!r}: `dob.q_order` = {self.dob.q_order} makes M = Q/P_hat improper "
+                f"(the plant model has relative degree {rel}); use q_order >= {rel}"
+            )
+
+    @property
+    def nominal_plant(self) -> PlantSpec:
+        """The plant model ``P_hat`` (the true plant when no model is given)."""
+        return self.model if self.model is not None else self.plant
+
+    def exact(self) -> "SystemSpec":
+        """The same system with the nominal model as its true plant (Case I of the Theorem)."""
+        from dataclasses import replace
+
+        return replace(self, plant=self.nominal_plant, model=None)

@@ -1,0 +1,1 @@
+"""Validation: block-diagram simulation, scenarios, reproduction of the paper."""
