@@ -11,9 +11,12 @@ applied as the exact stable inversion of design notes section 2:
   the end of the trial (stable in reversed time);
 * surplus zeros become an advance of ``k`` samples (non-causal lead).
 
-Boundary effects: the causal part assumes the system was at rest before ``t = 0``; the
-anti-causal and advance parts assume zero input after the trial, which affects the last few
-samples only (the anti-causal poles decay as ``1/|p|`` per sample).
+Boundary effects: the causal part assumes the system was at rest before ``t = 0``. The
+anti-causal and advance parts need the input a little beyond the trial; it is continued by
+a cubic fitted to the last samples (:func:`extend_smoothly`), long enough for the
+anti-causal response to decay below 1e-12 of its size. Padding with zeros instead would put
+a step at the end, which an inverse plant (high-frequency gain ~1e5) turns into a spike of
+thousands of m/s^2 in the last samples.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from scipy import signal
 
 from ilcdob.errors import SignalError, SpecError
 
-__all__ = ["ZPKFilter", "as_signal"]
+__all__ = ["ZPKFilter", "as_signal", "extend_smoothly"]
 
 _CIRCLE_TOL = 1e-8
 
@@ -41,6 +44,17 @@ def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
         bad = int(np.flatnonzero(~np.isfinite(arr))[0])
         raise SignalError(f"`{name}`: non-finite value {arr[bad]!r} at sample {bad}")
     return arr
+
+
+def extend_smoothly(x: np.ndarray, n_pad: int, n_fit: int = 16) -> np.ndarray:
+    """Append ``n_pad`` samples continuing ``x`` by a cubic fitted to its last ``n_fit``."""
+    if n_pad <= 0:
+        return x
+    m = min(n_fit, x.size)
+    deg = min(3, m - 1)
+    k = np.arange(m, dtype=float)
+    coef = np.polyfit(k, x[-m:], deg) if deg > 0 else np.array([x[-1]])
+    return np.concatenate([x, np.polyval(coef, np.arange(m, m + n_pad, dtype=float))])
 
 
 @dataclass(frozen=True)
@@ -100,8 +114,13 @@ class ZPKFilter:
         x = as_signal(x, name)
         n = x.size
         k = self.advance
-        # anti-causal part: prod 1/(z - p) = prod(-1/p) * prod 1/(1 - z/p), run in reversed time
         pu = self.anticausal_poles
+        n_pad = k + 8
+        if len(pu):
+            slowest = float(np.min(np.abs(pu)))
+            n_pad += int(np.ceil(12.0 / np.log10(slowest)))
+        x = extend_smoothly(x, n_pad)
+        # anti-causal part: prod 1/(z - p) = prod(-1/p) * prod 1/(1 - z/p), run in reversed time
         if len(pu):
             sos_u = signal.zpk2sos(np.zeros(len(pu)), 1.0 / pu, 1.0)
             scale = float(np.real(np.prod(-1.0 / pu)))
@@ -109,5 +128,4 @@ class ZPKFilter:
         # causal part with k extra poles at the origin, then advance by k samples
         pc = np.concatenate([self.causal_poles, np.zeros(k)])
         sos_c = signal.zpk2sos(self.zeros, pc, self.gain)
-        padded = np.concatenate([x, np.zeros(k)])
-        return signal.sosfilt(sos_c, padded)[k:k + n]
+        return signal.sosfilt(sos_c, x)[k:k + n]

@@ -8,6 +8,7 @@ Schema (one ``[[system]]`` table per vehicle; units in comments)::
     plant = { num = [1.0], den = [0.1, 1.0, 0.0, 0.0] }  # continuous, s-polynomials, highest power first
     delay = 0.0                             # s, plant input delay (optional, default 0)
     controller = { kp = 3.0, ki = 0.3, kd = 2.4, derivative_filter = 0.05 }
+    # C(s) = kp + ki/s + kd*s/(derivative_filter*s + 1); optional acceleration_feedforward = true
     dob = { q_order = 3, q_time_constant = 0.15 }
     # optional:
     model = { num = [...], den = [...], delay = 0.0 }   # P_hat when it differs from the plant
@@ -39,7 +40,8 @@ _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
 _TABLE_KEYS = {
     "plant": {"num": True, "den": True},
     "model": {"num": True, "den": True, "delay": False},
-    "controller": {"kp": True, "ki": True, "kd": True, "derivative_filter": True},
+    "controller": {"kp": True, "ki": True, "kd": True, "derivative_filter": True,
+                   "acceleration_feedforward": False},
     "dob": {"q_order": True, "q_time_constant": True},
     "noise": {"amplitude": False, "frequency": False, "phase": False},
 }

@@ -78,6 +78,13 @@ class PlantSpec:
 class PIDSpec:
     """Outer-loop PID ``C(s) = kp + ki/s + kd*s/(derivative_filter*s + 1)``.
 
+    With ``acceleration_feedforward`` the controller also adds the reference acceleration
+    ``a_ff = d^2 r/dt^2`` of the trajectory setpoint to its output, as flight stacks do
+    (PX4's position controller feeds the setpoint acceleration forward). It enters the loop
+    exactly like ``-d_f``, so the maps of :mod:`ilcdob.loop` are unchanged. Without it, a
+    learning signal built from another vehicle's error also has to carry the trajectory's
+    acceleration, and both tracking and disturbance estimates degrade on curved paths.
+
     Attributes
     ----------
     kp : float
@@ -88,12 +95,15 @@ class PIDSpec:
         Derivative gain, 1/s (>= 0).
     derivative_filter : float
         Time constant of the derivative low-pass, s (> 0).
+    acceleration_feedforward : bool
+        Add the reference acceleration to the controller output (default True).
     """
 
     kp: float
     ki: float
     kd: float
     derivative_filter: float
+    acceleration_feedforward: bool = True
 
     def __post_init__(self) -> None:
         for name in ("kp", "ki", "kd", "derivative_filter"):
@@ -102,6 +112,9 @@ class PIDSpec:
         _positive("controller.ki", self.ki, allow_zero=True)
         _positive("controller.kd", self.kd, allow_zero=True)
         _positive("controller.derivative_filter", self.derivative_filter)
+        if not isinstance(self.acceleration_feedforward, bool):
+            raise SpecError(f"`controller.acceleration_feedforward`: got {self.acceleration_feedforward!r}, "
+                            "expected true or false")
 
 
 @dataclass(frozen=True)

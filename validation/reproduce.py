@@ -1,0 +1,154 @@
+"""Reproduce the paper's validation: no DOB, only DOB, and learning passed around the fleet.
+
+Learning chain (cyclic, paper Sec. IV): every system first flies without DOB and with DOB
+only. The first system of the order flies the DOB-only trial that starts the chain; then
+each flight learns from the flight before it in the chain::
+
+    order = [A, B, C]:  B <- A(DOB only), C <- B, A <- C, B <- A, C <- B, A <- C, ...
+
+until every system has flown ``iterations`` learning trials; ``rmse_learning[i]`` is a
+system's (i+1)-th learning trial. Each learning signal comes from the closed-form filters
+of the Theorem (:func:`ilcdob.design.closed_form_filters`), built from the previous
+system's *model*.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ilcdob.design import LearningFilters, closed_form_filters
+from ilcdob.errors import SpecError
+from ilcdob.fleet import Fleet
+
+from .scenarios import Scenario, scenario
+from .simulate import Flight, simulate_flight
+
+__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "run_scenario", "reproduce"]
+
+
+@dataclass(frozen=True)
+class SystemResult:
+    """Flights of one system in one scenario."""
+
+    no_dob: Flight
+    dob: Flight
+    learning: tuple[Flight, ...]
+
+    def metrics(self) -> dict[str, object]:
+        """RMSE figures for results.json (m, and m/s^2 for ``rmse_dhat_*``)."""
+        return {
+            "rmse_no_dob": self.no_dob.rmse,
+            "rmse_dob": self.dob.rmse,
+            "rmse_learning": [f.rmse for f in self.learning],
+            "rmse_dhat_dob": self.dob.rmse_dhat,
+            "rmse_dhat_learning": [f.rmse_dhat for f in self.learning],
+        }
+
+
+@dataclass(frozen=True)
+class ScenarioResult:
+    """All flights of one scenario; ``chain`` lists (source, target) of each learning flight."""
+
+    scenario: Scenario
+    order: list[str]
+    systems: dict[str, SystemResult]
+    chain: list[tuple[str, str]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "id": self.scenario.id,
+            "title": self.scenario.title,
+            "duration_s": self.scenario.duration,
+            "order": self.order,
+            "chain": [list(p) for p in self.chain],
+            "systems": {name: self.systems[name].metrics() for name in self.order},
+        }
+
+
+@dataclass(frozen=True)
+class ReproductionResult:
+    """Every scenario run, plus the fleet and the filters used."""
+
+    fleet: Fleet
+    scenarios: list[ScenarioResult]
+    iterations: int
+    filters: dict[tuple[str, str], LearningFilters]
+    elapsed_s: float
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "plant": "linear",
+            "fleet": self.fleet.source,
+            "sample_time": self.fleet.sample_time,
+            "iterations": self.iterations,
+            "units": {"rmse": "m", "rmse_dhat": "m/s^2"},
+            "scenarios": [s.to_dict() for s in self.scenarios],
+        }
+
+
+def _filters_for(fleet: Fleet, cache: dict, src: str, tgt: str) -> LearningFilters:
+    if (src, tgt) not in cache:
+        cache[(src, tgt)] = closed_form_filters(fleet.loop(src), fleet.loop(tgt))
+    return cache[(src, tgt)]
+
+
+def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
+                 filters: dict | None = None) -> ScenarioResult:
+    """Fly one scenario for every system: no DOB, only DOB, ``iterations`` learning trials."""
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    filters = {} if filters is None else filters
+    ts = fleet.sample_time
+    t = sc.time(ts)
+    r = sc.reference(t)
+    a_ref = sc.acceleration(t)
+    wind = sc.disturbance(t)
+    order = sc.order(fleet.names)
+    specs = {s.name: s for s in fleet.systems}
+    dist = {name: wind + specs[name].noise(t) for name in order}
+    base = {}
+    for name in order:
+        lp = fleet.loop(name)
+        base[name] = (simulate_flight(lp, r, dist[name], mode="no_dob", a_ref=a_ref),
+                      simulate_flight(lp, r, dist[name], mode="dob", a_ref=a_ref))
+    learning: dict[str, list[Flight]] = {name: [] for name in order}
+    chain = []
+    prev = base[order[0]][1]
+    n = len(order)
+    for step in range(iterations * n):
+        src, tgt = order[step % n], order[(step + 1) % n]
+        if n == 1:
+            src = tgt = order[0]
+        df = _filters_for(fleet, filters, src, tgt).apply(prev.e, prev.d_f)
+        flight = simulate_flight(fleet.loop(tgt), r, dist[tgt], d_f=df, a_ref=a_ref)
+        learning[tgt].append(flight)
+        chain.append((src, tgt))
+        prev = flight
+    systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name]))
+               for name in order}
+    return ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
+
+
+def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: int = 3,
+              progress: Callable[[str], None] | None = None) -> ReproductionResult:
+    """Run the listed scenarios on ``fleet`` (see module docstring).
+
+    ``progress`` receives one line per scenario (default: printed to stderr).
+    """
+    say = progress if progress is not None else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    start = time.perf_counter()
+    filters: dict = {}
+    results = []
+    for i, sid in enumerate(scenario_ids, 1):
+        sc = scenario(sid)
+        t0 = time.perf_counter()
+        results.append(run_scenario(fleet, sc, iterations, filters))
+        say(f"[{i}/{len(scenario_ids)}] scenario {sid} ({sc.title}): "
+            f"{time.perf_counter() - t0:.1f} s")
+    return ReproductionResult(fleet=fleet, scenarios=results, iterations=iterations,
+                              filters=filters, elapsed_s=time.perf_counter() - start)
