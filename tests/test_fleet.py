@@ -1,0 +1,67 @@
+"""Fleet files: the schema of the foundation issue, and clear errors for bad files."""
+
+from __future__ import annotations
+
+import pytest
+
+import ilcdob
+from ilcdob import FleetError
+
+from .conftest import GOOD_FLEET
+
+
+def test_default_fleet_is_the_papers_three_uavs(fleet):
+    assert fleet.names == ["UAV1", "UAV2", "UAV3"]
+    assert fleet.sample_time == 0.02
+    # Table I outer-loop proportional gains (paper)
+    assert [s.controller.kp for s in fleet.systems] == [3.0, 1.2, 1.9]
+    for lp in fleet.loops:
+        assert max(abs(lp.poles())) < 1
+
+
+def test_issue_schema_loads(fleet_file):
+    f = ilcdob.load_fleet(fleet_file())
+    assert f.names == ["A", "B"]
+    assert f.systems[0].plant.den == (0.1, 1.0, 0.0, 0.0)
+    assert f.systems[1].plant.delay == 0.0
+
+
+@pytest.mark.parametrize(
+    "old, new, must_name",
+    [
+        ('dob = { q_order = 3, q_time_constant = 0.15 }\n\n', "\n", ["'A'", "dob"]),
+        ("kd = 2.4,", "kd = 2.4, kx = 1.0,", ["'A'", "controller", "kx"]),
+        ("q_order = 3, q_time_constant = 0.15 }\n\n", "q_order = 3, q_time_constant = 0.0 }\n\n",
+         ["'A'", "q_time_constant", "0.0"]),
+        ("q_order = 3, q_time_constant = 0.15 }\n\n", "q_order = 2, q_time_constant = 0.15 }\n\n",
+         ["'A'", "q_order", "improper"]),
+        ("derivative_filter = 0.05 }\ndob = { q_order = 3, q_time_constant = 0.15 }\n\n",
+         "derivative_filter = -0.05 }\ndob = { q_order = 3, q_time_constant = 0.15 }\n\n",
+         ["'A'", "derivative_filter"]),
+        ("kp = 3.0, ki = 0.3, kd = 2.4", "kp = 300.0, ki = 0.3, kd = 0.1", ["'A'", "unstable", "controller"]),
+        ("delay = 0.0\n", "delay = -0.1\n", ["'A'", "delay", "-0.1"]),
+        ("sample_time = 0.02", "sample_time = 0", ["sample_time"]),
+        ('name = "B"', 'name = "A"', ["duplicated", "'A'"]),
+        ("[[system]]\nname = \"B\"", "colour = 1\n[[system]]\nname = \"B\"", ["'A'", "colour"]),
+    ],
+)
+def test_bad_fleet_files_name_file_system_and_key(fleet_file, old, new, must_name):
+    assert old in GOOD_FLEET
+    path = fleet_file(GOOD_FLEET.replace(old, new, 1))
+    with pytest.raises(FleetError) as info:
+        ilcdob.load_fleet(path)
+    msg = str(info.value)
+    assert str(path) in msg
+    for part in must_name:
+        assert part in msg, msg
+
+
+def test_unreadable_and_invalid_toml(fleet_file, tmp_path):
+    with pytest.raises(FleetError, match="cannot read"):
+        ilcdob.load_fleet(tmp_path / "missing.toml")
+    with pytest.raises(FleetError, match="not valid TOML"):
+        ilcdob.load_fleet(fleet_file("sample_time = = 1"))
+
+
+def test_fleet_errors_are_value_errors():
+    assert issubclass(FleetError, ValueError) and issubclass(FleetError, ilcdob.IlcdobError)

@@ -1,0 +1,62 @@
+"""The loop of one system: maps against the block formulas and the block-diagram simulation."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ilcdob import PIDSpec, UnstableLoopError, build_loop, freqresp
+from ilcdob.design import simulate_map
+from ilcdob.validation.simulate import simulate_flight
+
+W = np.logspace(-2, np.log10(150), 60)
+
+
+@pytest.mark.parametrize("i", [0, 1, 2])
+def test_maps_match_block_formulas(fleet, i):
+    lp = fleet.loops[i]
+    p, c, q, m = (freqresp(s, W) for s in (lp.P, lp.C, lp.Q, lp.M))
+    d = 1 - q + p * (m + c)  # design notes section 1
+    for got, want in [(lp.G_r, p * c / d), (lp.G_d, p * (1 - q) / d), (lp.G_f, -p / d),
+                      (lp.Omega, (m + q * c) * p / d), (lp.G_d_no_dob, p / (1 + p * c)),
+                      (lp.G_r_no_dob, p * c / (1 + p * c))]:
+        np.testing.assert_allclose(freqresp(got, W), want, rtol=1e-6)
+
+
+def test_maps_match_block_diagram_simulation(fleet):
+    lp = fleet.loops[2]
+    rng = np.random.default_rng(4)
+    n = 1500
+    t = np.arange(n) * lp.ts
+    r = np.sin(0.4 * t) + 0.2 * rng.standard_normal(n)
+    d = np.cos(1.3 * t) + 0.3 * rng.standard_normal(n)
+    df = 0.5 * np.sin(2.1 * t)
+    fl = simulate_flight(lp, r, d, d_f=df)
+    y_maps = simulate_map(lp.G_r, r) + simulate_map(lp.G_d, d) + simulate_map(lp.G_f, df)
+    dhat_maps = (simulate_map(lp.closed_loop[2, 0], r) + simulate_map(lp.Omega, d)
+                 + simulate_map(lp.closed_loop[2, 2], df))
+    scale = np.max(np.abs(fl.y))
+    np.testing.assert_allclose(fl.y, y_maps, atol=1e-9 * scale)
+    np.testing.assert_allclose(fl.d_hat, dhat_maps, atol=1e-8 * np.max(np.abs(fl.d_hat)))
+    plain = simulate_flight(lp, r, d, mode="no_dob")
+    y_plain = simulate_map(lp.G_r_no_dob, r) + simulate_map(lp.G_d_no_dob, d)
+    np.testing.assert_allclose(plain.y, y_plain, atol=1e-9 * np.max(np.abs(plain.y)))
+
+
+def test_acceleration_feedforward_enters_like_minus_learning_signal(fleet):
+    lp = fleet.loops[0]
+    t = np.arange(800) * lp.ts
+    r, a = np.sin(0.5 * t), -0.25 * np.sin(0.5 * t)
+    with_ff = simulate_flight(lp, r, np.zeros_like(t), a_ref=a)
+    as_df = simulate_flight(lp, r, np.zeros_like(t), d_f=-a)
+    np.testing.assert_allclose(with_ff.y, as_df.y, atol=1e-12)
+
+
+def test_unstable_loop_is_a_clear_error(fleet):
+    spec = replace(fleet.systems[0], controller=PIDSpec(300.0, 0.3, 0.1, 0.05))
+    with pytest.raises(UnstableLoopError) as info:
+        build_loop(spec, 0.02)
+    msg = str(info.value)
+    assert "'UAV1'" in msg and "|z|=" in msg
