@@ -80,7 +80,7 @@ def test_naive_causal_inverse_would_blow_up(fleet):
 
     src, tgt = fleet.loops[0], fleet.loops[1]
     lf = closed_form_filters(src, tgt)
-    _, _, f_src, _ = _hover_case(src, tgt, 1000)
+    _, _, f_src, _ = _hover_case(src, tgt, 300)  # 3.55^300 ~ 1e165 stays finite
     k = len(lf.L1.zeros) - len(lf.L1.poles)
     sos = signal.zpk2sos(lf.L1.zeros, np.concatenate([lf.L1.poles, np.zeros(k)]), lf.L1.gain)
     naive = signal.sosfilt(sos, f_src.e)
