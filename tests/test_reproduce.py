@@ -1,0 +1,92 @@
+"""Acceptance of the foundation issue on the built-in fleet (exact models, Case I)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ilcdob.cli import main
+from ilcdob.validation.reproduce import reproduce, run_scenario
+from ilcdob.validation.scenarios import SCENARIOS, parse_scenarios, scenario
+from ilcdob.errors import SpecError
+
+
+@pytest.fixture(scope="module")
+def result(fleet):
+    return reproduce(fleet, [1, 2, 3, 4], 3, progress=lambda msg: None).to_dict()
+
+
+def _rows(result):
+    for sc in result["scenarios"]:
+        for name, m in sc["systems"].items():
+            yield sc["id"], name, m
+
+
+def test_dob_beats_no_dob_everywhere(result):
+    for sid, name, m in _rows(result):
+        assert m["rmse_dob"] < m["rmse_no_dob"], (sid, name)
+
+
+def test_learning_converges_in_the_first_iteration(result):
+    # issue acceptance: rmse_learning[0] <= 0.05 rmse_dob (paper: exact models converge at once)
+    for sid, name, m in _rows(result):
+        assert len(m["rmse_learning"]) == 3
+        assert m["rmse_learning"][0] <= 0.05 * m["rmse_dob"], (sid, name, m)
+
+
+def test_learning_improves_the_disturbance_estimate(result):
+    # issue acceptance: rmse_dhat_learning[0] <= 0.25 rmse_dhat_dob
+    for sid, name, m in _rows(result):
+        assert m["rmse_dhat_learning"][0] <= 0.25 * m["rmse_dhat_dob"], (sid, name, m)
+
+
+def test_orders_follow_the_paper(result):
+    orders = {sc["id"]: sc["order"] for sc in result["scenarios"]}
+    assert orders == {1: ["UAV1", "UAV2", "UAV3"], 2: ["UAV1", "UAV2", "UAV3"],
+                      3: ["UAV1", "UAV2", "UAV3"], 4: ["UAV1", "UAV3", "UAV2"]}
+    chain4 = next(sc["chain"] for sc in result["scenarios"] if sc["id"] == 4)
+    assert chain4[:4] == [["UAV1", "UAV3"], ["UAV3", "UAV2"], ["UAV2", "UAV1"], ["UAV1", "UAV3"]]
+
+
+def test_scenario_reference_accelerations_match_the_positions():
+    t = np.arange(3000) * 0.02
+    for sc in SCENARIOS.values():
+        acc = np.gradient(np.gradient(sc.reference(t), 0.02), 0.02)
+        # central differences of smooth trajectories: O(dt^2 * jerk rate); 0.01 m/s^2 bound
+        np.testing.assert_allclose(acc[2:-2], sc.acceleration(t)[2:-2], atol=1e-2)
+
+
+def test_scenario_ids_are_validated():
+    assert parse_scenarios("4, 1,1") == [4, 1]
+    with pytest.raises(SpecError, match="valid ids are"):
+        parse_scenarios("1,x")
+    with pytest.raises(SpecError, match="iterations"):
+        run_scenario(None, scenario(1), 0)
+
+
+def test_cli_writes_results_json_and_figures(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["reproduce", "--scenarios", "1", "--iterations", "2", "--out", str(out)]) == 0
+    data = json.loads((out / "results.json").read_text())
+    sc = data["scenarios"][0]
+    assert sc["id"] == 1 and sc["order"] == ["UAV1", "UAV2", "UAV3"]
+    for m in sc["systems"].values():
+        assert set(m) >= {"rmse_no_dob", "rmse_dob", "rmse_learning", "rmse_dhat_dob", "rmse_dhat_learning"}
+        assert len(m["rmse_learning"]) == 2
+    for name in ["rmse_bars.png", "error_s1.png", "disturbance_s1.png", "bode_loops.png",
+                 "bode_learning.png", "bode_te.png", "README.md"]:
+        assert (out / name).stat().st_size > 1000, name
+    assert not list(out.glob(".*tmp*"))
+
+
+def test_cli_reports_bad_input_with_exit_status_2(tmp_path, capsys):
+    assert main(["reproduce", "--scenarios", "5", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert "--scenarios" in err and "'5'" in err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("sample_time = 0.02\n")
+    assert main(["reproduce", "--fleet", str(bad), "--out", str(tmp_path / "y")]) == 2
+    assert str(bad) in capsys.readouterr().err
+    assert not (tmp_path / "y" / "results.json").exists()
