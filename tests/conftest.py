@@ -32,6 +32,12 @@ dob = { q_order = 3, q_time_constant = 0.15 }
 
 
 @pytest.fixture
+def good_fleet_text() -> str:
+    """A valid two-system fleet file in the schema of the foundation issue."""
+    return GOOD_FLEET
+
+
+@pytest.fixture
 def fleet_file(tmp_path: Path):
     """Write a fleet file from text; returns its path."""
 

@@ -7,8 +7,6 @@ import pytest
 import ilcdob
 from ilcdob import FleetError
 
-from .conftest import GOOD_FLEET
-
 
 def test_default_fleet_is_the_papers_three_uavs(fleet):
     assert fleet.names == ["UAV1", "UAV2", "UAV3"]
@@ -45,9 +43,9 @@ def test_issue_schema_loads(fleet_file):
         ("[[system]]\nname = \"B\"", "colour = 1\n[[system]]\nname = \"B\"", ["'A'", "colour"]),
     ],
 )
-def test_bad_fleet_files_name_file_system_and_key(fleet_file, old, new, must_name):
-    assert old in GOOD_FLEET
-    path = fleet_file(GOOD_FLEET.replace(old, new, 1))
+def test_bad_fleet_files_name_file_system_and_key(fleet_file, good_fleet_text, old, new, must_name):
+    assert old in good_fleet_text
+    path = fleet_file(good_fleet_text.replace(old, new, 1))
     with pytest.raises(FleetError) as info:
         ilcdob.load_fleet(path)
     msg = str(info.value)
