@@ -79,11 +79,9 @@ def zoh_with_delay(sys_c: ct.StateSpace, ts: float, delay: float = 0.0) -> ct.St
     if frac == 0.0:
         g0, g1 = g_full, np.zeros_like(g_full)
     else:
-        _, g0 = _zoh_integrals(a, b, ts - frac)
-        e_rest, g_f = _zoh_integrals(a, b, frac)
-        phi_rest, _ = _zoh_integrals(a, b, ts - frac)
+        phi_rest, g0 = _zoh_integrals(a, b, ts - frac)
+        _, g_f = _zoh_integrals(a, b, frac)
         g1 = phi_rest @ g_f
-        del e_rest
     nx = a.shape[0]
     n_extra = n_del + (1 if frac > 0 else 0)
     if n_extra == 0:

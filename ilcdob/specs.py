@@ -9,7 +9,7 @@ All dataclasses are frozen and validated in ``__post_init__``; a bad value raise
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -209,6 +209,4 @@ class SystemSpec:
 
     def exact(self) -> "SystemSpec":
         """The same system with the nominal model as its true plant (Case I of the Theorem)."""
-        from dataclasses import replace
-
         return replace(self, plant=self.nominal_plant, model=None)

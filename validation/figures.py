@@ -119,8 +119,18 @@ def _bode_pair(axes, w, resp, label, color, ls="-"):
     axes[1].semilogx(w, _phase(resp), color=color, ls=ls)
 
 
+def _min_span(ax, span: float) -> None:
+    """Keep matplotlib from zooming into rounding noise (L2 = 1 to 1e-8 with exact models)."""
+    lo, hi = ax.get_ylim()
+    if hi - lo < span:
+        mid = 0.5 * (lo + hi)
+        ax.set_ylim(mid - span / 2, mid + span / 2)
+
+
 def _finish_bode(axes, titles, ts):
     for col, title in enumerate(titles):
+        _min_span(axes[0, col], 10.0)
+        _min_span(axes[1, col], 30.0)
         axes[0, col].set_title(title)
         axes[0, col].set_ylabel("magnitude (dB)")
         axes[1, col].set_ylabel("phase (deg)")
