@@ -17,7 +17,8 @@ __all__ = ["write_reproduction", "markdown_index"]
 _FIGURE_TEXT = {
     "rmse_bars.png": "Tracking RMSE per scenario and system (log scale): no DOB, only DOB, learning iterations.",
     "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB).",
-    "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown.",
+    "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown (with equal "
+                         "Q filters L2 = (1 - Q_j)/(1 - Q_{j-1}) = 1 exactly).",
     "bode_te.png": "Te1, Te2 (error propagation with learning when every true plant is 10 % stronger "
                    "than its model; with exact models both vanish) and Omega (disturbance -> DOB estimate).",
 }

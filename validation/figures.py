@@ -80,37 +80,40 @@ def _rmse_bars(res: ReproductionResult, out: Path) -> Path:
     return _save(fig, out, "rmse_bars.png")
 
 
+def _per_system(sr, out: Path, name: str, title: str, ylabel: str, draw) -> Path:
+    """One row per system of scenario ``sr``; ``draw(ax, system_result)`` fills a row."""
+    names = sr.order
+    fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True, squeeze=False)
+    for ax, system in zip(axes[:, 0], names):
+        draw(ax, sr.systems[system])
+        ax.set_ylabel(f"{system}\n{ylabel}")
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
+    axes[0, 0].set_title(f"Scenario {sr.scenario.id}: {title}")
+    axes[-1, 0].set_xlabel("time (s)")
+    return _save(fig, out, name)
+
+
+def _draw_error(ax, s) -> None:
+    ax.plot(s.no_dob.t, s.no_dob.e, color=_COLORS[0], lw=0.9, label="no DOB")
+    ax.plot(s.dob.t, s.dob.e, color=_COLORS[1], lw=0.9, label="only DOB")
+    ax.plot(s.learning[0].t, s.learning[0].e, color=_COLORS[2], lw=1.1, label="learning 1")
+
+
+def _draw_disturbance(ax, s) -> None:
+    lf = s.learning[0]
+    ax.plot(s.dob.t, s.dob.d, color="k", lw=1.2, label="true d (wind + noise)")
+    ax.plot(s.dob.t, s.dob.d_hat, color=_COLORS[1], lw=0.9, label="DOB estimate (only DOB)")
+    ax.plot(lf.t, lf.d_hat + lf.d_f, color=_COLORS[2], lw=0.9, ls="--", label="d_hat + d_f (learning 1)")
+
+
 def _time_series(res: ReproductionResult, out: Path) -> list[Path]:
     paths = []
     for sr in res.scenarios:
-        names = sr.order
-        fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True, squeeze=False)
-        for ax, name in zip(axes[:, 0], names):
-            s = sr.systems[name]
-            ax.plot(s.no_dob.t, s.no_dob.e, color=_COLORS[0], lw=0.9, label="no DOB")
-            ax.plot(s.dob.t, s.dob.e, color=_COLORS[1], lw=0.9, label="only DOB")
-            ax.plot(s.learning[0].t, s.learning[0].e, color=_COLORS[2], lw=1.1, label="learning 1")
-            ax.set_ylabel(f"{name}\nerror e (m)")
-            ax.grid(True, alpha=0.3)
-        axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
-        axes[0, 0].set_title(f"Scenario {sr.scenario.id}: tracking error")
-        axes[-1, 0].set_xlabel("time (s)")
-        paths.append(_save(fig, out, f"error_s{sr.scenario.id}.png"))
-
-        fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True, squeeze=False)
-        for ax, name in zip(axes[:, 0], names):
-            s = sr.systems[name]
-            ax.plot(s.dob.t, s.dob.d, color="k", lw=1.2, label="true d (wind + noise)")
-            ax.plot(s.dob.t, s.dob.d_hat, color=_COLORS[1], lw=0.9, label="DOB estimate (only DOB)")
-            lf = s.learning[0]
-            ax.plot(lf.t, lf.d_hat + lf.d_f, color=_COLORS[2], lw=0.9, ls="--",
-                    label="d_hat + d_f (learning 1)")
-            ax.set_ylabel(f"{name}\nd (m/s$^2$)")
-            ax.grid(True, alpha=0.3)
-        axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
-        axes[0, 0].set_title(f"Scenario {sr.scenario.id}: disturbance estimates")
-        axes[-1, 0].set_xlabel("time (s)")
-        paths.append(_save(fig, out, f"disturbance_s{sr.scenario.id}.png"))
+        sid = sr.scenario.id
+        paths.append(_per_system(sr, out, f"error_s{sid}.png", "tracking error", "error e (m)", _draw_error))
+        paths.append(_per_system(sr, out, f"disturbance_s{sid}.png", "disturbance estimates",
+                                 "d (m/s$^2$)", _draw_disturbance))
     return paths
 
 
