@@ -1,0 +1,184 @@
+"""One flight-data object for every source (CSV, Parquet, PX4 ULog, ArduPilot DataFlash,
+and the synthetic flights).
+
+Conventions: time in s on a uniform grid starting wherever the log starts; every signal is
+a 1-D float array of the same length as ``t``; ``units`` maps a signal name to its unit
+string (e.g. ``"m"``, ``"m/s^2"``). Constructing a :class:`FlightData` checks all of it and
+raises :class:`~ilcdob.errors.SignalError` naming the source and the signal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ilcdob.atomic import atomic_path
+from ilcdob.errors import SignalError
+
+__all__ = ["FlightData", "check_time", "resample_onto"]
+
+#: Relative tolerance on the spacing of a "uniform" time grid.
+UNIFORM_RTOL = 1e-6
+
+
+def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:
+    """Check time stamps: finite, strictly increasing (no duplicates); returns float array."""
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or t.size < 2:
+        raise SignalError(f"{source}: signal `{signal}`: expected at least 2 time stamps, got shape {t.shape}")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise SignalError(f"{source}: signal `{signal}`: non-finite time stamp {t[bad[0]]!r} at sample {bad[0]}")
+    dt = np.diff(t)
+    if np.any(dt == 0):
+        k = int(np.flatnonzero(dt == 0)[0])
+        raise SignalError(f"{source}: signal `{signal}`: duplicated time stamp {t[k]!r} at samples {k} and {k + 1}")
+    if np.any(dt < 0):
+        k = int(np.flatnonzero(dt < 0)[0])
+        raise SignalError(f"{source}: signal `{signal}`: time stamps not increasing at sample {k + 1} "
+                          f"({t[k]!r} -> {t[k + 1]!r})")
+    return t
+
+
+def resample_onto(t_src: np.ndarray, x: np.ndarray, t_new: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``x(t_src)`` onto ``t_new`` (inside the source span)."""
+    return np.interp(t_new, t_src, x)
+
+
+@dataclass(frozen=True)
+class FlightData:
+    """Named signals of one flight (or experiment) on a uniform time grid.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        Time stamps, s, uniform spacing ``ts``.
+    signals : dict of str -> numpy.ndarray
+        Each the same length as ``t``.
+    units : dict of str -> str
+        Unit of each signal ("" where unknown).
+    metadata : dict
+        Free-form (vehicle, experiment, sample rates of the original topics, ...).
+    source : str
+        File name or description, used in every error message.
+    """
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    units: dict[str, str] = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        t = check_time(self.t, self.source)
+        dt = np.diff(t)
+        if np.max(np.abs(dt - dt[0])) > UNIFORM_RTOL * dt[0] + 1e-12:
+            raise SignalError(f"{self.source}: signal `time`: not uniformly spaced (steps from {dt.min():.6g} "
+                              f"to {dt.max():.6g} s); resample first (FlightData.from_samples)")
+        sig = {}
+        for name, x in self.signals.items():
+            arr = np.asarray(x, dtype=float)
+            if arr.shape != t.shape:
+                raise SignalError(f"{self.source}: signal `{name}`: expected {t.size} samples, got shape {arr.shape}")
+            bad = np.flatnonzero(~np.isfinite(arr))
+            if bad.size:
+                raise SignalError(f"{self.source}: signal `{name}`: non-finite value {arr[bad[0]]!r} at "
+                                  f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
+            sig[name] = arr
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "signals", sig)
+        object.__setattr__(self, "units", {n: self.units.get(n, "") for n in sig})
+
+    @classmethod
+    def from_samples(cls, series: dict[str, tuple[np.ndarray, np.ndarray]], ts: float | None = None,
+                     units: dict[str, str] | None = None, metadata: dict[str, Any] | None = None,
+                     source: str = "<memory>") -> "FlightData":
+        """Build from signals with their own time stamps (mixed rates), resampled onto one grid.
+
+        Parameters
+        ----------
+        series : dict name -> (t, x)
+            Each signal with its own strictly increasing time stamps (s).
+        ts : float, optional
+            Sample time of the common grid; default: the finest median step among the signals.
+        The common grid spans the overlap of all signals.
+        """
+        if not series:
+            raise SignalError(f"{source}: no signals given")
+        checked = {}
+        for name, (t, x) in series.items():
+            t = check_time(t, source, name)
+            x = np.asarray(x, dtype=float)
+            if x.shape != t.shape:
+                raise SignalError(f"{source}: signal `{name}`: {x.size} values for {t.size} time stamps")
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                raise SignalError(f"{source}: signal `{name}`: non-finite value {x[bad[0]]!r} at "
+                                  f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
+            checked[name] = (t, x)
+        if ts is None:
+            ts = min(float(np.median(np.diff(t))) for t, _ in checked.values())
+        if not (np.isfinite(ts) and ts > 0):
+            raise SignalError(f"{source}: `ts`: got {ts!r}, expected a sample time > 0 (s)")
+        t0 = max(t[0] for t, _ in checked.values())
+        t1 = min(t[-1] for t, _ in checked.values())
+        if t1 <= t0:
+            raise SignalError(f"{source}: the signals {sorted(checked)} do not overlap in time")
+        grid = t0 + np.arange(int(np.floor((t1 - t0) / ts + 1e-9)) + 1) * ts
+        rates = {name: 1.0 / float(np.median(np.diff(t))) for name, (t, _) in checked.items()}
+        meta = dict(metadata or {})
+        meta.setdefault("original_rates_hz", rates)
+        return cls(t=grid, signals={n: resample_onto(t, x, grid) for n, (t, x) in checked.items()},
+                   units=dict(units or {}), metadata=meta, source=source)
+
+    @property
+    def ts(self) -> float:
+        """Sample time, s."""
+        return float(self.t[1] - self.t[0])
+
+    def __len__(self) -> int:
+        return self.t.size
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.signals[name]
+        except KeyError:
+            raise SignalError(f"{self.source}: no signal `{name}`; available: {sorted(self.signals)}") from None
+
+    def segment(self, start: float | None = None, stop: float | None = None) -> "FlightData":
+        """The samples with ``start <= t <= stop`` (s, same clock as ``t``)."""
+        lo = self.t[0] if start is None else float(start)
+        hi = self.t[-1] if stop is None else float(stop)
+        keep = (self.t >= lo - 1e-9) & (self.t <= hi + 1e-9)
+        if np.count_nonzero(keep) < 2:
+            raise SignalError(f"{self.source}: segment [{start}, {stop}] s holds fewer than 2 samples "
+                              f"(data span {self.t[0]:.6g} to {self.t[-1]:.6g} s)")
+        return FlightData(self.t[keep], {n: x[keep] for n, x in self.signals.items()}, dict(self.units),
+                          {**self.metadata, "segment": [lo, hi]}, self.source)
+
+    def to_csv(self, path: str) -> None:
+        """Write ``time`` and every signal as columns (header row of names), atomically.
+
+        Units go into a comment line before the header: ``# units: time=s, x=m, ...``.
+        """
+        names = list(self.signals)
+        units = ", ".join(["time=s"] + [f"{n}={self.units.get(n, '')}" for n in names])
+        data = np.column_stack([self.t] + [self.signals[n] for n in names])
+        with atomic_path(path) as tmp:
+            np.savetxt(tmp, data, delimiter=",", header=f"units: {units}\n" + ",".join(["time"] + names),
+                       comments="# ", fmt="%.10g")
+
+    def to_parquet(self, path: str) -> None:
+        """Write ``time`` and every signal as Parquet columns (units in the schema metadata)."""
+        import json
+
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        cols = {"time": self.t, **self.signals}
+        table = pa.table(cols).replace_schema_metadata(
+            {"ilcdob.units": json.dumps({"time": "s", **self.units})})
+        with atomic_path(path) as tmp:
+            pq.write_table(table, tmp)
