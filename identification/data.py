@@ -166,9 +166,9 @@ class FlightData:
         names = list(self.signals)
         units = ", ".join(["time=s"] + [f"{n}={self.units.get(n, '')}" for n in names])
         data = np.column_stack([self.t] + [self.signals[n] for n in names])
-        with atomic_path(path) as tmp:
-            np.savetxt(tmp, data, delimiter=",", header=f"units: {units}\n" + ",".join(["time"] + names),
-                       comments="# ", fmt="%.10g")
+        with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(f"# units: {units}\n" + ",".join(["time"] + names) + "\n")
+            np.savetxt(fh, data, delimiter=",", fmt="%.10g")
 
     def to_parquet(self, path: str) -> None:
         """Write ``time`` and every signal as Parquet columns (units in the schema metadata)."""
