@@ -1,0 +1,283 @@
+"""The result of a transfer-function fit: model, fit, covariance, residual tests, uncertainty.
+
+Modelled on MATLAB's ``tfest`` / ``compare`` / ``resid`` / ``getcov`` and on the estimator
+pattern (fitted quantities as attributes; ``predict``, ``score``). ``fit_percent`` is
+MATLAB's normalised RMSE fit ``100 (1 - ||y - yhat|| / ||y - mean(y)||)``, with each
+experiment's initial state estimated by linear least squares, as ``compare`` does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import control as ct
+import numpy as np
+
+from .data import FlightData
+from .model import ModelStructure, simulate_zoh, zoh_matrices
+
+__all__ = ["TFEstimate", "ResidualTest", "fit_percent", "free_response_basis"]
+
+
+def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
+    """MATLAB's fit: ``100 * (1 - ||y - yhat|| / ||y - mean(y)||)``, in %."""
+    y, yhat = np.asarray(y, float), np.asarray(yhat, float)
+    den = np.linalg.norm(y - np.mean(y))
+    return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / den)) if den > 0 else float("nan")
+
+
+def free_response_basis(structure: ModelStructure, theta: np.ndarray, ts: float, n: int) -> np.ndarray:
+    """Columns: output from each unit initial state with zero input (n x states)."""
+    den, num = structure.split(theta)
+    phi, _, _, c, _ = zoh_matrices(den, num, ts, 0.0)
+    out = np.empty((n, phi.shape[0]))
+    m = c.copy()
+    for k in range(n):
+        out[k] = m[0]
+        m = m @ phi
+    return out
+
+
+@dataclass(frozen=True)
+class ResidualTest:
+    """A correlation test of the residuals (MATLAB ``resid``), at the 99 % level.
+
+    Attributes
+    ----------
+    lags : array of int
+    values : array
+        Normalised correlation at each lag.
+    bound : float
+        ``2.58 / sqrt(N)``: the 99 % band for white, independent signals.
+    """
+
+    lags: np.ndarray
+    values: np.ndarray
+    bound: float
+
+    @property
+    def share_inside(self) -> float:
+        """Fraction of lags inside the band (about 0.99 expected when the test passes)."""
+        return float(np.mean(np.abs(self.values) <= self.bound))
+
+    @property
+    def passed(self) -> bool:
+        """At most 5 % of the lags outside the 99 % band."""
+        return self.share_inside >= 0.95
+
+
+def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    a = a - a.mean()
+    b = b - b.mean()
+    n = a.size
+    norm = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    out = []
+    for k in lags:
+        out.append(np.sum(a[k:] * b[: n - k]) if k >= 0 else np.sum(a[: n + k] * b[-k:]))
+    return np.asarray(out) / norm
+
+
+@dataclass(frozen=True)
+class TFEstimate:
+    """A fitted continuous-time transfer function ``B(s)/(s^K A(s)) e^{-s delay}``.
+
+    Attributes
+    ----------
+    structure : ModelStructure
+    theta : array
+        Parameters (free denominator coefficients, then numerator), see ``structure``.
+    num, den : array
+        s-polynomials, highest power first, denominator monic.
+    delay : float
+        Input delay, s.
+    covariance : array
+        Covariance of ``theta`` (and of ``delay`` as last row/column when it was estimated).
+    delay_estimated : bool
+    sigma2 : float
+        Residual variance of the estimation data.
+    ts : float
+        Sample time of the data, s.
+    fit_estimation : float
+        Fit % on the estimation experiments (all samples pooled).
+    fit_validation : float or None
+        Fit % on held-out experiments.
+    whiteness : ResidualTest
+        Residual autocorrelation, lags 1..25.
+    input_correlation : ResidualTest
+        Input-residual cross-correlation, lags -25..25.
+    solver : dict
+        IPOPT status, iterations and wall time.
+    """
+
+    structure: ModelStructure
+    theta: np.ndarray
+    num: np.ndarray
+    den: np.ndarray
+    delay: float
+    covariance: np.ndarray
+    delay_estimated: bool
+    sigma2: float
+    ts: float
+    fit_estimation: float
+    fit_validation: float | None
+    whiteness: ResidualTest
+    input_correlation: ResidualTest
+    input: str = "u"
+    output: str = "y"
+    solver: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_fit(cls, *, structure, theta, delay, covariance, delay_estimated, sigma2, experiments, ts,
+                 validation, input, output, solver, closed_loop=None, fir_order=60) -> "TFEstimate":
+        den, num = structure.split(theta)
+        ys, yhats, us = [], [], []
+        for u, y in experiments:
+            ys.append(y)
+            yhats.append(_compare(structure, theta, delay, ts, u, y))
+            us.append(u)
+        y_all, yh_all, u_all = np.concatenate(ys), np.concatenate(yhats), np.concatenate(us)
+        resid = y_all - yh_all
+        lags = np.arange(1, 26)
+        bound = 2.58 / np.sqrt(resid.size)
+        white = ResidualTest(lags, _xcorr(resid, resid, lags), bound)
+        xl = np.arange(-25, 26)
+        xcor = ResidualTest(xl, _xcorr(resid, u_all, xl), bound)
+        fit_val = None
+        if validation is not None:
+            from .tfest import project_on_excitation
+
+            vals = [validation] if isinstance(validation, FlightData) else list(validation)
+            yv, yhv = [], []
+            for fd in vals:
+                u = fd[input]
+                if closed_loop is not None:
+                    u = project_on_excitation(u, fd[closed_loop], fir_order)
+                yv.append(fd[output])
+                yhv.append(_compare(structure, theta, delay, fd.ts, u, fd[output]))
+            fit_val = fit_percent(np.concatenate(yv), np.concatenate(yhv))
+        return cls(structure=structure, theta=np.asarray(theta, float), num=num, den=den, delay=float(delay),
+                   covariance=np.asarray(covariance, float), delay_estimated=bool(delay_estimated),
+                   sigma2=float(sigma2), ts=float(ts), fit_estimation=fit_percent(y_all, yh_all),
+                   fit_validation=fit_val, whiteness=white, input_correlation=xcor, input=input,
+                   output=output, solver=dict(solver))
+
+    # ------------------------------------------------------------------ use
+    @property
+    def model(self) -> ct.TransferFunction:
+        """python-control transfer function (the delay is in ``delay``, not in the object)."""
+        return ct.tf(self.num, self.den)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations of ``theta`` (and ``delay``)."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    def predict(self, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """Simulated output for input ``u``; with ``y``, the initial state is fitted to it."""
+        if y is None:
+            return simulate_zoh(self.structure, self.theta, u, self.ts, self.delay)
+        return _compare(self.structure, self.theta, self.delay, self.ts, u, y)
+
+    def score(self, data: FlightData) -> float:
+        """Fit % on ``data`` (signals named as in the fit)."""
+        return fit_percent(data[self.output], self.predict(data[self.input], data[self.output]))
+
+    def frequency_response(self, w: np.ndarray, theta: np.ndarray | None = None,
+                           delay: float | None = None) -> np.ndarray:
+        """``G(jw)`` including the delay, at ``w`` rad/s."""
+        den, num = self.structure.split(self.theta if theta is None else theta)
+        s = 1j * np.asarray(w, float)
+        d = self.delay if delay is None else delay
+        return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * d)
+
+    def uncertainty(self, w: np.ndarray, k: float = 3.0) -> np.ndarray:
+        """Frequency-wise multiplicative uncertainty bound ``|Delta(jw)|`` at ``k`` sigma.
+
+        Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
+        ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the
+        linearised relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate).
+        """
+        w = np.asarray(w, float)
+        p = self.covariance.shape[0]
+        g0 = self.frequency_response(w)
+        grads = np.empty((p, w.size), dtype=complex)
+        x = np.concatenate([self.theta, [self.delay]]) if self.delay_estimated else self.theta.copy()
+        for i in range(p):
+            h = 1e-6 * max(1.0, abs(x[i]))
+            xp = x.copy()
+            xp[i] += h
+            th, d = (xp[:-1], xp[-1]) if self.delay_estimated else (xp, self.delay)
+            grads[i] = (self.frequency_response(w, th, d) - g0) / h
+        var = (np.einsum("iw,ij,jw->w", grads.real, self.covariance, grads.real)
+               + np.einsum("iw,ij,jw->w", grads.imag, self.covariance, grads.imag))
+        return k * np.sqrt(np.clip(var, 0, None)) / np.abs(g0)
+
+    def sample(self, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """``n`` plausible models ``(num, den, delay)`` drawn from N(theta, covariance)."""
+        mean = np.concatenate([self.theta, [self.delay]]) if self.delay_estimated else self.theta
+        draws = rng.multivariate_normal(mean, self.covariance, size=n, method="svd")
+        out = []
+        for x in draws:
+            th, d = (x[:-1], max(0.0, x[-1])) if self.delay_estimated else (x, self.delay)
+            den, num = self.structure.split(th)
+            out.append((num, den, float(d)))
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (the ``model.json`` of ``ilcdob identify``)."""
+        return {
+            "num": [float(v) for v in self.num],
+            "den": [float(v) for v in self.den],
+            "delay": self.delay,
+            "structure": {"poles": self.structure.n_poles, "zeros": self.structure.n_zeros,
+                          "integrators": self.structure.n_integrators},
+            "parameters": [float(v) for v in self.theta],
+            "std": [float(v) for v in self.std],
+            "delay_estimated": self.delay_estimated,
+            "fit_percent": {"estimation": self.fit_estimation, "validation": self.fit_validation},
+            "covariance": self.covariance.tolist(),
+            "noise_variance": self.sigma2,
+            "sample_time": self.ts,
+            "residuals": {"whiteness_inside_99": self.whiteness.share_inside,
+                          "input_correlation_inside_99": self.input_correlation.share_inside},
+            "signals": {"input": self.input, "output": self.output},
+            "solver": self.solver,
+        }
+
+    def summary(self) -> str:
+        """Human-readable summary (parameters with 1-sigma, fit, residual tests)."""
+        lines = [f"G(s) = ({_poly(self.num)}) / ({_poly(self.den)})"
+                 + (f" * exp(-{self.delay:.4g} s)" if self.delay else "")]
+        names = [f"a{i}" for i in range(self.structure.n_free_poles - 1, -1, -1)] + \
+                [f"b{j}" for j in range(self.structure.n_zeros, -1, -1)]
+        if self.delay_estimated:
+            names.append("delay")
+        vals = list(self.theta) + ([self.delay] if self.delay_estimated else [])
+        for nme, v, sd in zip(names, vals, self.std):
+            lines.append(f"  {nme:>5} = {v: .6g} +- {sd:.3g} (1 sigma)")
+        lines.append(f"fit: estimation {self.fit_estimation:.2f} %"
+                     + (f", validation {self.fit_validation:.2f} %" if self.fit_validation is not None else ""))
+        lines.append(f"residuals: whiteness {100 * self.whiteness.share_inside:.0f} % of lags inside the 99 % band, "
+                     f"input correlation {100 * self.input_correlation.share_inside:.0f} %")
+        return "\n".join(lines)
+
+
+def _poly(c: np.ndarray) -> str:
+    n = len(c) - 1
+    terms = []
+    for i, v in enumerate(c):
+        p = n - i
+        if v == 0:
+            continue
+        terms.append(f"{v:.5g}" + ("" if p == 0 else " s" if p == 1 else f" s^{p}"))
+    return " + ".join(terms) if terms else "0"
+
+
+def _compare(structure, theta, delay, ts, u, y) -> np.ndarray:
+    """Simulated output with the initial state chosen by least squares (MATLAB compare)."""
+    forced = simulate_zoh(structure, theta, u, ts, delay)
+    basis = free_response_basis(structure, theta, ts, u.size)
+    x0, *_ = np.linalg.lstsq(basis, y - forced, rcond=None)
+    return forced + basis @ x0

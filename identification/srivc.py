@@ -1,0 +1,110 @@
+"""Initial estimates for continuous-time fits: state-variable-filter instrumental variables.
+
+Simplified refined instrumental variables for continuous-time models (SRIVC; P. Young,
+"Refined instrumental variable estimation", 2011; Garnier, Wang, Young, 2008), with the
+fixed integrators imposed structurally. The model ``s^K A(s) y = B(s) u`` is linear in the
+parameters once both sides are passed through a stable prefilter ``s^k / L(s)``:
+
+    y_f^(N) = -sum_i a_i y_f^(K+i) + sum_j b_j u_f^(j)
+
+The first pass uses ``L(s) = (s + lam)^N``; every further pass uses the current estimate of
+``A(s)`` (stabilised, integrators replaced by ``(s + lam)``) and, as instruments, the
+filtered noise-free output simulated from the current model: the estimate converges to the
+output-error optimum in a few passes, which makes it a good starting point for the
+CasADi/IPOPT refinement in :mod:`ilcdob.identification.tfest`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import control as ct
+from scipy import signal
+
+from .model import ModelStructure, simulate_zoh
+
+__all__ = ["srivc", "delayed"]
+
+
+def delayed(u: np.ndarray, delay_samples: float) -> np.ndarray:
+    """``u`` delayed by a (fractional) number of samples, zeros before the start."""
+    n = u.size
+    k = np.arange(n) - delay_samples
+    return np.interp(k, np.arange(n), u, left=0.0)
+
+
+def _filter_bank(x: np.ndarray, lpoly: np.ndarray, orders: range, ts: float, hold: str) -> list[np.ndarray]:
+    """``s^k / L(s)`` applied to samples of ``x``: ``hold="zoh"`` for the piecewise-constant
+    input, ``"foh"`` (piecewise linear) for the sampled continuous output."""
+    out = []
+    for k in orders:
+        num = np.zeros(k + 1)
+        num[0] = 1.0
+        sysd = ct.sample_system(ct.tf(num, lpoly), ts, method=hold)
+        b, a = np.asarray(sysd.num[0][0], float), np.asarray(sysd.den[0][0], float)
+        out.append(signal.lfilter(b, a, x))
+    return out
+
+
+def _stable_prefilter(theta: np.ndarray, structure: ModelStructure, lam: float) -> np.ndarray:
+    den, _ = structure.split(theta)
+    free = den[: structure.n_free_poles + 1]
+    roots = np.roots(free) if structure.n_free_poles else np.zeros(0)
+    roots = np.where(roots.real > -1e-3 * lam, -np.abs(roots.real) - 1e-3 * lam + 1j * roots.imag, roots)
+    roots = np.concatenate([roots, np.full(structure.n_integrators, -lam)])
+    return np.real(np.poly(roots))
+
+
+def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndarray]], ts: float,
+          delay: float = 0.0, lam: float | None = None, iterations: int = 8) -> np.ndarray:
+    """SRIVC estimate of ``theta`` from experiments ``[(u, y), ...]`` sampled at ``ts``.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+    experiments : list of (u, y)
+        Input and output samples of each experiment (same length within one experiment).
+    ts : float
+        Sample time, s.
+    delay : float
+        Known input delay, s (applied to ``u`` by interpolation).
+    lam : float, optional
+        Initial prefilter pole (rad/s); default ``0.5 / (10 ts)``... a tenth of Nyquist/5.
+    iterations : int
+        Refinement passes after the first.
+    """
+    n_tot = structure.n_poles
+    k_int = structure.n_integrators
+    lam = float(lam) if lam is not None else 0.1 * np.pi / ts / 5
+    lpoly = np.real(np.poly(np.full(n_tot, -lam)))
+    data = [(delayed(np.asarray(u, float), delay / ts), np.asarray(y, float)) for u, y in experiments]
+    theta = None
+    for it in range(iterations + 1):
+        rows, rhs, inst = [], [], []
+        for u, y in data:
+            yf = _filter_bank(y, lpoly, range(n_tot + 1), ts, "foh")
+            uf = _filter_bank(u, lpoly, range(structure.n_zeros + 1), ts, "zoh")
+            skip = min(u.size // 4, int(np.ceil(6.0 / (lam * ts))))
+            phi = np.column_stack([-yf[k_int + i] for i in range(structure.n_free_poles - 1, -1, -1)]
+                                  + [uf[j] for j in range(structure.n_zeros, -1, -1)])
+            if theta is None:
+                zeta = phi
+            else:
+                xh = simulate_zoh(structure, theta, u, ts)
+                xf = _filter_bank(xh, lpoly, range(n_tot + 1), ts, "foh")
+                zeta = np.column_stack([-xf[k_int + i] for i in range(structure.n_free_poles - 1, -1, -1)]
+                                       + [uf[j] for j in range(structure.n_zeros, -1, -1)])
+            rows.append(phi[skip:])
+            inst.append(zeta[skip:])
+            rhs.append(yf[n_tot][skip:])
+        phi_all, zeta_all, y_all = np.vstack(rows), np.vstack(inst), np.concatenate(rhs)
+        scale = np.linalg.norm(phi_all, axis=0)
+        scale[scale == 0] = 1.0
+        new, *_ = np.linalg.lstsq((zeta_all / scale).T @ (phi_all / scale), (zeta_all / scale).T @ y_all,
+                                  rcond=None)
+        new = new / scale
+        if theta is not None and np.linalg.norm(new - theta) <= 1e-9 * np.linalg.norm(theta):
+            theta = new
+            break
+        theta = new
+        lpoly = _stable_prefilter(theta, structure, lam)
+    return theta
