@@ -139,7 +139,13 @@ def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts
     ud = np.concatenate([np.zeros(nd), u])[: u.size]
     ud1 = np.concatenate([[0.0], ud])[: u.size]
     n = phi.shape[0]
-    # x[k+1] = Phi x[k] + G0 ud[k] + G1 ud1[k]  ->  one 2-input state-space simulation
-    sys = signal.dlti(phi, np.hstack([g0, g1]), c, np.zeros((1, 2)), dt=ts)
-    _, y, _ = signal.dlsim(sys, np.column_stack([ud, ud1]), x0=np.zeros(n) if x0 is None else x0)
-    return y[:, 0]
+    if x0 is not None:
+        # x[k+1] = Phi x[k] + G0 ud[k] + G1 ud1[k]: a 2-input state-space simulation
+        sys = signal.dlti(phi, np.hstack([g0, g1]), c, np.zeros((1, 2)), dt=ts)
+        _, y, _ = signal.dlsim(sys, np.column_stack([ud, ud1]), x0=x0)
+        return y[:, 0]
+    # from rest: y = (N0(z) + z^-1 N1(z)) / den(z) ud, run by lfilter (C speed)
+    b0, a = signal.ss2tf(phi, g0, c, np.zeros((1, 1)))
+    b1, _ = signal.ss2tf(phi, g1, c, np.zeros((1, 1)))
+    b = np.concatenate([b0[0], [0.0]]) + np.concatenate([[0.0], b1[0]])
+    return signal.lfilter(b, np.concatenate([a, [0.0]]), ud)

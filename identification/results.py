@@ -130,7 +130,7 @@ class TFEstimate:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_fit(cls, *, structure, theta, delay, covariance, delay_estimated, sigma2, experiments, ts,
-                 validation, input, output, solver, closed_loop=None, fir_order=60) -> "TFEstimate":
+                 validation, input, output, solver) -> "TFEstimate":
         den, num = structure.split(theta)
         ys, yhats, us = [], [], []
         for u, y in experiments:
@@ -146,14 +146,10 @@ class TFEstimate:
         xcor = ResidualTest(xl, _xcorr(resid, u_all, xl), bound)
         fit_val = None
         if validation is not None:
-            from .tfest import project_on_excitation
-
             vals = [validation] if isinstance(validation, FlightData) else list(validation)
             yv, yhv = [], []
             for fd in vals:
                 u = fd[input]
-                if closed_loop is not None:
-                    u = project_on_excitation(u, fd[closed_loop], fir_order)
                 yv.append(fd[output])
                 yhv.append(_compare(structure, theta, delay, fd.ts, u, fd[output]))
             fit_val = fit_percent(np.concatenate(yv), np.concatenate(yhv))

@@ -16,13 +16,17 @@ Initialisation (so that IPOPT does not stall in a local minimum): candidates fro
 squares; the candidate with the lowest simulation error starts IPOPT. With ``delay="auto"``
 the same grid scans the delay in half-sample steps; IPOPT then refines the fractional part.
 
-Closed-loop data: the direct output-error fit is consistent when the output noise is white
-and does not reach the input, i.e. open-loop data. In closed loop the input carries fed-back
-noise and the estimate is biased by an amount that grows with the noise-to-signal ratio
-(Ljung, System Identification, 2nd ed., sec. 13.4). ``closed_loop=<excitation signal>``
-uses the two-stage method (Van den Hof & Schrama, 1993): the input is first projected onto
-the external excitation by a non-causal FIR least-squares fit, and the plant is fitted to
-that noise-free input; this is consistent whatever the noise, at some loss of variance.
+Closed-loop data (the vehicles fly under their PID, so the commanded acceleration depends on
+the measured position): the direct output-error fit used here is consistent when the
+disturbance on the output is white measurement noise and the plant is strictly proper --
+the noise sample v[k] reaches the input at k and the output only from k+1 on, so the
+output error equals v and is uncorrelated with the regressors (Ljung, System
+Identification, 2nd ed., sec. 13.4: the direct method is consistent when the noise model is
+right). It is biased when the output disturbance is coloured (turbulence, unmodelled
+vibration) and fed back, in proportion to that disturbance's power relative to the
+excitation: fly closed-loop experiments in calm air with a strong external excitation
+(reference steps, an injected chirp), and check ``input_correlation`` of the result,
+which flags residuals correlated with the input.
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from .model import ModelStructure, simulate_zoh
 from .results import TFEstimate, fit_percent
 from .srivc import srivc
 
-__all__ = ["FitOptions", "tfest", "project_on_excitation"]
+__all__ = ["FitOptions", "tfest"]
 
 
 @dataclass(frozen=True)
@@ -59,11 +63,6 @@ class FitOptions:
         Upper bound of the delay search, s.
     estimate_x0 : bool
         Estimate each experiment's initial state (else: the system starts at rest).
-    closed_loop : str or None
-        Name of the external excitation signal (reference or injection) for the two-stage
-        closed-loop method; ``None`` fits the measured input directly.
-    fir_order : int
-        Half-length of the non-causal FIR of the two-stage method, samples.
     max_iter : int
         IPOPT iteration limit.
     tol : float
@@ -75,8 +74,6 @@ class FitOptions:
     delay: float | str = 0.0
     max_delay: float = 0.3
     estimate_x0: bool = True
-    closed_loop: str | None = None
-    fir_order: int = 60
     max_iter: int = 300
     tol: float = 1e-10
     verbose: bool = False
@@ -193,7 +190,18 @@ class _OEProblem:
         nlp = {"x": self.w, "f": f}
         ipopt = {"print_level": 5 if opts.verbose else 0, "max_iter": opts.max_iter, "tol": opts.tol,
                  "acceptable_tol": 1e-8, "acceptable_iter": 5, "sb": "yes"}
-        solver = cs.nlpsol("oe", "ipopt", nlp, {"ipopt": ipopt, "print_time": opts.verbose})
+        # Gauss-Newton Hessian J'J: positive semidefinite, so IPOPT takes full Newton-like steps
+        # instead of crawling with inertia correction through indefinite regions
+        lam_f = cs.SX.sym("lam_f")
+        lam_g = cs.SX.sym("lam_g", 0)
+        p = cs.SX.sym("p", 0)
+        jr = cs.jacobian(self.r, self.w)
+        hess = cs.triu(lam_f * (jr.T @ jr) / self.y_scale)
+        hess_fn = cs.Function("nlp_hess_l", [self.w, p, lam_f, lam_g], [hess],
+                              ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+        solver = cs.nlpsol("oe", "ipopt", nlp, {"ipopt": ipopt, "print_time": opts.verbose,
+                                               "show_eval_warnings": opts.verbose,
+                                               "hess_lag": hess_fn})
         lbw = -np.inf * np.ones(self.w.shape[0])
         ubw = np.inf * np.ones(self.w.shape[0])
         w0 = np.zeros(self.w.shape[0])
@@ -280,24 +288,6 @@ def _initialise(structure, exps, ts, delays, progress):
     return best[1], best[2]
 
 
-# ---------------------------------------------------------------- two-stage closed loop
-
-def project_on_excitation(u: np.ndarray, r: np.ndarray, order: int) -> np.ndarray:
-    """Least-squares non-causal FIR projection of ``u`` onto the excitation ``r``
-    (lags ``-order..order``): the part of the input explained by the excitation alone."""
-    n = u.size
-    lags = range(-order, order + 1)
-    cols = [np.roll(r, k) for k in lags]
-    for k, col in zip(lags, cols):
-        if k > 0:
-            col[:k] = 0.0
-        elif k < 0:
-            col[k:] = 0.0
-    phi = np.column_stack(cols)
-    coef, *_ = np.linalg.lstsq(phi, u, rcond=None)
-    return phi @ coef
-
-
 # ---------------------------------------------------------------- public entry
 
 def _experiments(data, input: str, output: str, structure: ModelStructure, opts: FitOptions):
@@ -312,8 +302,6 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
             raise SignalError(f"{fd.source}: sample time {fd.ts} s differs from {data[0].source} ({ts} s); "
                               "resample to one grid first")
         u, y = fd[input], fd[output]
-        if opts.closed_loop is not None:
-            u = project_on_excitation(u, fd[opts.closed_loop], opts.fir_order)
         need = 10 * (structure.n_params + structure.n_poles)
         if u.size < need:
             raise SignalError(f"{fd.source}: {u.size} samples are too few for a model with "
@@ -395,6 +383,5 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
     return TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
                                delay_estimated=estimate_delay, sigma2=sigma2, experiments=exps, ts=ts,
                                validation=validation, input=input, output=output,
-                               closed_loop=opts.closed_loop, fir_order=opts.fir_order,
                                solver={"status": stats["return_status"], "iterations": stats["iter_count"],
                                        "seconds": time.perf_counter() - t_start})
