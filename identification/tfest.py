@@ -133,12 +133,13 @@ class _OEProblem:
         n = structure.n_poles
         p = structure.n_params
         self.scale = np.maximum(np.abs(theta0), 1e-3 * max(1.0, float(np.max(np.abs(theta0)))))
-        z = cs.SX.sym("z", p)
-        theta = z * self.scale
+        zs = cs.SX.sym("z", p)
+        theta = zs * self.scale
         den_tail = cs.vertcat(theta[: structure.n_free_poles], cs.SX.zeros(structure.n_integrators, 1))
         num = theta[structure.n_free_poles:]
         a, b, c = _sym_companion(den_tail, num, n, structure.n_zeros + 1)
-        frac = cs.SX.sym("f") if estimate_frac else cs.SX(frac0)
+        fs = cs.SX.sym("f")
+        frac_expr = fs if estimate_frac else cs.SX(frac0)
         # squarings from the initial estimate's spectral scale
         a0 = np.zeros((n, n))
         a0[:-1, 1:] = np.eye(n - 1)
@@ -148,31 +149,36 @@ class _OEProblem:
         sq = max(0, int(math.ceil(math.log2(norm / 0.1))) + 2)
         phi, g_full = _sym_expm_aug(a, b, ts, sq)
         if estimate_frac or frac0 > 0:
-            phi_rest, g0 = _sym_expm_aug(a, b, ts - frac, sq)
-            _, gf = _sym_expm_aug(a, b, frac, max(0, sq - 1))
+            phi_rest, g0 = _sym_expm_aug(a, b, ts - frac_expr, sq)
+            _, gf = _sym_expm_aug(a, b, frac_expr, max(0, sq - 1))
             g1 = phi_rest @ gf
         else:
             g0, g1 = g_full, cs.SX.zeros(n, 1)
+        # parameters -> sampled model, as one small SX function called from the MX graph
+        model_fn = cs.Function("model", [zs, fs], [cs.vertcat(cs.vec(phi), g0, g1), c])
         x = cs.SX.sym("x", n)
         uu = cs.SX.sym("uu", 2)
         pars = cs.SX.sym("P", n * n + 2 * n)
         phi_p = cs.reshape(pars[: n * n], n, n)
         step = cs.Function("step", [x, uu, pars], [phi_p @ x + pars[n * n:n * n + n] * uu[0]
                                                    + pars[n * n + n:] * uu[1]])
-        pvec = cs.vertcat(cs.vec(phi), g0, g1)
+        # the trajectory lives in an MX graph: mapaccum stays one call node (no scalar expansion)
+        z = cs.MX.sym("z", p)
+        frac = cs.MX.sym("f")
+        pvec, c_mx = model_fn(z, frac if estimate_frac else cs.MX(frac0))
         variables = [z] + ([frac] if estimate_frac else [])
         x0s, resid, yhats = [], [], []
         for i, (u, y) in enumerate(exps):
             ud = _shift(u, nd)
             ud1 = _shift(ud, 1)
             nsteps = u.size
-            x0 = cs.SX.sym(f"x0_{i}", n) if opts.estimate_x0 else cs.SX.zeros(n, 1)
+            x0 = cs.MX.sym(f"x0_{i}", n) if opts.estimate_x0 else cs.MX.zeros(n, 1)
             if opts.estimate_x0:
                 x0s.append(x0)
             fmap = step.mapaccum(f"sim{i}", nsteps - 1)
             xs = fmap(x0, cs.DM(np.vstack([ud[:-1], ud1[:-1]])), cs.repmat(pvec, 1, nsteps - 1))
             xall = cs.horzcat(x0, xs)
-            yhat = (c @ xall).T
+            yhat = (c_mx @ xall).T
             yhats.append(yhat)
             resid.append(cs.DM(y) - yhat)
         self.n_x0 = len(x0s) * n
@@ -192,9 +198,9 @@ class _OEProblem:
                  "acceptable_tol": 1e-8, "acceptable_iter": 5, "sb": "yes"}
         # Gauss-Newton Hessian J'J: positive semidefinite, so IPOPT takes full Newton-like steps
         # instead of crawling with inertia correction through indefinite regions
-        lam_f = cs.SX.sym("lam_f")
-        lam_g = cs.SX.sym("lam_g", 0)
-        p = cs.SX.sym("p", 0)
+        lam_f = cs.MX.sym("lam_f")
+        lam_g = cs.MX.sym("lam_g", 0)
+        p = cs.MX.sym("p", 0)
         jr = cs.jacobian(self.r, self.w)
         hess = cs.triu(lam_f * (jr.T @ jr) / self.y_scale)
         hess_fn = cs.Function("nlp_hess_l", [self.w, p, lam_f, lam_g], [hess],
@@ -216,8 +222,7 @@ class _OEProblem:
         theta = wopt[: self.n_theta] * self.scale
         frac = float(wopt[self.n_theta]) if self.estimate_frac else self.frac0
         # Jacobian of the simulated output in the unscaled variables, for the covariance
-        jac = cs.Function("J", [self.w], [cs.jacobian(self.yhat, self.w)])(wopt)
-        jac = np.asarray(jac)
+        jac = -np.asarray(cs.Function("J", [self.w], [jr])(wopt))
         jac[:, : self.n_theta] /= self.scale
         return theta, frac, jac, float(sol["f"]) * 2 * self.y_scale, stats
 
