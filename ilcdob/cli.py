@@ -3,6 +3,11 @@
 ``ilcdob reproduce [--fleet FILE] [--scenarios 1,2,3,4] [--iterations 3] --out DIR``
 runs the paper's validation on a fleet (default: the built-in three UAVs) and writes
 ``DIR/results.json``, the figures and ``DIR/README.md``.
+
+``ilcdob identify FILE [FILE ...] --input COL --output COL [--time COL] --poles N [--zeros M]
+[--integrators K] [--delay auto|SECONDS] [--validate FILE ...] --out model.json [--plot DIR]``
+fits a continuous-time transfer function to flight data (CSV, Parquet, PX4 ULog with
+TOPIC.FIELD, ArduPilot DataFlash with MESSAGE.FIELD) and writes ``model.json``.
 """
 
 from __future__ import annotations
@@ -38,6 +43,22 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--iterations", type=_positive_int, default=3, help="learning iterations (default 3)")
     rep.add_argument("--out", required=True, help="output folder")
     rep.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+
+    idf = sub.add_parser("identify", help="fit a continuous-time transfer function to flight data")
+    idf.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
+    idf.add_argument("--input", required=True, help="input signal: COLUMN, TOPIC.FIELD (ULog) or MESSAGE.FIELD")
+    idf.add_argument("--output", required=True, help="output signal, same forms as --input")
+    idf.add_argument("--time", default=None, help="time column of CSV/Parquet files (default: time), in s")
+    idf.add_argument("--poles", type=_positive_int, required=True, help="number of poles, integrators included")
+    idf.add_argument("--zeros", type=int, default=0, help="number of zeros (default 0)")
+    idf.add_argument("--integrators", type=int, default=0, help="poles fixed at s = 0 (default 0)")
+    idf.add_argument("--delay", default="0", help="input delay in s, or 'auto' to estimate it (default 0)")
+    idf.add_argument("--max-delay", type=float, default=0.3, help="upper bound of the delay search, s")
+    idf.add_argument("--validate", nargs="*", default=[], help="held-out data files")
+    idf.add_argument("--start", type=float, default=None, help="segment start, s (log clock)")
+    idf.add_argument("--stop", type=float, default=None, help="segment end, s (log clock)")
+    idf.add_argument("--out", required=True, help="model.json to write")
+    idf.add_argument("--plot", default=None, help="folder for the compare/residual/Bode figures")
     return parser
 
 
@@ -61,6 +82,46 @@ def _reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify(args: argparse.Namespace) -> int:
+    from .atomic import write_json_atomic
+    from .errors import SpecError
+    from .identification.loaders import load_flight
+    from .identification.model import ModelStructure
+    from .identification.tfest import FitOptions, tfest
+
+    if args.delay == "auto":
+        delay: float | str = "auto"
+    else:
+        try:
+            delay = float(args.delay)
+        except ValueError:
+            raise SpecError(f"`--delay`: got {args.delay!r}, expected 'auto' or a number of seconds >= 0") from None
+    structure = ModelStructure(args.poles, args.zeros, args.integrators)
+    fields = {"u": args.input, "y": args.output}
+    kw = {"start": args.start, "stop": args.stop}
+    if args.time is not None:
+        kw["time"] = args.time
+    est_data = [load_flight(f, fields, **kw) for f in args.files]
+    val_data = [load_flight(f, fields, **kw) for f in args.validate]
+    say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
+    say(f"fitting {structure.n_params} parameters to {sum(len(d) for d in est_data)} samples "
+        f"from {len(est_data)} file(s)")
+    est = tfest(est_data, "u", "y", structure, FitOptions(delay=delay, max_delay=args.max_delay),
+                validation=val_data or None, progress=say)
+    data = est.to_dict()
+    data["signals"] = {"input": args.input, "output": args.output}
+    data["files"] = {"estimation": list(args.files), "validation": list(args.validate)}
+    write_json_atomic(args.out, data)
+    print(est.summary())
+    if args.plot:
+        from .identification.plots import plot_fit
+
+        for path in plot_fit(est, est_data, val_data, args.plot):
+            say(f"wrote {path}")
+    say(f"wrote {args.out}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ilcdob`` command; returns the exit status."""
     parser = build_parser()
@@ -68,6 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "reproduce":
             return _reproduce(args)
+        if args.command == "identify":
+            return _identify(args)
     except IlcdobError as exc:
         print(f"ilcdob: error: {exc}", file=sys.stderr)
         return 2

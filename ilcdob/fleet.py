@@ -13,6 +13,9 @@ Schema (one ``[[system]]`` table per vehicle; units in comments)::
     # optional:
     model = { num = [...], den = [...], delay = 0.0 }   # P_hat when it differs from the plant
     noise = { amplitude = 0.05, frequency = 2.0, phase = 0.0 }  # m/s^2, Hz, rad
+    identification = { poles = 3, zeros = 0, integrators = 2, parameters = [...],
+                       covariance = [[...]], fit_estimation = 98.0, fit_validation = 97.5,
+                       source = "..." }   # written by `ilcdob identify-fleet`
 
 Every system's loops are built (and checked for stability) when the fleet is loaded. Any
 problem raises :class:`~ilcdob.errors.FleetError` naming the file, the system and the key.
@@ -28,7 +31,7 @@ from typing import Any
 
 from .errors import FleetError, SpecError, UnstableLoopError
 from .loop import LoopSystem, build_loop
-from .specs import DOBSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec
+from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec
 
 __all__ = ["Fleet", "load_fleet", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict"]
 
@@ -36,7 +39,7 @@ DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_flee
 
 _TOP_KEYS = {"sample_time": True, "system": True, "description": False}
 _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
-                "delay": False, "model": False, "noise": False}
+                "delay": False, "model": False, "noise": False, "identification": False}
 _TABLE_KEYS = {
     "plant": {"num": True, "den": True},
     "model": {"num": True, "den": True, "delay": False},
@@ -44,9 +47,12 @@ _TABLE_KEYS = {
                    "acceleration_feedforward": False},
     "dob": {"q_order": True, "q_time_constant": True},
     "noise": {"amplitude": False, "frequency": False, "phase": False},
+    "identification": {"poles": True, "zeros": True, "integrators": True, "parameters": True,
+                       "covariance": True, "delay_estimated": False, "fit_estimation": False,
+                       "fit_validation": False, "source": False},
 }
 _SPEC_CLASS = {"plant": PlantSpec, "model": PlantSpec, "controller": PIDSpec, "dob": DOBSpec,
-               "noise": NoiseSpec}
+               "noise": NoiseSpec, "identification": IdentificationSpec}
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import SpecError
 
-__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "SystemSpec"]
+__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "SystemSpec"]
 
 
 def _poly(name: str, values: object) -> tuple[float, ...]:
@@ -167,6 +167,51 @@ class NoiseSpec:
 
 
 @dataclass(frozen=True)
+class IdentificationSpec:
+    """Where a plant model came from, when it was identified (``ilcdob identify``).
+
+    The parameter covariance defines the model's Delta set: the frequency-wise
+    multiplicative uncertainty bound and samples of plausible models.
+
+    Attributes
+    ----------
+    poles, zeros, integrators : int
+        Model structure (poles include the fixed integrators).
+    parameters : tuple of float
+        Free denominator coefficients then numerator (see ``ModelStructure``).
+    covariance : tuple of tuple of float
+        Covariance of ``parameters`` (and of the delay, last, when it was estimated).
+    delay_estimated : bool
+    fit_estimation, fit_validation : float
+        Fit in % (MATLAB definition) on estimation and held-out flights.
+    source : str
+        The flights it was identified from.
+    """
+
+    poles: int
+    zeros: int
+    integrators: int
+    parameters: tuple[float, ...]
+    covariance: tuple[tuple[float, ...], ...]
+    delay_estimated: bool = False
+    fit_estimation: float = float("nan")
+    fit_validation: float = float("nan")
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        params = tuple(float(v) for v in self.parameters)
+        cov = np.asarray(self.covariance, dtype=float)
+        n = len(params) + (1 if self.delay_estimated else 0)
+        if len(params) != self.poles - self.integrators + self.zeros + 1:
+            raise SpecError(f"`identification.parameters`: {len(params)} values do not match poles={self.poles}, "
+                            f"zeros={self.zeros}, integrators={self.integrators}")
+        if cov.shape != (n, n) or not np.all(np.isfinite(cov)):
+            raise SpecError(f"`identification.covariance`: expected a finite {n} x {n} matrix, got shape {cov.shape}")
+        object.__setattr__(self, "parameters", params)
+        object.__setattr__(self, "covariance", tuple(tuple(float(v) for v in row) for row in cov))
+
+
+@dataclass(frozen=True)
 class SystemSpec:
     """One vehicle: its true plant, the model its DOB and learning filters use, PID, DOB.
 
@@ -183,6 +228,8 @@ class SystemSpec:
         ``None`` means the model is exact (``P_hat = P``), as in the paper's simulations.
     noise : NoiseSpec
         The system's own process noise.
+    identification : IdentificationSpec or None
+        How the plant model was identified (None: derived or given).
     """
 
     name: str
@@ -191,6 +238,7 @@ class SystemSpec:
     dob: DOBSpec
     model: PlantSpec | None = None
     noise: NoiseSpec = field(default_factory=NoiseSpec)
+    identification: IdentificationSpec | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
