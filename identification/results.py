@@ -17,7 +17,8 @@ import numpy as np
 from .data import FlightData
 from .model import ModelStructure, simulate_zoh, zoh_matrices
 
-__all__ = ["TFEstimate", "ResidualTest", "fit_percent", "free_response_basis"]
+__all__ = ["TFEstimate", "ResidualTest", "fit_percent", "free_response_basis", "frequency_response",
+           "multiplicative_bound"]
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -37,6 +38,38 @@ def free_response_basis(structure: ModelStructure, theta: np.ndarray, ts: float,
         out[k] = m[0]
         m = m @ phi
     return out
+
+
+def frequency_response(structure: ModelStructure, theta: np.ndarray, delay: float, w: np.ndarray) -> np.ndarray:
+    """``G(jw)`` of the model ``theta`` (with its delay) at ``w`` rad/s."""
+    den, num = structure.split(theta)
+    s = 1j * np.asarray(w, float)
+    return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay)
+
+
+def multiplicative_bound(structure: ModelStructure, theta: np.ndarray, covariance: np.ndarray, delay: float,
+                         delay_estimated: bool, w: np.ndarray, k: float = 3.0) -> np.ndarray:
+    """Frequency-wise multiplicative uncertainty ``|Delta(jw)|`` at ``k`` sigma.
+
+    Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
+    ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the linearised
+    relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate). ``covariance``
+    covers ``theta`` and, last, the delay when ``delay_estimated``.
+    """
+    w = np.asarray(w, float)
+    cov = np.asarray(covariance, float)
+    x = np.concatenate([theta, [delay]]) if delay_estimated else np.asarray(theta, float).copy()
+    g0 = frequency_response(structure, theta, delay, w)
+    grads = np.empty((x.size, w.size), dtype=complex)
+    for i in range(x.size):
+        h = 1e-6 * max(1.0, abs(x[i]))
+        xp = x.copy()
+        xp[i] += h
+        th, d = (xp[:-1], xp[-1]) if delay_estimated else (xp, delay)
+        grads[i] = (frequency_response(structure, th, d, w) - g0) / h
+    var = (np.einsum("iw,ij,jw->w", grads.real, cov, grads.real)
+           + np.einsum("iw,ij,jw->w", grads.imag, cov, grads.imag))
+    return k * np.sqrt(np.clip(var, 0, None)) / np.abs(g0)
 
 
 @dataclass(frozen=True)
@@ -180,35 +213,14 @@ class TFEstimate:
         """Fit % on ``data`` (signals named as in the fit)."""
         return fit_percent(data[self.output], self.predict(data[self.input], data[self.output]))
 
-    def frequency_response(self, w: np.ndarray, theta: np.ndarray | None = None,
-                           delay: float | None = None) -> np.ndarray:
+    def frequency_response(self, w: np.ndarray) -> np.ndarray:
         """``G(jw)`` including the delay, at ``w`` rad/s."""
-        den, num = self.structure.split(self.theta if theta is None else theta)
-        s = 1j * np.asarray(w, float)
-        d = self.delay if delay is None else delay
-        return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * d)
+        return frequency_response(self.structure, self.theta, self.delay, w)
 
     def uncertainty(self, w: np.ndarray, k: float = 3.0) -> np.ndarray:
-        """Frequency-wise multiplicative uncertainty bound ``|Delta(jw)|`` at ``k`` sigma.
-
-        Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
-        ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the
-        linearised relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate).
-        """
-        w = np.asarray(w, float)
-        p = self.covariance.shape[0]
-        g0 = self.frequency_response(w)
-        grads = np.empty((p, w.size), dtype=complex)
-        x = np.concatenate([self.theta, [self.delay]]) if self.delay_estimated else self.theta.copy()
-        for i in range(p):
-            h = 1e-6 * max(1.0, abs(x[i]))
-            xp = x.copy()
-            xp[i] += h
-            th, d = (xp[:-1], xp[-1]) if self.delay_estimated else (xp, self.delay)
-            grads[i] = (self.frequency_response(w, th, d) - g0) / h
-        var = (np.einsum("iw,ij,jw->w", grads.real, self.covariance, grads.real)
-               + np.einsum("iw,ij,jw->w", grads.imag, self.covariance, grads.imag))
-        return k * np.sqrt(np.clip(var, 0, None)) / np.abs(g0)
+        """Multiplicative uncertainty ``|Delta(jw)|`` at ``k`` sigma (:func:`multiplicative_bound`)."""
+        return multiplicative_bound(self.structure, self.theta, self.covariance, self.delay,
+                                    self.delay_estimated, w, k)
 
     def sample(self, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, float]]:
         """``n`` plausible models ``(num, den, delay)`` drawn from N(theta, covariance)."""

