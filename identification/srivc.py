@@ -97,6 +97,8 @@ def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndar
             inst.append(zeta[skip:])
             rhs.append(yf[n_tot][skip:])
         phi_all, zeta_all, y_all = np.vstack(rows), np.vstack(inst), np.concatenate(rhs)
+        if not (np.all(np.isfinite(phi_all)) and np.all(np.isfinite(zeta_all))):
+            raise ValueError("SRIVC diverged (non-finite filtered signals)")
         scale = np.linalg.norm(phi_all, axis=0)
         scale[scale == 0] = 1.0
         new, *_ = np.linalg.lstsq((zeta_all / scale).T @ (phi_all / scale), (zeta_all / scale).T @ y_all,

@@ -264,14 +264,19 @@ def _grid_candidates(structure: ModelStructure, ts: float) -> list[np.ndarray]:
 
 
 def _sse(structure, theta, exps, ts, delay) -> float:
+    """Simulation SSE of a candidate; unstable candidates that overflow count as infinite."""
     try:
-        return float(sum(np.sum((y - simulate_zoh(structure, theta, u, ts, delay)) ** 2) for u, y in exps))
+        with np.errstate(over="ignore", invalid="ignore"):
+            sse = float(sum(np.sum((y - simulate_zoh(structure, theta, u, ts, delay)) ** 2) for u, y in exps))
     except (ValueError, np.linalg.LinAlgError, OverflowError):
         return np.inf
+    return sse if np.isfinite(sse) else np.inf
 
 
-def _initialise(structure, exps, ts, delays, progress):
-    best = (np.inf, None, 0.0)
+def _initialise(structure, exps, ts, delays, progress, keep: int = 1):
+    """Best initial estimate per delay; returns the ``keep`` best ``(sse, theta, delay)`` with
+    distinct integer delays, best first."""
+    per_delay = []
     for d in delays:
         cands = []
         try:
@@ -281,16 +286,28 @@ def _initialise(structure, exps, ts, delays, progress):
         for free in _grid_candidates(structure, ts):
             theta, sse = _ls_numerator(structure, free, exps, ts, d)
             cands.append(theta)
+        best = (np.inf, None, d)
         for theta in cands:
             if not np.all(np.isfinite(theta)):
                 continue
             sse = _sse(structure, theta, exps, ts, d)
             if sse < best[0]:
                 best = (sse, theta, d)
-    if best[1] is None:
+        if best[1] is not None:
+            per_delay.append(best)
+    if not per_delay:
         raise IlcdobError("no initial estimate could be formed: check that the input excites the system")
-    progress(f"initial estimate: delay {best[2]:.4g} s, simulation SSE {best[0]:.4g}")
-    return best[1], best[2]
+    per_delay.sort(key=lambda c: c[0])
+    chosen, seen = [], set()
+    for cand in per_delay:
+        nd = int(math.floor(cand[2] / ts + 1e-9))
+        if nd not in seen:
+            seen.add(nd)
+            chosen.append(cand)
+        if len(chosen) == keep:
+            break
+    progress("initial estimate(s): " + ", ".join(f"delay {c[2]:.4g} s (SSE {c[0]:.4g})" for c in chosen))
+    return chosen
 
 
 # ---------------------------------------------------------------- public entry
@@ -350,34 +367,37 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
         delays = np.arange(0.0, opts.max_delay + 1e-12, ts / 2)
     else:
         delays = [float(opts.delay)]
-    theta0, d0 = _initialise(structure, exps, ts, delays, say)
     estimate_delay = opts.delay == "auto"
-    nd = int(math.floor(d0 / ts + 1e-9))
-    frac0 = d0 - nd * ts
+    # delay and lag trade off: refine the three best delays of the scan, keep the best fit
+    starts = _initialise(structure, exps, ts, delays, say, keep=3 if estimate_delay else 1)
     best = None
-    tried = set()
-    while nd not in tried and nd >= 0:
-        tried.add(nd)
-        prob = _OEProblem(structure, exps, ts, nd, estimate_delay, frac0, theta0, opts)
-        theta, frac, jac, sse, stats = prob.solve(opts, frac0)
-        say(f"IPOPT (integer delay {nd} samples): {stats['return_status']}, {stats['iter_count']} iterations, "
-            f"SSE {sse:.6g}")
-        if best is None or sse < best[3]:
-            best = (theta, nd * ts + frac, jac, sse, stats, prob)
-        if not estimate_delay:
-            break
-        # fractional part at a bound: the optimum may lie in the neighbouring sample
-        if frac >= ts * (1 - 1e-6):
-            nd, frac0 = nd + 1, 0.0
-        elif frac <= ts * 1e-6 and nd > 0:
-            nd, frac0 = nd - 1, ts
-        else:
-            break
-        theta0 = theta
-    theta, delay, jac, sse, stats, prob = best
-    if not stats["success"] and stats["return_status"] not in ("Solved_To_Acceptable_Level",):
+    tried: set[int] = set()
+    for _, theta0, d0 in starts:
+        nd = int(math.floor(d0 / ts + 1e-9))
+        frac0 = d0 - nd * ts
+        while nd not in tried and nd >= 0:
+            tried.add(nd)
+            prob = _OEProblem(structure, exps, ts, nd, estimate_delay, frac0, theta0, opts)
+            theta, frac, jac, sse, stats = prob.solve(opts, frac0)
+            say(f"IPOPT (integer delay {nd} samples): {stats['return_status']}, {stats['iter_count']} "
+                f"iterations, SSE {sse:.6g}")
+            ok = stats["success"] or stats["return_status"] == "Solved_To_Acceptable_Level"
+            if ok and (best is None or sse < best[3]):
+                best = (theta, nd * ts + frac, jac, sse, stats, prob)
+            if not estimate_delay:
+                break
+            # fractional part at a bound: the optimum may lie in the neighbouring sample
+            if frac >= ts * (1 - 1e-3):
+                nd, frac0 = nd + 1, 0.0
+            elif frac <= ts * 1e-3 and nd > 0:
+                nd, frac0 = nd - 1, ts
+            else:
+                break
+            theta0 = theta
+    if best is None:
         raise IlcdobError(f"IPOPT did not converge ({stats['return_status']}); try another model order, "
                           "more excitation, or options.verbose=True to see the iterations")
+    theta, delay, jac, sse, stats, prob = best
     n_obs = sum(u.size for u, _ in exps)
     n_var = jac.shape[1]
     sigma2 = sse / max(n_obs - n_var, 1)
