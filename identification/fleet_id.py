@@ -30,6 +30,7 @@ from ilcdob.fleet import Fleet
 from ilcdob.specs import IdentificationSpec, PlantSpec
 
 from .data import FlightData
+from .excitation import Chirp, StepSequence
 from .model import ModelStructure
 from .quadrotor import fly, table_i_vehicles
 from .results import TFEstimate
@@ -41,27 +42,6 @@ __all__ = ["VehicleIdentification", "identify_vehicle", "identify_fleet", "fleet
 #: Commanded acceleration -> position: double integrator behind one attitude lag.
 PLANT_STRUCTURE = ModelStructure(n_poles=3, n_zeros=0, n_integrators=2)
 INPUT, OUTPUT = "acc_cmd", "x"
-
-
-def _steps(levels: list[float], hold: float) -> Callable[[np.ndarray], np.ndarray]:
-    lv = np.asarray(levels, float)
-
-    def ref(t):
-        k = np.minimum((np.asarray(t) // hold).astype(int), lv.size - 1)
-        return lv[k]
-
-    return ref
-
-
-def _chirp(f0: float, f1: float, duration: float, amplitude: float, fade: float = 2.0):
-    def w(t):
-        t = np.asarray(t, float)
-        phase = 2 * np.pi * (f0 * t + (f1 - f0) * t**2 / (2 * duration))
-        env = np.clip(np.minimum(t, duration - t) / fade, 0.0, 1.0)
-        env = 0.5 * (1 - np.cos(np.pi * env))
-        return amplitude * env * np.sin(phase) * (t <= duration)
-
-    return w
 
 
 SEGMENT_S = 10.0  # s, window of each fitted segment (own initial state)
@@ -96,13 +76,13 @@ def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 
     params = table_i_vehicles()[name]
     spec = next(s for s in fleet.systems if s.name == name)
     ts = fleet.sample_time
-    step_est = fly(params, spec, 30.0, ts, reference=_steps([0, 0.05, -0.05, 0.03, -0.03, 0.0], 5.0),
+    step_est = fly(params, spec, 30.0, ts, reference=StepSequence((0, 0.05, -0.05, 0.03, -0.03, 0.0), 5.0).signal,
                    noise_std=noise_std, seed=seed, experiment="steps")
-    chirp_est = fly(params, spec, 40.0, ts, injection=_chirp(0.1, 2.0, 40.0, 1.5),
+    chirp_est = fly(params, spec, 40.0, ts, injection=Chirp(0.1, 2.0, 40.0, 1.5, fade=2.0).signal,
                     noise_std=noise_std, seed=seed + 1, experiment="chirp")
-    step_val = fly(params, spec, 30.0, ts, reference=_steps([0, -0.04, 0.05, -0.02, 0.03, 0.0], 5.0),
+    step_val = fly(params, spec, 30.0, ts, reference=StepSequence((0, -0.04, 0.05, -0.02, 0.03, 0.0), 5.0).signal,
                    noise_std=noise_std, seed=seed + 2, experiment="steps-validation")
-    chirp_val = fly(params, spec, 30.0, ts, injection=_chirp(0.15, 1.5, 30.0, 1.2),
+    chirp_val = fly(params, spec, 30.0, ts, injection=Chirp(0.15, 1.5, 30.0, 1.2, fade=2.0).signal,
                     noise_std=noise_std, seed=seed + 3, experiment="chirp-validation")
     say(f"{name}: flew 4 experiments ({sum(len(f) for f in (step_est, chirp_est, step_val, chirp_val))} samples)")
     est = tfest(segments([step_est, chirp_est]), INPUT, OUTPUT, PLANT_STRUCTURE, FitOptions(delay=0.0),
