@@ -17,7 +17,7 @@ import numpy as np
 from ilcdob.atomic import atomic_path
 from ilcdob.errors import SignalError
 
-__all__ = ["FlightData", "check_time", "resample_onto"]
+__all__ = ["FlightData", "check_time", "check_signal", "resample_onto"]
 
 #: Relative tolerance on the spacing of a "uniform" time grid.
 UNIFORM_RTOL = 1e-6
@@ -27,19 +27,31 @@ def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:
     """Check time stamps: finite, strictly increasing (no duplicates); returns float array."""
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 2:
-        raise SignalError(f"{source}: signal `{signal}`: expected at least 2 time stamps, got shape {t.shape}")
+        raise SignalError(f"{source}: `{signal}`: expected at least 2 time stamps, got shape {t.shape}")
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
-        raise SignalError(f"{source}: signal `{signal}`: non-finite time stamp {t[bad[0]]!r} at sample {bad[0]}")
+        raise SignalError(f"{source}: `{signal}`: non-finite time stamp {float(t[bad[0]])!r} at sample {bad[0]}")
     dt = np.diff(t)
     if np.any(dt == 0):
         k = int(np.flatnonzero(dt == 0)[0])
-        raise SignalError(f"{source}: signal `{signal}`: duplicated time stamp {t[k]!r} at samples {k} and {k + 1}")
+        raise SignalError(f"{source}: `{signal}`: duplicated time stamp {float(t[k])!r} at samples {k} and {k + 1}")
     if np.any(dt < 0):
         k = int(np.flatnonzero(dt < 0)[0])
-        raise SignalError(f"{source}: signal `{signal}`: time stamps not increasing at sample {k + 1} "
-                          f"({t[k]!r} -> {t[k + 1]!r})")
+        raise SignalError(f"{source}: `{signal}`: time stamps not increasing at sample {k + 1} "
+                          f"({float(t[k])!r} -> {float(t[k + 1])!r})")
     return t
+
+
+def check_signal(x: object, t: np.ndarray, source: str, name: str) -> np.ndarray:
+    """A signal as a float array with one finite value per time stamp in ``t``."""
+    arr = np.asarray(x, dtype=float)
+    if arr.shape != t.shape:
+        raise SignalError(f"{source}: signal `{name}`: expected {t.size} samples, got shape {arr.shape}")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise SignalError(f"{source}: signal `{name}`: non-finite value {float(arr[bad[0]])!r} at "
+                          f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
+    return arr
 
 
 def resample_onto(t_src: np.ndarray, x: np.ndarray, t_new: np.ndarray) -> np.ndarray:
@@ -77,16 +89,7 @@ class FlightData:
         if np.max(np.abs(dt - dt[0])) > UNIFORM_RTOL * dt[0] + 1e-12:
             raise SignalError(f"{self.source}: signal `time`: not uniformly spaced (steps from {dt.min():.6g} "
                               f"to {dt.max():.6g} s); resample first (FlightData.from_samples)")
-        sig = {}
-        for name, x in self.signals.items():
-            arr = np.asarray(x, dtype=float)
-            if arr.shape != t.shape:
-                raise SignalError(f"{self.source}: signal `{name}`: expected {t.size} samples, got shape {arr.shape}")
-            bad = np.flatnonzero(~np.isfinite(arr))
-            if bad.size:
-                raise SignalError(f"{self.source}: signal `{name}`: non-finite value {arr[bad[0]]!r} at "
-                                  f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
-            sig[name] = arr
+        sig = {name: check_signal(x, t, self.source, name) for name, x in self.signals.items()}
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "signals", sig)
         object.__setattr__(self, "units", {n: self.units.get(n, "") for n in sig})
@@ -109,15 +112,8 @@ class FlightData:
             raise SignalError(f"{source}: no signals given")
         checked = {}
         for name, (t, x) in series.items():
-            t = check_time(t, source, name)
-            x = np.asarray(x, dtype=float)
-            if x.shape != t.shape:
-                raise SignalError(f"{source}: signal `{name}`: {x.size} values for {t.size} time stamps")
-            bad = np.flatnonzero(~np.isfinite(x))
-            if bad.size:
-                raise SignalError(f"{source}: signal `{name}`: non-finite value {x[bad[0]]!r} at "
-                                  f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
-            checked[name] = (t, x)
+            t = check_time(t, source, f"time of {name}")
+            checked[name] = (t, check_signal(x, t, source, name))
         if ts is None:
             ts = min(float(np.median(np.diff(t))) for t, _ in checked.values())
         if not (np.isfinite(ts) and ts > 0):

@@ -377,6 +377,19 @@ def _time_scale(unit: str, source: str, column: str) -> float:
     return _TIME_UNITS[u]
 
 
+def _tabular_arguments(path, columns, time, units, ts, start, stop):
+    """Check the arguments shared by the CSV and Parquet loaders."""
+    source = _source_of(path)
+    cols = _mapping(columns, "columns", source)
+    if not isinstance(time, str) or not time:
+        raise SignalError(f"{source}: `time`: got {time!r}, expected the name of the time column")
+    units_arg = _check_units(units, list(cols), source, allow_time=True)
+    ts = _check_ts(ts, source)
+    start, stop = _check_window(start, stop, source)
+    _check_file(source)
+    return source, cols, units_arg, ts, start, stop
+
+
 def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str], time: str = "time",
              units: Mapping[str, str] | None = None, ts: float | None = None,
              start: float | None = None, stop: float | None = None) -> FlightData:
@@ -417,14 +430,7 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
         empty cell, a row of the wrong length, non-finite values, time stamps that are not
         strictly increasing, or an empty selection.
     """
-    source = _source_of(path)
-    cols = _mapping(columns, "columns", source)
-    if not isinstance(time, str) or not time:
-        raise SignalError(f"{source}: `time`: got {time!r}, expected the name of the time column")
-    units_arg = _check_units(units, list(cols), source, allow_time=True)
-    ts = _check_ts(ts, source)
-    start, stop = _check_window(start, stop, source)
-    _check_file(source)
+    source, cols, units_arg, ts, start, stop = _tabular_arguments(path, columns, time, units, ts, start, stop)
 
     try:
         with open(source, encoding="utf-8", newline="") as fh:
@@ -564,14 +570,7 @@ def load_parquet(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[
     """
     import pyarrow.parquet as pq
 
-    source = _source_of(path)
-    cols = _mapping(columns, "columns", source)
-    if not isinstance(time, str) or not time:
-        raise SignalError(f"{source}: `time`: got {time!r}, expected the name of the time column")
-    units_arg = _check_units(units, list(cols), source, allow_time=True)
-    ts = _check_ts(ts, source)
-    start, stop = _check_window(start, stop, source)
-    _check_file(source)
+    source, cols, units_arg, ts, start, stop = _tabular_arguments(path, columns, time, units, ts, start, stop)
     try:
         schema = pq.read_schema(source)
     except Exception as exc:  # pyarrow raises ArrowInvalid, OSError, ... for a bad file
