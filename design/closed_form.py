@@ -27,6 +27,7 @@ becomes an anti-causal pole (stable inversion, :mod:`ilcdob.design.noncausal`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import control as ct
 import numpy as np
@@ -36,7 +37,8 @@ from ilcdob.loop import LoopSystem, freqresp
 
 from .noncausal import ZPKFilter, as_signal
 
-__all__ = ["LearningFilters", "closed_form_filters", "simulate_map"]
+__all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "inverse_gd_filter",
+           "reconstruct_disturbance"]
 
 _GAIN_CHECK_W = np.array([0.37, 1.3, 5.1, 17.0])  # rad/s, points where the zpk form is checked
 
@@ -132,6 +134,50 @@ class LearningFilters:
         return te1, te1 * freqresp(src.G_f, w)
 
 
+def _matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, what: str) -> ZPKFilter:
+    """ZPK filter with the gain matched to the block formula ``exact(w)`` (and checked)."""
+    unit = ZPKFilter(zeros, poles, 1.0, ts)
+    ratio = exact(_GAIN_CHECK_W) / unit.freqresp(_GAIN_CHECK_W)
+    gain = float(np.real(np.mean(ratio)))
+    if np.max(np.abs(ratio / gain - 1)) > 1e-5:
+        raise IlcdobError(f"{what}: zero-pole form does not match the block formula (gain ratios {ratio}); "
+                          "the loop is probably badly conditioned. Report this fleet.")
+    return ZPKFilter(zeros, poles, gain, ts)
+
+
+def inverse_gd_filter(loop: LoopSystem) -> ZPKFilter:
+    """``Gd^{-1} = D / (P (1 - Q))`` of ``loop``'s model, for non-causal application.
+
+    Poles: zeros of P_hat, of (1 - Q) (including z = 1) and the poles of M and C; zeros: the
+    closed-loop poles. Two poles sit at z = 1 (constant disturbances leave no trace in the
+    error, so their reconstruction integrates twice from rest).
+    """
+    src = loop.nominal
+    p_zeros = np.asarray(src.P.zeros(), dtype=complex)
+    q_zeros = np.asarray(_one_minus(src.Q).zeros(), dtype=complex)
+    zeros = np.linalg.eigvals(src.closed_loop.A)
+    poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], q_zeros[np.isfinite(q_zeros)],
+                            np.linalg.eigvals(src.M.A), np.linalg.eigvals(src.C.A)])
+
+    def exact(w):
+        p, m, c, q = (freqresp(s, w) for s in (src.P, src.M, src.C, src.Q))
+        return 1.0 / p + (m + c) / (1 - q)
+
+    return _matched(zeros, poles, src.ts, exact, f"Gd^-1 of {loop.name!r}")
+
+
+def reconstruct_disturbance(loop: LoopSystem, e: object, d_f: object) -> np.ndarray:
+    """Disturbance that explains a flight of ``loop``'s model: ``-Gd^{-1}{e + Gf{d_f}}`` (m/s^2).
+
+    Exact for the model (Case I); the constant part of a disturbance is invisible in the
+    error and is reconstructed from rest.
+    """
+    e = as_signal(e, "e")
+    df = as_signal(d_f, "d_f", e.size)
+    e_virtual = e + simulate_map(loop.nominal.G_f, df) if np.any(df) else e
+    return -inverse_gd_filter(loop).apply(e_virtual, "e")
+
+
 def closed_form_filters(prev: LoopSystem, nxt: LoopSystem) -> LearningFilters:
     """Build the closed-form filters for system ``nxt`` learning from ``prev``.
 
@@ -160,13 +206,6 @@ def closed_form_filters(prev: LoopSystem, nxt: LoopSystem) -> LearningFilters:
         np.linalg.eigvals(src.M.A),
         np.linalg.eigvals(src.C.A),
     ])
-    unit = ZPKFilter(zeros, poles, 1.0, src.ts)
-    exact = _l1_exact(src, nxt, _GAIN_CHECK_W)
-    ratio = exact / unit.freqresp(_GAIN_CHECK_W)
-    gain = float(np.real(np.mean(ratio)))
-    if np.max(np.abs(ratio / gain - 1)) > 1e-5:
-        raise IlcdobError(
-            f"learning filter {prev.name!r} -> {nxt.name!r}: zero-pole form does not match the block "
-            f"formula (gain ratios {ratio}); the loop is probably badly conditioned. Report this fleet."
-        )
-    return LearningFilters(source=src, target=nxt, L1=ZPKFilter(zeros, poles, gain, src.ts))
+    l1 = _matched(zeros, poles, src.ts, lambda w: _l1_exact(src, nxt, w),
+                  f"learning filter {prev.name!r} -> {nxt.name!r}")
+    return LearningFilters(source=src, target=nxt, L1=l1)

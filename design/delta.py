@@ -1,0 +1,147 @@
+"""The Delta set: plausible true plants around a system's model (design notes section 3).
+
+Two sources:
+
+* an identified model (``SystemSpec.identification``): parameters drawn from the fit's
+  Gaussian ``N(theta, Cov)`` (optionally with the covariance scaled, ``scale`` > 1 to go
+  beyond the identified uncertainty), and the frequency-wise 3-sigma bound ``|Delta(jw)|``;
+* a bound given in the fleet file (``uncertainty = { bound = 0.2 }``): multiplicative
+  errors ``P = (1 + Delta) P_hat`` with ``Delta`` a real gain in ``[-bound, bound]`` or a
+  first-order high-pass ``bound * sign * s tau / (s tau + 1)`` (unmodelled fast dynamics),
+  so ``|Delta(jw)| <= bound`` at every frequency.
+
+Each sample becomes a :class:`~ilcdob.loop.LoopSystem` whose true plant is the sample and
+whose DOB and learning filters keep using the nominal model, exactly as a vehicle flies.
+Samples whose loop is unstable are redrawn (and counted).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ilcdob.errors import SpecError, UnstableLoopError
+from ilcdob.loop import LoopSystem, build_loop, freqresp
+from ilcdob.specs import PlantSpec, SystemSpec
+
+__all__ = ["DeltaSet", "delta_set"]
+
+
+@dataclass(frozen=True)
+class DeltaSet:
+    """Sampled true plants of one system and its frequency-wise multiplicative bound.
+
+    Attributes
+    ----------
+    system : str
+    nominal : LoopSystem
+        The loop with the model as plant.
+    loops : tuple of LoopSystem
+        One loop per sampled true plant (model unchanged).
+    w : array, rad/s
+    bound : array
+        ``|Delta(jw)|`` bound on ``w`` (3 sigma for identified models).
+    rejected : int
+        Samples redrawn because their loop was unstable.
+    source : str
+        ``"identification"`` or ``"fleet bound"``.
+    """
+
+    system: str
+    nominal: LoopSystem
+    loops: tuple[LoopSystem, ...]
+    w: np.ndarray
+    bound: np.ndarray
+    rejected: int
+    source: str
+
+    def deltas(self, w: np.ndarray | None = None) -> np.ndarray:
+        """``Delta_k(e^{jw Ts}) = P_k / P_hat - 1`` of every sample (K x len(w))."""
+        w = self.w if w is None else np.asarray(w, float)
+        p_hat = freqresp(self.nominal.P, w)
+        return np.array([freqresp(lp.P, w) / p_hat - 1 for lp in self.loops])
+
+
+def _identified_samples(spec: SystemSpec, k: int, rng: np.random.Generator, scale: float):
+    from ilcdob.identification.model import ModelStructure
+
+    ident = spec.identification
+    structure = ModelStructure(ident.poles, ident.zeros, ident.integrators)
+    theta = np.asarray(ident.parameters)
+    cov = np.asarray(ident.covariance) * scale**2
+    mean = np.concatenate([theta, [spec.nominal_plant.delay]]) if ident.delay_estimated else theta
+    while True:
+        x = rng.multivariate_normal(mean, cov, method="svd")
+        th, d = (x[:-1], max(0.0, float(x[-1]))) if ident.delay_estimated else (x, spec.nominal_plant.delay)
+        den, num = structure.split(th)
+        yield PlantSpec(tuple(num), tuple(den), d)
+
+
+def _bound_samples(spec: SystemSpec, bound: float, k: int, rng: np.random.Generator):
+    model = spec.nominal_plant
+    while True:
+        r = bound * rng.uniform(-1.0, 1.0)
+        if rng.uniform() < 0.5:  # gain error
+            yield PlantSpec(tuple(np.asarray(model.num) * (1 + r)), model.den, model.delay)
+        else:  # high-pass error: P (1 + r s tau/(s tau + 1)), tau log-uniform in [0.01, 1] s
+            tau = 10 ** rng.uniform(-2, 0)
+            num = np.polymul(model.num, [(1 + r) * tau, 1.0])
+            den = np.polymul(model.den, [tau, 1.0])
+            yield PlantSpec(tuple(num), tuple(den), model.delay)
+
+
+def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator | None = None,
+              scale: float = 1.0, bound: float | None = None, w: np.ndarray | None = None,
+              max_rejections: int = 200) -> DeltaSet:
+    """Draw ``k`` plausible true plants of ``spec`` (see module docstring).
+
+    Parameters
+    ----------
+    spec : SystemSpec
+    ts : float
+        Sample time, s.
+    k : int
+        Number of samples (>= 1).
+    rng : numpy.random.Generator
+        Seeded generator (default ``default_rng(0)``).
+    scale : float
+        Multiplier of the identified standard deviations (1: the identified uncertainty).
+    bound : float, optional
+        Multiplicative bound to use instead of the identification (or when there is none).
+    w : array, optional
+        Frequencies of the bound, rad/s (default: log grid to Nyquist).
+    """
+    if k < 1:
+        raise SpecError(f"`k`: got {k}, expected >= 1 samples")
+    rng = np.random.default_rng(0) if rng is None else rng
+    w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
+    nominal = build_loop(spec.exact(), ts)
+    if bound is None and spec.identification is None:
+        raise SpecError(f"system {spec.name!r}: no identification in the fleet and no `bound` given; "
+                        "identify it (ilcdob identify-fleet) or pass bound=<relative error, e.g. 0.2>")
+    if bound is not None:
+        if not (np.isfinite(bound) and 0 < bound < 1):
+            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+        gen, source, bnd = _bound_samples(spec, bound, k, rng), "fleet bound", np.full(w.size, float(bound))
+    else:
+        from ilcdob.identification.model import ModelStructure
+        from ilcdob.identification.results import multiplicative_bound
+
+        ident = spec.identification
+        gen, source = _identified_samples(spec, k, rng, scale), "identification"
+        bnd = scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),
+                                           np.asarray(ident.parameters), np.asarray(ident.covariance),
+                                           spec.nominal_plant.delay, ident.delay_estimated, w)
+    loops, rejected = [], 0
+    model = spec.nominal_plant
+    while len(loops) < k:
+        plant = next(gen)
+        try:
+            loops.append(build_loop(replace(spec, plant=plant, model=model), ts))
+        except (UnstableLoopError, SpecError):
+            rejected += 1
+            if rejected > max_rejections:
+                raise SpecError(f"system {spec.name!r}: {rejected} sampled plants gave unstable loops; the "
+                                "uncertainty is too large for this controller (lower `scale` or `bound`)") from None
+    return DeltaSet(spec.name, nominal, tuple(loops), w, bnd, rejected, source)
