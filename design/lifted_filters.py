@@ -26,7 +26,7 @@ from ilcdob.loop import LoopSystem
 from .closed_form import _one_minus
 from .noncausal import as_signal
 
-__all__ = ["LiftedLearningFilters", "lifted_filters"]
+__all__ = ["LiftedLearningFilters", "lifted_filters", "regularised_inverse"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,25 @@ class LiftedLearningFilters:
         return self.L1 @ e + self.L2 @ df
 
 
+def regularised_inverse(h: np.ndarray, regularisation: float = 1e-12) -> tuple[np.ndarray, int, np.ndarray]:
+    """Tikhonov inverse ``Gd^+`` (N x N) of the lifted map with Markov parameters ``h``.
+
+    Returns ``(Gd^+, shift m, singular values of the shifted operator)``; see module docstring.
+    """
+    if not regularisation > 0:
+        raise SpecError(f"`regularisation`: got {regularisation!r}, expected a number > 0")
+    n = h.size
+    m = relative_degree(h)
+    hs = lifted_operator(h[m:])
+    sv = svdvals(hs)
+    alpha = regularisation * sv[0] ** 2
+    normal = hs.T @ hs + alpha * np.eye(n - m)
+    inv = cho_solve(cho_factor(normal), hs.T)  # (n-m) x (n-m)
+    pinv = np.zeros((n, n))
+    pinv[: n - m, m:] = inv
+    return pinv, m, sv
+
+
 def lifted_filters(prev: LoopSystem, nxt: LoopSystem, n: int,
                    regularisation: float = 1e-12) -> LiftedLearningFilters:
     """Lifted, regularised form of the closed-form filters over ``n`` samples.
@@ -76,18 +95,9 @@ def lifted_filters(prev: LoopSystem, nxt: LoopSystem, n: int,
     regularisation : float
         Relative Tikhonov weight, > 0.
     """
-    if not regularisation > 0:
-        raise SpecError(f"`regularisation`: got {regularisation!r}, expected a number > 0")
     src = prev.nominal
-    h_gd = markov_parameters(src.G_d, n)
-    m = relative_degree(h_gd)
-    hs = lifted_operator(h_gd[m:])
-    sv = svdvals(hs)
+    gd_pinv, m, sv = regularised_inverse(markov_parameters(src.G_d, n), regularisation)
     alpha = regularisation * sv[0] ** 2
-    normal = hs.T @ hs + alpha * np.eye(n - m)
-    inv = cho_solve(cho_factor(normal), hs.T)  # (n-m) x (n-m)
-    gd_pinv = np.zeros((n, n))
-    gd_pinv[: n - m, m:] = inv
     t_1mq = lifted_operator(markov_parameters(_one_minus(nxt.Q), n))
     l1 = -t_1mq @ gd_pinv
     l2 = l1 @ lifted_operator(markov_parameters(src.G_f, n))
