@@ -150,7 +150,8 @@ class NormOptimalDesigner:
     def lifted_matrices(self, source: LoopSystem, regularisation: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
         """Lifted learning matrices ``(L1, L2)``: ``d_f,j = L1 e_{j-1} + L2 d_f,{j-1}``.
 
-        ``L1 = F (-Gd_j) Gd_{j-1}^+`` with ``F`` the solution matrix and ``Gd_{j-1}^+`` the
+        ``L1 = F Gd_j Gd_{j-1}^+`` (``e0 = -Gd_j d_rec``, ``d_rec = -Gd_{j-1}^+ e'``) with ``F`` the
+        solution matrix and ``Gd_{j-1}^+`` the
         regularised inverse of :func:`~ilcdob.design.lifted_filters.regularised_inverse`;
         ``L2 = L1 Gf_{j-1}``. Dense, O(N^3): for export and checks at moderate N.
         """
@@ -160,7 +161,7 @@ class NormOptimalDesigner:
         n = self.n
         gd_prev_inv, _, _ = regularised_inverse(markov_parameters(src.G_d, n), regularisation)
         gd_j = lifted_operator(markov_parameters(self.target.nominal.G_d, n))
-        l1 = self.solution_matrix() @ (-gd_j @ gd_prev_inv)
+        l1 = self.solution_matrix() @ (gd_j @ gd_prev_inv)
         l2 = l1 @ lifted_operator(markov_parameters(src.G_f, n))
         return l1, l2
 
