@@ -134,8 +134,25 @@ class LearningFilters:
         return te1, te1 * freqresp(src.G_f, w)
 
 
+def _cancel_common(zeros: np.ndarray, poles: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Remove pole/zero pairs that coincide (e.g. the PID's derivative-filter pole, present in
+    both D and C): they cancel exactly and only raise the order."""
+    zs, ps = list(zeros), list(poles)
+    kept = []
+    for z in zs:
+        if ps:
+            d = np.abs(np.asarray(ps) - z)
+            j = int(np.argmin(d))
+            if d[j] <= tol * max(1.0, abs(z)):
+                ps.pop(j)
+                continue
+        kept.append(z)
+    return np.asarray(kept, dtype=complex), np.asarray(ps, dtype=complex)
+
+
 def _matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, what: str) -> ZPKFilter:
     """ZPK filter with the gain matched to the block formula ``exact(w)`` (and checked)."""
+    zeros, poles = _cancel_common(zeros, poles)
     unit = ZPKFilter(zeros, poles, 1.0, ts)
     ratio = exact(_GAIN_CHECK_W) / unit.freqresp(_GAIN_CHECK_W)
     gain = float(np.real(np.mean(ratio)))
