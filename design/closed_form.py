@@ -84,11 +84,14 @@ class LearningFilters:
         System j (its Q is known exactly: it is software).
     L1 : ZPKFilter
         ``-(1 - Q_j) Gd_{j-1}^{-1}`` applied non-causally.
+    L2 : ZPKFilter
+        ``L1 Gf_{j-1} = (1 - Q_j)/(1 - Q_{j-1})`` (causal, stable; 1 when both Q are equal).
     """
 
     source: LoopSystem
     target: LoopSystem
     L1: ZPKFilter
+    L2: ZPKFilter
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
         """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem).
@@ -225,4 +228,10 @@ def closed_form_filters(prev: LoopSystem, nxt: LoopSystem) -> LearningFilters:
     ])
     l1 = _matched(zeros, poles, src.ts, lambda w: _l1_exact(src, nxt, w),
                   f"learning filter {prev.name!r} -> {nxt.name!r}")
-    return LearningFilters(source=src, target=nxt, L1=l1)
+    l2_zeros = np.concatenate([_zeros_without_one(_one_minus(nxt.Q), f"system {nxt.name!r}"),
+                               np.linalg.eigvals(src.Q.A)])
+    l2_poles = np.concatenate([np.linalg.eigvals(nxt.Q.A),
+                               _zeros_without_one(_one_minus(src.Q), f"system {prev.name!r}")])
+    l2 = _matched(l2_zeros, l2_poles, src.ts, lambda w: _l1_exact(src, nxt, w) * freqresp(src.G_f, w),
+                  f"learning filter L2 {prev.name!r} -> {nxt.name!r}")
+    return LearningFilters(source=src, target=nxt, L1=l1, L2=l2)

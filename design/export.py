@@ -96,6 +96,11 @@ def c_header(design: dict, guard: str = "ILCDOB_LEARNING_FILTERS_H") -> str:
         lines += [f"#define ILCDOB_{key}_ADVANCE {int(f['advance'])}",
                   _c_array(f"ilcdob_{key.lower()}_num", f["num"]),
                   _c_array(f"ilcdob_{key.lower()}_den", f["den"])]
+        if f.get("sos"):
+            rows = ", ".join("{" + ", ".join(f"{float(v):.17g}" for v in row) + "}" for row in f["sos"])
+            lines += [f"/* {key} as second-order sections (preferred): rows b0 b1 b2 a0 a1 a2 */",
+                      f"#define ILCDOB_{key}_N_SOS {len(f['sos'])}",
+                      f"static const double ilcdob_{key.lower()}_sos[{len(f['sos'])}][6] = {{{rows}}};"]
     lines += ["", f"#endif /* {guard} */", ""]
     return "\n".join(lines)
 

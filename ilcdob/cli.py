@@ -60,6 +60,17 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--out", required=True, help="model.json to write")
     idf.add_argument("--plot", default=None, help="folder for the compare/residual/Bode figures")
 
+    des = sub.add_parser("design", help="design the learning filters of one system from another")
+    des.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
+    des.add_argument("--from", dest="source", required=True, help="system learned from (j-1)")
+    des.add_argument("--to", dest="target", required=True, help="system that learns (j)")
+    des.add_argument("--method", default="closed-form", help="closed-form or norm-optimal (default closed-form)")
+    des.add_argument("--n", type=_positive_int, default=None,
+                     help="trial length in samples for lifted matrices (default: the trial's, else 500)")
+    des.add_argument("--trial", default=None,
+                     help="CSV of the previous system's trial: columns time (s), error (m), learning (m/s^2)")
+    des.add_argument("--out", required=True, help="output folder")
+
     ifl = sub.add_parser("identify-fleet", help="fly synthetic step/chirp experiments with the nonlinear "
                                                 "vehicles and identify every plant of the fleet")
     ifl.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
@@ -129,6 +140,46 @@ def _identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _design(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    from .atomic import atomic_path, write_json_atomic, write_text_atomic
+    from .design.export import c_header
+    from .design.pair import design_pair
+    from .identification.data import FlightData
+    from .identification.loaders import load_csv
+
+    fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
+    trial = load_csv(args.trial, {"e": "error", "d_f": "learning"}) if args.trial else None
+    if trial is not None and abs(trial.ts - fleet.sample_time) > 1e-9:
+        from .errors import SignalError
+
+        raise SignalError(f"{args.trial}: sample time {trial.ts} s differs from the fleet's {fleet.sample_time} s")
+    n = args.n or (len(trial) if trial is not None else None)
+    design = design_pair(fleet, args.source, args.target, args.method, n=n)
+    from pathlib import Path
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if design.lifted is not None:
+        with atomic_path(out / "lifted.npz") as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **design.lifted)
+    if "L1" in design.filters:
+        write_text_atomic(out / "filters.h", c_header(design.filters))
+    if trial is not None:
+        df = design.learn(trial["e"], trial["d_f"])
+        FlightData(trial.t, {"learning": df}, {"learning": "m/s^2"},
+                   source=f"learning signal of {args.target} from {args.trial}").to_csv(out / "learning_signal.csv")
+        print(f"wrote {out / 'learning_signal.csv'}", file=sys.stderr)
+    write_json_atomic(out / "filters.json", design.filters)
+    print(json.dumps({k: v for k, v in design.filters.items() if k not in ("L1", "L2")}))
+    print(f"wrote {out / 'filters.json'}", file=sys.stderr)
+    return 0
+
+
 def _identify_fleet(args: argparse.Namespace) -> int:
     from .identification.fleet_id import identify_fleet
 
@@ -152,6 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _identify(args)
         if args.command == "identify-fleet":
             return _identify_fleet(args)
+        if args.command == "design":
+            return _design(args)
     except IlcdobError as exc:
         print(f"ilcdob: error: {exc}", file=sys.stderr)
         return 2

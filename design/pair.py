@@ -1,0 +1,80 @@
+"""One learning design for a pair of systems (j-1 -> j), by method, and its outputs.
+
+This is the API behind ``ilcdob design``: it builds the design, the ``filters.json``
+content (discrete filters applied to the previous system's error and learning signal,
+``z^-1`` coefficients with a non-causal ``advance``, see :mod:`.export`), the lifted matrices
+for the lifted methods, and the learning signal for a given trial of the previous system.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+from ilcdob.fleet import Fleet
+
+from .closed_form import closed_form_filters
+from .export import zpk_to_coefficients
+from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
+
+__all__ = ["PairDesign", "design_pair", "METHODS"]
+
+METHODS = ("closed-form", "norm-optimal")
+
+
+@dataclass(frozen=True)
+class PairDesign:
+    """A learning design for system ``target`` learning from ``source``.
+
+    Attributes
+    ----------
+    method : str
+    filters : dict
+        ``filters.json`` content.
+    lifted : dict of str -> array, or None
+        ``L1``, ``L2`` (N x N) for the lifted methods.
+    learn : callable (e_prev, df_prev) -> d_f
+        Learning signal of the target from a trial of the source (m, m/s^2 -> m/s^2).
+    """
+
+    method: str
+    filters: dict[str, Any]
+    learn: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    lifted: dict[str, np.ndarray] | None = field(default=None)
+
+
+def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
+                norm_optimal: NormOptimalOptions | None = None) -> PairDesign:
+    """Design the learning filters of ``target`` from ``source`` with ``method``.
+
+    Parameters
+    ----------
+    fleet : Fleet
+    source, target : str
+        System names (j-1 and j).
+    method : {"closed-form", "norm-optimal"}
+    n : int, optional
+        Trial length in samples for the lifted matrices of the lifted methods (default 500).
+    norm_optimal : NormOptimalOptions, optional
+    """
+    if method not in METHODS:
+        raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
+    src, tgt = fleet.loop(source), fleet.loop(target)
+    head = {"method": method, "from": source, "to": target, "sample_time": fleet.sample_time}
+    if method == "closed-form":
+        lf = closed_form_filters(src, tgt)
+        filters = {**head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
+                   "units": {"L1": "(m/s^2)/m", "L2": "1"}}
+        return PairDesign(method, filters, lf.apply)
+    opts = norm_optimal or NormOptimalOptions()
+    n = 500 if n is None else int(n)
+    if n < 2:
+        raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
+    l1, l2 = NormOptimalDesigner(tgt, n, opts).lifted_matrices(src)
+    filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
+               "lifted": "lifted.npz (L1, L2: d_f,j = L1 e_{j-1} + L2 d_f,{j-1})"}
+    return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts),
+                      {"L1": l1, "L2": l2})

@@ -1,0 +1,408 @@
+"""Robust norm-optimal learning over the Delta set, as an SOCP (design notes sections 3 and 5).
+
+For system j with K plausible true plants (samples of the Delta set, :func:`~ilcdob.design.delta_set`),
+``e0_k`` is the error system j would fly under sample k without learning and
+``e_k = e0_k - Gf_k d_f`` the error with the learning signal ``d_f``. The design is::
+
+    minimise    t + lam ||d_f||^2 + mu ||Diff d_f||^2
+    subject to  ||W e_k||^2 <= t                  for every k   (epigraph of the worst case)
+                ||e_k||     <= rho ||e0_k||       for every k   (guaranteed improvement)
+
+The epigraph is taken of the *squares* ``||W e_k||^2`` (cvxpy turns each into one rotated
+second-order cone), so for K = 1 with an inactive improvement constraint the problem is
+exactly the regularised least-squares (norm-optimal ILC) problem
+``(G^T W^2 G + lam I + mu Diff^T Diff) d_f = G^T W^2 e0``.
+
+Scale (design notes section 5): the predicted errors are not formed with dense N x N lifted
+matrices. Each ``Gf_k`` enters through its state-space equations as sparse equality
+constraints ``x_{t+1} = A x_t + B d_t``, ``x_0 = 0``, ``y_t = C x_t + D d_t``, in a minimal
+balanced realisation (``control.minreal`` then ``control.balred`` at full order, slycot), so
+the states are well scaled. The signals are normalised inside: ``e0`` by
+``s = max_k ||e0_k||`` and ``d_f`` by ``s / g`` with ``g`` the peak gain of the first model's
+``Gf``; the weights are rescaled so the optimum is unchanged.
+
+The cvxpy problem is built once with Parameters (the normalised ``e0`` and the right-hand
+sides ``rho ||e0_k||``), checked to be DPP, and re-solved per trial.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import control as ct
+import cvxpy as cp
+import numpy as np
+import scipy.sparse as sp
+
+from ilcdob.errors import IlcdobError, SignalError, SpecError
+from ilcdob.loop import LoopSystem, freqresp
+
+from .closed_form import simulate_map
+
+__all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustInfeasibleError", "RobustSolverError",
+           "predicted_errors", "design_ratios"]
+
+_OK = ("optimal", "optimal_inaccurate")
+_INFEASIBLE = ("infeasible", "infeasible_inaccurate")
+
+
+class RobustInfeasibleError(IlcdobError, ValueError):
+    """No learning signal meets ``||e_k|| <= rho ||e0_k||`` for every model.
+
+    Attributes
+    ----------
+    rho : float
+        The requested improvement factor.
+    rho_feasible : float
+        Smallest feasible factor found by bisection (within ``bisection_tol``).
+    binding : tuple of int
+        Indices of the models whose improvement constraint binds at ``rho_feasible``.
+    """
+
+    def __init__(self, message: str, rho: float, rho_feasible: float, binding: tuple[int, ...]):
+        super().__init__(message)
+        self.rho = rho
+        self.rho_feasible = rho_feasible
+        self.binding = binding
+
+
+class RobustSolverError(IlcdobError, RuntimeError):
+    """The conic solver failed (neither a solution nor a certificate of infeasibility)."""
+
+
+@dataclass(frozen=True)
+class RobustOptions:
+    """Options of the robust design (design notes section 3).
+
+    Attributes
+    ----------
+    rho : float
+        Guaranteed improvement factor, ``||e_k|| <= rho ||e0_k||``; in (0, inf), < 1 to
+        guarantee improvement on every model (1 or more makes the constraint harmless).
+    lam : float
+        Weight of ``||d_f||^2`` (s^4, i.e. m^2 per (m/s^2)^2), >= 0.
+    mu : float
+        Weight of ``||Diff d_f||^2`` (first differences), >= 0.
+    weight : float or sequence of float
+        ``W``: a scalar or N per-sample weights (>= 0, not all zero) on the error.
+    solver : str
+        cvxpy solver name (``"CLARABEL"``; ``"SCS"`` as a fallback).
+    verbose : bool
+        Print the solver log.
+    bisection_tol : float
+        Absolute tolerance on rho of the infeasibility bisection, in (0, 0.1].
+    """
+
+    rho: float = 0.95
+    lam: float = 1e-8
+    mu: float = 1e-6
+    weight: float | Sequence[float] = 1.0
+    solver: str = "CLARABEL"
+    verbose: bool = False
+    bisection_tol: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.rho) and self.rho > 0):
+            raise SpecError(f"`rho`: got {self.rho!r}, expected a finite improvement factor > 0 (e.g. 0.95)")
+        for name in ("lam", "mu"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise SpecError(f"`{name}`: got {v!r}, expected a finite weight >= 0")
+        w = np.asarray(self.weight, dtype=float)
+        if w.ndim > 1 or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+            raise SpecError(f"`weight`: got {self.weight!r}, expected a scalar or 1-D sequence of finite "
+                            "weights >= 0, not all zero")
+        if not isinstance(self.solver, str) or self.solver.upper() not in cp.installed_solvers():
+            raise SpecError(f"`solver`: got {self.solver!r}, expected one of the installed cvxpy solvers "
+                            f"{cp.installed_solvers()}")
+        if not (0 < self.bisection_tol <= 0.1):
+            raise SpecError(f"`bisection_tol`: got {self.bisection_tol!r}, expected a value in (0, 0.1]")
+
+
+@dataclass(frozen=True)
+class RobustDesign:
+    """Result of one robust design.
+
+    Attributes
+    ----------
+    d_f : numpy.ndarray
+        Learning signal, m/s^2 (N,).
+    rho : float
+        The improvement factor imposed.
+    ratios : numpy.ndarray
+        ``||e_k|| / ||e0_k||`` per model (K,), recomputed from the solution.
+    worst_ratio : float
+        ``max(ratios)``.
+    objective : float
+        ``max_k ||W e_k||^2 + lam ||d_f||^2 + mu ||Diff d_f||^2`` in the original units
+        (recomputed from the solution).
+    status : str
+        cvxpy status (``"optimal"`` or ``"optimal_inaccurate"``).
+    solve_time : float
+        Wall-clock time of the solve call, s (parameter mapping + solver).
+    iterations : int or None
+        Solver iterations.
+    errors : numpy.ndarray
+        Predicted errors with learning ``e_k`` (K, N), m.
+    """
+
+    d_f: np.ndarray
+    rho: float
+    ratios: np.ndarray
+    worst_ratio: float
+    objective: float
+    status: str
+    solve_time: float
+    iterations: int | None
+    errors: np.ndarray = field(repr=False)
+
+
+def predicted_errors(d_rec: object, loops: Sequence[LoopSystem]) -> np.ndarray:
+    """Errors without learning ``e0_k = -Gd_k{d_rec}`` under every model (K, N), m.
+
+    Parameters
+    ----------
+    d_rec : array, m/s^2
+        Reconstructed disturbance, e.g. ``reconstruct_disturbance(prev_loop, e_prev, df_prev)``.
+    loops : sequence of LoopSystem
+        System j under each model (``DeltaSet.loops``).
+    """
+    d = np.asarray(d_rec, dtype=float)
+    if d.ndim != 1 or d.size < 2 or not np.all(np.isfinite(d)):
+        raise SignalError(f"`d_rec`: got shape {d.shape}, expected a finite 1-D signal of >= 2 samples")
+    if len(loops) < 1:
+        raise SpecError("`loops`: got no loops, expected one LoopSystem per model (DeltaSet.loops)")
+    return np.array([-simulate_map(lp.G_d, d) for lp in loops])
+
+
+def design_ratios(d_f: object, e0: object, loops: Sequence[LoopSystem]) -> np.ndarray:
+    """``||e0_k - Gf_k{d_f}|| / ||e0_k||`` of any learning signal under every model (K,)."""
+    e0 = np.atleast_2d(np.asarray(e0, dtype=float))
+    d = np.asarray(d_f, dtype=float)
+    e = np.array([e0[k] - simulate_map(lp.G_f, d) for k, lp in enumerate(loops)])
+    return np.linalg.norm(e, axis=1) / np.linalg.norm(e0, axis=1)
+
+
+def _balanced(sys: ct.StateSpace) -> ct.StateSpace:
+    """Minimal balanced realisation of a stable discrete SISO map (falls back to minimal)."""
+    m = ct.minreal(sys, verbose=False)
+    if m.nstates == 0:
+        return m
+    try:
+        b = ct.balred(m, m.nstates)
+    except Exception:  # slycot missing or balancing failed: a minimal realisation still works
+        return m
+    return b
+
+
+def _state_space_blocks(sys: ct.StateSpace, n: int, gain: float):
+    """Sparse matrices of ``y = sys{d}`` from rest: ``lhs x = inp d``, ``y = out x + dd d``.
+
+    ``x`` stacks ``x_1 .. x_{n-1}`` (``x_0 = 0``); ``gain`` scales the output.
+    """
+    a, b = np.asarray(sys.A, float), np.asarray(sys.B, float)
+    c, dd = np.asarray(sys.C, float) * gain, float(np.asarray(sys.D).ravel()[0]) * gain
+    nx, m = a.shape[0], n - 1
+    shift = sp.diags(np.ones(m - 1), -1, shape=(m, m), format="csr")
+    lhs = sp.eye(m * nx, format="csr") - sp.kron(shift, sp.csr_matrix(a), format="csr")
+    inp = sp.kron(sp.hstack([sp.eye(m), sp.csr_matrix((m, 1))]), sp.csr_matrix(b), format="csr")
+    out = sp.vstack([sp.csr_matrix((1, m * nx)), sp.kron(sp.eye(m), sp.csr_matrix(c))], format="csr")
+    return lhs, inp, out, dd * sp.eye(n, format="csr")
+
+
+class RobustDesigner:
+    """Robust norm-optimal design for one system over K models, built once (see module docstring).
+
+    Parameters
+    ----------
+    loops : sequence of LoopSystem
+        System j under each model (``DeltaSet.loops``); their ``G_f`` define the constraints.
+    n : int
+        Trial length in samples (>= 3).
+    options : RobustOptions, optional
+
+    Raises
+    ------
+    SpecError
+        Bad ``n``, no loops, loops with different sample times, or weights of the wrong length.
+    RobustSolverError
+        The problem is not DPP (a bug: report it).
+    """
+
+    def __init__(self, loops: Sequence[LoopSystem], n: int, options: RobustOptions | None = None):
+        self.options = options if options is not None else RobustOptions()
+        self.loops = tuple(loops)
+        if not self.loops:
+            raise SpecError("`loops`: got no loops, expected one LoopSystem per model (DeltaSet.loops)")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 3:
+            raise SpecError(f"`n`: got {n!r}, expected a trial length >= 3 samples")
+        ts = {round(lp.ts, 12) for lp in self.loops}
+        if len(ts) != 1:
+            raise SpecError(f"`loops`: sample times {sorted(ts)} differ; all models must share one")
+        self.n = int(n)
+        w = np.asarray(self.options.weight, dtype=float)
+        if w.ndim == 1 and w.size != self.n:
+            raise SpecError(f"`weight`: got {w.size} weights, expected a scalar or n = {self.n} weights")
+        self._w = np.broadcast_to(w, (self.n,)).copy()
+        k = len(self.loops)
+        self.realisations = tuple(_balanced(lp.G_f) for lp in self.loops)
+        # input scaling: peak gain of the first model's Gf on a grid up to Nyquist
+        lp0 = self.loops[0]
+        grid = np.logspace(-3, np.log10(0.999 * np.pi / lp0.ts), 400)
+        self._gain = float(np.max(np.abs(freqresp(lp0.G_f, grid))))
+        if not (np.isfinite(self._gain) and self._gain > 0):
+            raise SpecError(f"`loops`: system {lp0.name!r} has a zero or non-finite G_f gain ({self._gain})")
+
+        # one block-sparse system for all models; identical loops (same object) share their states
+        unique: dict[int, int] = {}
+        for lp in self.loops:
+            unique.setdefault(id(lp), len(unique))
+        self._slot = [unique[id(lp)] for lp in self.loops]
+        reals = {unique[id(lp)]: real for lp, real in zip(self.loops, self.realisations)}
+        blocks = [_state_space_blocks(reals[u], self.n, 1.0 / self._gain) for u in range(len(unique))]
+        lhs = sp.block_diag([b[0] for b in blocks], format="csr")
+        inp = sp.vstack([b[1] for b in blocks], format="csr")
+        out = sp.block_diag([b[2] for b in blocks], format="csr")
+        feed = sp.vstack([b[3] for b in blocks], format="csr")
+        pick = sp.kron(sp.csr_matrix((np.ones(k), (np.arange(k), self._slot)), shape=(k, len(unique))),
+                       sp.eye(self.n), format="csr")  # model k -> its unique map's outputs
+        self._e0 = cp.Parameter(k * self.n, name="e0")
+        self._rhs = cp.Parameter(k, nonneg=True, name="rho_norm_e0")
+        self._d = cp.Variable(self.n, name="d_f")
+        self._t = cp.Variable(name="t")
+        self._x = cp.Variable(lhs.shape[0], name="x")
+        self._e = cp.Variable(k * self.n, name="e")
+        cons: list = [lhs @ self._x == inp @ self._d,
+                      self._e == self._e0 - pick @ (out @ self._x + feed @ self._d)]
+        self._errors = [self._e[i * self.n:(i + 1) * self.n] for i in range(k)]
+        cons += [cp.sum_squares(cp.multiply(self._w, e)) <= self._t for e in self._errors]
+        self._improve = [cp.norm(e, 2) <= self._rhs[i] for i, e in enumerate(self._errors)]
+        cons += self._improve
+        self._lam_s = cp.Parameter(nonneg=True, name="lam")
+        self._mu_s = cp.Parameter(nonneg=True, name="mu")
+        obj = self._t + self._lam_s * cp.sum_squares(self._d) + self._mu_s * cp.sum_squares(cp.diff(self._d))
+        self.problem = cp.Problem(cp.Minimize(obj), cons)
+        if not self.problem.is_dpp():
+            raise RobustSolverError("robust design: the cvxpy problem is not DPP, so it would be recompiled at "
+                                    "every solve; this is a bug in ilcdob.design.robust, please report it")
+        # normalised d = d_f * gain / s: lam and mu scale by 1/gain^2 (s cancels)
+        self._lam_s.value = self.options.lam / self._gain**2
+        self._mu_s.value = self.options.mu / self._gain**2
+
+    # ------------------------------------------------------------------ internals
+    def _check_e0(self, e0: object) -> np.ndarray:
+        e0 = np.asarray(e0, dtype=float)
+        k = len(self.loops)
+        if e0.ndim == 1 and k == 1:
+            e0 = e0[None, :]
+        if e0.shape != (k, self.n) or not np.all(np.isfinite(e0)):
+            raise SignalError(f"`e0`: got shape {e0.shape}, expected finite predicted errors of shape "
+                              f"(K, N) = ({k}, {self.n}); build them with predicted_errors(d_rec, loops)")
+        norms = np.linalg.norm(e0, axis=1)
+        if np.any(norms == 0):
+            raise SignalError(f"`e0`: models {np.flatnonzero(norms == 0).tolist()} predict zero error; there is "
+                              "nothing to improve under them (drop them or use a longer/disturbed trial)")
+        return e0
+
+    def _run(self, rho: float):
+        self._rhs.value = rho * self._norms_s
+        kwargs = {"solver": self.options.solver, "verbose": self.options.verbose}
+        t0 = time.perf_counter()
+        try:
+            self.problem.solve(**kwargs)
+        except cp.error.SolverError as exc:
+            raise RobustSolverError(
+                f"robust design: solver {self.options.solver!r} failed at rho = {rho:g} ({exc}). Next steps: try "
+                "solver='SCS', scale the signals (e0 in m, d_f in m/s^2), raise lam/mu, or pass verbose=True "
+                "to see the solver log") from exc
+        return self.problem.status, time.perf_counter() - t0
+
+    def _result(self, rho: float, status: str, elapsed: float) -> RobustDesign:
+        d_f = np.asarray(self._d.value, dtype=float) * self._scale / self._gain
+        errors = np.array([self._e0_raw[k] - simulate_map(lp.G_f, d_f) for k, lp in enumerate(self.loops)])
+        ratios = np.linalg.norm(errors, axis=1) / np.linalg.norm(self._e0_raw, axis=1)
+        worst = float(np.max(np.sum((self._w * errors) ** 2, axis=1)))
+        obj = worst + self.options.lam * float(d_f @ d_f) + self.options.mu * float(np.sum(np.diff(d_f) ** 2))
+        stats = self.problem.solver_stats
+        iters = getattr(stats, "num_iters", None) if stats is not None else None
+        return RobustDesign(d_f=d_f, rho=rho, ratios=ratios, worst_ratio=float(ratios.max()), objective=obj,
+                            status=status, solve_time=elapsed, iterations=iters, errors=errors)
+
+    def _bisect(self, rho: float) -> tuple[float, tuple[int, ...]]:
+        lo, hi = rho, max(1.0, rho)
+        status, _ = self._run(hi)
+        if status not in _OK:
+            raise RobustSolverError(
+                f"robust design: even rho = {hi:g} (d_f = 0 is feasible) gave status {status!r}; the solver is in "
+                "numerical trouble. Next steps: try solver='SCS', scale the signals, raise lam/mu, verbose=True")
+        tol = self.options.bisection_tol
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            status, _ = self._run(mid)
+            if status in _OK:
+                hi = mid
+            else:
+                lo = mid
+        status, elapsed = self._run(hi)
+        if status not in _OK:
+            raise RobustSolverError(f"robust design: bisection ended at rho = {hi:g} but re-solving gave status "
+                                    f"{status!r}. Next steps: try solver='SCS', scale the signals, verbose=True")
+        ratios = self._result(hi, status, elapsed).ratios
+        binding = tuple(int(i) for i in np.flatnonzero(ratios >= hi - 2 * tol))
+        return hi, binding
+
+    # ------------------------------------------------------------------ public
+    def solve(self, e0: object, rho: float | None = None) -> RobustDesign:
+        """Design ``d_f`` for the predicted errors ``e0`` (K, N) (one SOCP solve, no recompilation).
+
+        Parameters
+        ----------
+        e0 : array (K, N), m
+            Errors without learning under every model (:func:`predicted_errors`).
+        rho : float, optional
+            Override ``options.rho`` for this solve.
+
+        Returns
+        -------
+        RobustDesign
+
+        Raises
+        ------
+        SignalError
+            ``e0`` of the wrong shape, non-finite, or zero under some model.
+        RobustInfeasibleError
+            No ``d_f`` meets the improvement constraints at ``rho``; carries the smallest feasible
+            rho (bisection on the same problem) and the binding models.
+        RobustSolverError
+            The solver failed; the message lists next steps.
+        """
+        rho = self.options.rho if rho is None else float(rho)
+        if not (np.isfinite(rho) and rho > 0):
+            raise SpecError(f"`rho`: got {rho!r}, expected a finite improvement factor > 0")
+        self._e0_raw = self._check_e0(e0)
+        norms = np.linalg.norm(self._e0_raw, axis=1)
+        self._scale = float(norms.max())
+        self._e0.value = (self._e0_raw / self._scale).ravel()
+        self._norms_s = norms / self._scale
+        status, elapsed = self._run(rho)
+        if status in _INFEASIBLE:
+            rho_f, binding = self._bisect(rho)
+            raise RobustInfeasibleError(
+                f"robust design: rho = {rho:g} is infeasible, no learning signal makes ||e_k|| <= rho ||e0_k|| "
+                f"for all {len(self.loops)} models. Smallest feasible rho found by bisection: {rho_f:.4g} "
+                f"(tolerance {self.options.bisection_tol:g}); binding models: {list(binding)}. Next step: use "
+                f"rho >= {rho_f:.4g}, or drop/relax the binding models (smaller Delta bound).",
+                rho=rho, rho_feasible=rho_f, binding=binding)
+        if status not in _OK:
+            raise RobustSolverError(
+                f"robust design: solver {self.options.solver!r} returned status {status!r} at rho = {rho:g}. "
+                "Next steps: try solver='SCS', scale the signals (e0 in m, d_f in m/s^2), raise lam/mu, or "
+                "pass verbose=True to see the solver log")
+        if status == "optimal_inaccurate":
+            warnings.warn(f"robust design: solver {self.options.solver!r} returned 'optimal_inaccurate' at rho = "
+                          f"{rho:g}; check the returned ratios, or try solver='SCS' / verbose=True",
+                          RuntimeWarning, stacklevel=2)
+        return self._result(rho, status, elapsed)

@@ -1,0 +1,170 @@
+"""The Theorem's condition, checked per learning pair and frequency (design notes section 2).
+
+With true plant ``P = (1 + Delta) P_hat``, learning from system j-1 leaves system j with
+``e_j ~ -2 Delta_{j-1} / (1 + P_{j-1} C_{j-1}) {e'_j}``, so learning helps at the
+frequencies where::
+
+    |Delta_{j-1}(e^{jw Ts})|  <  |1 + P_{j-1}(e^{jw Ts}) C_{j-1}(e^{jw Ts})| / 2
+
+This is checked frequency by frequency (not as a ratio of two H-infinity norms), with the
+discrete model ``P_hat`` and PID ``C`` of system j-1 (:func:`ilcdob.loop.freqresp`) and
+``|Delta|`` either from the Delta set's bound (3 sigma of the identification, or the fleet
+bound) or from its sampled plants (``max_k |Delta_k|``). The margin is ``rhs / lhs`` (> 1:
+the condition holds). At high frequency ``P C -> 0``, so ``rhs -> 1/2``: any uncertainty
+above 50 % there breaks the condition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+from ilcdob.loop import freqresp
+
+from .delta import DeltaSet
+
+__all__ = ["PairCheck", "theorem_check", "format_theorem_table", "learning_pairs"]
+
+_SOURCES = ("bound", "samples")
+
+
+@dataclass(frozen=True)
+class PairCheck:
+    """The Theorem's condition for one learning step ``source`` (j-1) -> ``target`` (j).
+
+    Attributes
+    ----------
+    source, target : str
+    w : numpy.ndarray
+        Frequencies, rad/s.
+    delta : numpy.ndarray
+        ``|Delta_{j-1}(e^{jw Ts})|`` (bound or largest sample).
+    rhs : numpy.ndarray
+        ``|1 + P_{j-1} C_{j-1}| / 2`` with the model of system j-1.
+    holds : numpy.ndarray of bool
+        ``delta < rhs`` per frequency.
+    margin : numpy.ndarray
+        ``rhs / delta`` (inf where ``delta = 0``).
+    min_margin : float
+        Smallest margin (< 1: the condition fails somewhere).
+    worst_w : float
+        Frequency of ``min_margin``, rad/s.
+    delta_source : str
+        ``"bound"`` or ``"samples"``.
+    """
+
+    source: str
+    target: str
+    w: np.ndarray
+    delta: np.ndarray
+    rhs: np.ndarray
+    holds: np.ndarray
+    margin: np.ndarray
+    min_margin: float
+    worst_w: float
+    delta_source: str
+
+    @property
+    def holds_everywhere(self) -> bool:
+        return bool(np.all(self.holds))
+
+    @property
+    def failing_band(self) -> tuple[float, float] | None:
+        """``(lowest, highest)`` failing frequency, rad/s, or None."""
+        bad = self.w[~self.holds]
+        return None if bad.size == 0 else (float(bad.min()), float(bad.max()))
+
+    def to_dict(self) -> dict:
+        band = self.failing_band
+        return {"source": self.source, "target": self.target, "w": self.w.tolist(),
+                "delta": self.delta.tolist(), "rhs": self.rhs.tolist(), "holds": self.holds.tolist(),
+                "margin": [float(m) if np.isfinite(m) else None for m in self.margin],
+                "min_margin": self.min_margin if np.isfinite(self.min_margin) else None,
+                "worst_w": self.worst_w, "holds_everywhere": self.holds_everywhere,
+                "failing_band": list(band) if band else None, "delta_source": self.delta_source}
+
+
+def learning_pairs(names: list[str], order: list[str] | tuple[str, ...]) -> list[tuple[str, str]]:
+    """Cyclic pairs ``(order[i-1], order[i])``: ``[a, b, c]`` -> ``(a, b), (b, c), (c, a)``."""
+    order = list(order)
+    if len(order) < 2:
+        raise SpecError(f"`order`: got {order!r}, expected at least two system names")
+    unknown = [n for n in order if n not in names]
+    if unknown:
+        raise SpecError(f"`order`: unknown systems {unknown}; the fleet has {list(names)}")
+    if len(set(order)) != len(order):
+        raise SpecError(f"`order`: got {order!r}; each system may appear once (the cycle closes itself)")
+    return [(order[i - 1], order[i]) for i in range(1, len(order))] + [(order[-1], order[0])]
+
+
+def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict[str, DeltaSet],
+                  w: np.ndarray | None = None, source: str = "bound") -> list[PairCheck]:
+    """Check ``|Delta_{j-1}| < |1 + P_{j-1} C_{j-1}| / 2`` for every cyclic pair of ``order``.
+
+    Parameters
+    ----------
+    fleet : ilcdob.Fleet
+    order : list of str or None
+        Learning order (cyclic; None: the fleet's order). Scenario 4 flies
+        ``["UAV1", "UAV3", "UAV2"]``.
+    deltas : dict of str -> DeltaSet
+        Delta set of every system that is a source of some pair.
+    w : array, rad/s, optional
+        Frequencies; default each Delta set's own grid. With ``source="bound"`` the bound is
+        interpolated (log-log) onto ``w``, which must lie inside the set's grid.
+    source : {"bound", "samples"}
+        ``|Delta|`` from the set's bound, or ``max_k |Delta_k|`` of its sampled plants.
+
+    Returns
+    -------
+    list of PairCheck, in the order of the pairs.
+    """
+    if source not in _SOURCES:
+        raise SpecError(f"`source`: got {source!r}, expected one of {_SOURCES}")
+    names = list(fleet.names)
+    loops = dict(zip(names, fleet.loops))
+    pairs = learning_pairs(names, names if order is None else order)
+    out = []
+    for src, tgt in pairs:
+        if src not in deltas:
+            raise SpecError(f"`deltas`: no Delta set for system {src!r} (source of {src} -> {tgt}); "
+                            f"build one with ilcdob.design.delta_set(...) and pass it under {src!r}")
+        ds = deltas[src]
+        if not isinstance(ds, DeltaSet):
+            raise SpecError(f"`deltas[{src!r}]`: expected a DeltaSet, got {type(ds).__name__}")
+        ww = np.asarray(ds.w if w is None else w, dtype=float)
+        if ww.ndim != 1 or ww.size == 0 or np.any(ww <= 0) or np.any(ww >= np.pi / loops[src].ts):
+            raise SpecError(f"`w`: expected a 1-D array of frequencies in (0, Nyquist = "
+                            f"{np.pi / loops[src].ts:.4g}) rad/s")
+        if source == "bound":
+            bw, bb = np.asarray(ds.w, float), np.asarray(ds.bound, float)
+            if w is not None and (ww.min() < bw.min() * (1 - 1e-12) or ww.max() > bw.max() * (1 + 1e-12)):
+                raise SpecError(f"`w`: [{ww.min():.4g}, {ww.max():.4g}] rad/s leaves the Delta set's grid "
+                                f"[{bw.min():.4g}, {bw.max():.4g}]; pass w inside it or use source='samples'")
+            delta = bb if w is None else np.exp(np.interp(np.log(ww), np.log(bw), np.log(np.maximum(bb, 1e-300))))
+        else:
+            delta = np.max(np.abs(ds.deltas(ww)), axis=0)
+        model = loops[src].nominal
+        rhs = np.abs(1.0 + freqresp(model.P, ww) * freqresp(model.C, ww)) / 2.0
+        with np.errstate(divide="ignore"):
+            margin = np.where(delta > 0, rhs / np.where(delta > 0, delta, 1.0), np.inf)
+        i = int(np.argmin(margin))
+        out.append(PairCheck(source=src, target=tgt, w=ww, delta=np.asarray(delta, float), rhs=rhs,
+                             holds=delta < rhs, margin=margin, min_margin=float(margin[i]),
+                             worst_w=float(ww[i]), delta_source=source))
+    return out
+
+
+def format_theorem_table(checks: list[PairCheck]) -> str:
+    """Plain-text table: one row per pair with verdict, minimum margin, worst frequency, failing band."""
+    head = f"{'pair':<16} {'holds':<6} {'min margin':>10} {'worst w [rad/s]':>16}  failing band [rad/s]"
+    rows = [head, "-" * len(head)]
+    for c in checks:
+        band = c.failing_band
+        band_s = "-" if band is None else f"{band[0]:.4g} .. {band[1]:.4g}"
+        mm = f"{c.min_margin:.3g}" if np.isfinite(c.min_margin) else "inf"
+        rows.append(f"{c.source + ' -> ' + c.target:<16} {'yes' if c.holds_everywhere else 'NO':<6} "
+                    f"{mm:>10} {c.worst_w:>16.4g}  {band_s}")
+    return "\n".join(rows)
