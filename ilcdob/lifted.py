@@ -11,10 +11,13 @@ from __future__ import annotations
 import control as ct
 import numpy as np
 from scipy.linalg import toeplitz
+from scipy.signal import fftconvolve
+from scipy.sparse.linalg import LinearOperator
 
 from .errors import SignalError
 
-__all__ = ["markov_parameters", "lifted_operator", "relative_degree"]
+__all__ = ["markov_parameters", "lifted_operator", "relative_degree", "toeplitz_matvec", "toeplitz_rmatvec",
+           "lifted_linear_operator"]
 
 
 def markov_parameters(sys: ct.StateSpace, n: int) -> np.ndarray:
@@ -44,3 +47,22 @@ def relative_degree(h: np.ndarray, rtol: float = 1e-9) -> int:
     if big == 0:
         raise SignalError("`h`: all Markov parameters are zero (the map is zero)")
     return int(np.flatnonzero(np.abs(h) > rtol * big)[0])
+
+
+def toeplitz_matvec(h: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``T(h) x`` without forming ``T``: the causal convolution, by FFT (O(N log N))."""
+    x = np.asarray(x, dtype=float)
+    return fftconvolve(np.asarray(h, float), x)[: x.size]
+
+
+def toeplitz_rmatvec(h: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``T(h)' y`` without forming ``T``: anti-causal correlation (time-reverse, convolve, reverse)."""
+    y = np.asarray(y, dtype=float)
+    return fftconvolve(np.asarray(h, float), y[::-1])[: y.size][::-1]
+
+
+def lifted_linear_operator(sys: ct.StateSpace, n: int) -> LinearOperator:
+    """Matrix-free lifted operator of ``sys`` over ``n`` samples (scipy ``LinearOperator``)."""
+    h = markov_parameters(sys, n)
+    return LinearOperator((n, n), matvec=lambda x: toeplitz_matvec(h, np.ravel(x)),
+                          rmatvec=lambda y: toeplitz_rmatvec(h, np.ravel(y)), dtype=float)
