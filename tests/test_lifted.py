@@ -20,8 +20,8 @@ def test_lifted_operator_equals_simulation(fleet):
 
 
 def test_relative_degree_of_a_delay():
-    sys = ct.ss(ct.tf([1.0], [1.0, -0.5, 0.0, 0.0], 0.02))  # z^-2 / (1 - 0.5 z^-1) -> 2 samples
-    assert relative_degree(markov_parameters(sys, 20)) == 2
+    sys = ct.ss(ct.tf([1.0], [1.0, -0.5, 0.0, 0.0], 0.02))  # 1/(z^3 - 0.5 z^2) = z^-3/(1 - 0.5 z^-1)
+    assert relative_degree(markov_parameters(sys, 20)) == 3
 
 
 def test_fft_products_match_dense(fleet):
