@@ -3,9 +3,16 @@
 from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, reconstruct_disturbance,
                           simulate_map)
 from .delta import DeltaSet, delta_set
+from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
+from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
+from .pair import METHODS, PairDesign, design_pair
+from .theorem import PairCheck, format_theorem_table, theorem_check
 from .lifted_filters import LiftedLearningFilters, lifted_filters
 from .noncausal import ZPKFilter
 
 __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter", "inverse_gd_filter",
            "reconstruct_disturbance", "DeltaSet", "delta_set",
+           "FIRDesign", "FIRDesignError", "FIRFilter", "FIROptions", "design_fir",
+           "NormOptimalDesigner", "NormOptimalOptions", "norm_optimal_learning",
+           "METHODS", "PairDesign", "design_pair", "PairCheck", "format_theorem_table", "theorem_check",
            "LiftedLearningFilters", "lifted_filters"]

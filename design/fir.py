@@ -389,7 +389,7 @@ def design_fir(prev_loop: LoopSystem, next_loop: LoopSystem, delta_prev: DeltaSe
                         "k-th samples are paired, draw both Delta sets with the same k")
     const = np.array([freqresp(t.G_d, w) / freqresp(s.G_d, w) for s, t in zip(src_models, tgt_models)])
     gain = np.array([freqresp(t.G_f, w) for t in tgt_models])
-    l1_fir, te, status, ok = fit_fir(filters.l1_response(w), w, ts, options, const, gain)
+    l1_fir, te, status, _converged = fit_fir(filters.l1_response(w), w, ts, options, const, gain)
     k, i = np.unravel_index(int(np.argmax(te)), te.shape)
     worst = float(te[k, i])
     limit = 1.0 - options.margin

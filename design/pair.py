@@ -17,12 +17,14 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 
 from .closed_form import closed_form_filters
+from .delta import DeltaSet, delta_set
 from .export import zpk_to_coefficients
+from .fir import FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 
-__all__ = ["PairDesign", "design_pair", "METHODS"]
+__all__ = ["PairDesign", "design_pair", "fleet_delta_sets", "METHODS"]
 
-METHODS = ("closed-form", "norm-optimal")
+METHODS = ("closed-form", "fir", "norm-optimal")
 
 
 @dataclass(frozen=True)
@@ -46,8 +48,17 @@ class PairDesign:
     lifted: dict[str, np.ndarray] | None = field(default=None)
 
 
+def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | None = None,
+                     scale: float = 1.0, seed: int = 0) -> dict[str, DeltaSet]:
+    """Delta sets of the named systems: from each identification (scaled), or a common ``bound``."""
+    rng = np.random.default_rng(seed)
+    return {name: delta_set(next(s for s in fleet.systems if s.name == name), fleet.sample_time, k, rng,
+                            scale=scale, bound=bound) for name in names}
+
+
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
-                norm_optimal: NormOptimalOptions | None = None) -> PairDesign:
+                norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
+                deltas: dict[str, DeltaSet] | None = None) -> PairDesign:
     """Design the learning filters of ``target`` from ``source`` with ``method``.
 
     Parameters
@@ -55,10 +66,14 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     fleet : Fleet
     source, target : str
         System names (j-1 and j).
-    method : {"closed-form", "norm-optimal"}
+    method : {"closed-form", "fir", "norm-optimal"}
     n : int, optional
         Trial length in samples for the lifted matrices of the lifted methods (default 500).
     norm_optimal : NormOptimalOptions, optional
+    fir : FIROptions, optional
+    deltas : dict name -> DeltaSet, optional
+        Sampled true loops of ``source`` and ``target`` for the robust constraint of the FIR
+        design (default: :func:`fleet_delta_sets` with K = 8 from the identifications).
     """
     if method not in METHODS:
         raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
@@ -69,6 +84,14 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         filters = {**head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
                    "units": {"L1": "(m/s^2)/m", "L2": "1"}}
         return PairDesign(method, filters, lf.apply)
+    if method == "fir":
+        deltas = deltas or fleet_delta_sets(fleet, [source, target])
+        fd = design_fir(src, tgt, deltas[source], deltas[target], fir)
+        info = fd.to_dict()
+        filters = {**head, "L1": info.pop("L1"), "L2": info.pop("L2"),
+                   "units": {"L1": "(m/s^2)/m", "L2": "1"},
+                   "robustness": {k: v for k, v in info.items() if k not in ("source", "target")}}
+        return PairDesign(method, filters, fd.apply)
     opts = norm_optimal or NormOptimalOptions()
     n = 500 if n is None else int(n)
     if n < 2:

@@ -64,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     des.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
     des.add_argument("--from", dest="source", required=True, help="system learned from (j-1)")
     des.add_argument("--to", dest="target", required=True, help="system that learns (j)")
-    des.add_argument("--method", default="closed-form", help="closed-form or norm-optimal (default closed-form)")
+    des.add_argument("--method", default="closed-form", help="closed-form, fir or norm-optimal (default closed-form)")
     des.add_argument("--n", type=_positive_int, default=None,
                      help="trial length in samples for lifted matrices (default: the trial's, else 500)")
     des.add_argument("--trial", default=None,

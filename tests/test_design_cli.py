@@ -83,3 +83,17 @@ def test_design_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "magic" in err and "closed-form" in err
     assert not (tmp_path / "y" / "filters.json").exists()
+
+
+def test_fir_design_via_cli(fleet, tmp_path):
+    trial = tmp_path / "trial.csv"
+    d, fl = _trial(fleet, trial, n=3000)
+    out = tmp_path / "fir"
+    assert main(["design", "--from", "UAV1", "--to", "UAV2", "--method", "fir", "--trial", str(trial),
+                 "--out", str(out)]) == 0
+    filters = json.loads((out / "filters.json").read_text())
+    assert filters["L1"]["den"] == [1.0] and filters["robustness"]["worst_te1"] < 0.9  # margin 0.1
+    ls = load_csv(out / "learning_signal.csv", {"d_f": "learning"})
+    base = simulate_flight(fleet.loop("UAV2"), np.zeros(3000), d)
+    learned = simulate_flight(fleet.loop("UAV2"), np.zeros(3000), d, d_f=ls["d_f"])
+    assert rmse(learned.e) < 0.1 * rmse(base.e)  # FIR: within 10 % of DOB-only (closed form: ~0)

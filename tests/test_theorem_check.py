@@ -1,0 +1,80 @@
+"""The Theorem's condition |Delta_{j-1}| < |1 + P_{j-1} C_{j-1}| / 2 per pair and frequency."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import control as ct
+import numpy as np
+import pytest
+
+from ilcdob import SpecError
+from ilcdob.design import delta_set
+from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
+
+
+@pytest.fixture(scope="module")
+def deltas(fleet):
+    return {s.name: delta_set(s, fleet.sample_time, k=5) for s in fleet.systems}
+
+
+def test_holds_everywhere_for_the_identified_uncertainty(fleet, deltas):
+    for source in ("bound", "samples"):
+        checks = theorem_check(fleet, None, deltas, source=source)
+        assert [(c.source, c.target) for c in checks] == [("UAV1", "UAV2"), ("UAV2", "UAV3"), ("UAV3", "UAV1")]
+        for c in checks:
+            assert c.holds_everywhere and c.failing_band is None
+            assert c.min_margin > 1
+
+
+def test_a_bound_of_one_and_a_half_fails_at_high_frequency(fleet, deltas):
+    big = {n: replace(d, bound=np.full(d.w.size, 1.5)) for n, d in deltas.items()}
+    checks = theorem_check(fleet, ["UAV1", "UAV3", "UAV2"], big)
+    assert [(c.source, c.target) for c in checks] == [("UAV1", "UAV3"), ("UAV3", "UAV2"), ("UAV2", "UAV1")]
+    for c in checks:
+        assert not c.holds_everywhere
+        assert not c.holds[-1]  # |1 + PC| -> 1 near Nyquist: rhs -> 0.5 < 1.5
+        assert c.rhs[-1] == pytest.approx(0.5, abs=0.02)
+        assert c.min_margin < 1
+        lo, hi = c.failing_band
+        assert lo <= c.worst_w <= hi and hi == pytest.approx(c.w[-1])
+        assert c.holds[0]  # the PID integrator makes |1 + PC| large at low frequency
+    table = format_theorem_table(checks)
+    assert "UAV1 -> UAV3" in table and "NO" in table
+
+
+def test_margins_match_an_independent_numpy_evaluation(fleet, deltas):
+    w = np.logspace(-1, 2, 40)
+    checks = theorem_check(fleet, None, deltas, w=w, source="samples")
+    for c in checks:
+        z = np.exp(1j * w * fleet.sample_time)
+        # independent: transfer-function polynomials of the discrete blocks evaluated at z
+        loop = fleet.loops[fleet.names.index(c.source)]
+        p_tf, c_tf = ct.ss2tf(loop.nominal.P), ct.ss2tf(loop.nominal.C)
+        pz = np.polyval(np.ravel(p_tf.num[0][0]), z) / np.polyval(np.ravel(p_tf.den[0][0]), z)
+        cz = np.polyval(np.ravel(c_tf.num[0][0]), z) / np.polyval(np.ravel(c_tf.den[0][0]), z)
+        rhs = np.abs(1 + pz * cz) / 2
+        ds = deltas[c.source]
+        delta = np.array([[abs(complex(np.squeeze(ct.evalfr(lp.P, zz))) / complex(np.squeeze(ct.evalfr(ds.nominal.P, zz))) - 1)
+                           for zz in z] for lp in ds.loops]).max(axis=0)
+        np.testing.assert_allclose(c.rhs, rhs, rtol=1e-7)
+        np.testing.assert_allclose(c.delta, delta, rtol=1e-7)
+        np.testing.assert_allclose(c.margin, rhs / delta, rtol=1e-6)
+        assert c.min_margin == pytest.approx(np.min(rhs / delta), rel=1e-6)
+        assert c.worst_w == w[np.argmin(rhs / delta)]
+        assert np.array_equal(c.holds, delta < rhs)
+
+
+def test_to_dict_is_json_and_bad_inputs_raise(fleet, deltas):
+    c = theorem_check(fleet, None, deltas)[0]
+    d = json.loads(json.dumps(c.to_dict()))
+    assert d["source"] == "UAV1" and d["holds_everywhere"] is True and len(d["w"]) == len(d["margin"])
+    with pytest.raises(SpecError, match="unknown systems"):
+        theorem_check(fleet, ["UAV1", "UAV9"], deltas)
+    with pytest.raises(SpecError, match="no Delta set"):
+        theorem_check(fleet, None, {"UAV1": deltas["UAV1"]})
+    with pytest.raises(SpecError, match="source"):
+        theorem_check(fleet, None, deltas, source="max")
+    with pytest.raises(SpecError, match="at least two"):
+        learning_pairs(fleet.names, ["UAV1"])
