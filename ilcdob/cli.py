@@ -71,6 +71,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="CSV of the previous system's trial: columns time (s), error (m), learning (m/s^2)")
     des.add_argument("--out", required=True, help="output folder")
 
+    chk = sub.add_parser("check", help="the Theorem's condition |Delta| < |1 + P C|/2 per pair and frequency")
+    chk.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
+    chk.add_argument("--order", default=None, help="learning order, comma-separated names (default: file order)")
+    chk.add_argument("--bound", type=float, default=None,
+                     help="multiplicative uncertainty bound for every system (default: identified covariance)")
+    chk.add_argument("--scale", type=float, default=1.0, help="scale of the identified standard deviations")
+    chk.add_argument("--out", default=None, help="write the check as JSON here")
+
     ifl = sub.add_parser("identify-fleet", help="fly synthetic step/chirp experiments with the nonlinear "
                                                 "vehicles and identify every plant of the fleet")
     ifl.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
@@ -180,6 +188,23 @@ def _design(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check(args: argparse.Namespace) -> int:
+    from .atomic import write_json_atomic
+    from .design.pair import fleet_delta_sets
+    from .design.theorem import format_theorem_table, theorem_check
+
+    fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
+    order = [s.strip() for s in args.order.split(",")] if args.order else fleet.names
+    for name in order:
+        fleet.loop(name)  # unknown names: a clear error
+    deltas = fleet_delta_sets(fleet, order, k=8, bound=args.bound, scale=args.scale)
+    checks = theorem_check(fleet, order, deltas)
+    print(format_theorem_table(checks))
+    if args.out:
+        write_json_atomic(args.out, {"order": order, "pairs": [c.to_dict() for c in checks]})
+    return 0
+
+
 def _identify_fleet(args: argparse.Namespace) -> int:
     from .identification.fleet_id import identify_fleet
 
@@ -205,6 +230,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _identify_fleet(args)
         if args.command == "design":
             return _design(args)
+        if args.command == "check":
+            return _check(args)
     except IlcdobError as exc:
         print(f"ilcdob: error: {exc}", file=sys.stderr)
         return 2

@@ -97,3 +97,15 @@ def test_fir_design_via_cli(fleet, tmp_path):
     base = simulate_flight(fleet.loop("UAV2"), np.zeros(3000), d)
     learned = simulate_flight(fleet.loop("UAV2"), np.zeros(3000), d, d_f=ls["d_f"])
     assert rmse(learned.e) < 0.1 * rmse(base.e)  # FIR: within 10 % of DOB-only (closed form: ~0)
+
+
+def test_check_cli_reports_the_theorem_condition(tmp_path, capsys):
+    out = tmp_path / "check.json"
+    assert main(["check", "--order", "UAV1,UAV3,UAV2", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["order"] == ["UAV1", "UAV3", "UAV2"]
+    assert all(p["holds_everywhere"] for p in data["pairs"])  # identified uncertainty is small
+    assert main(["check", "--bound", "0.9"]) == 0
+    text = capsys.readouterr().out
+    assert "NO" in text  # |Delta| = 0.9 > |1 + PC|/2 -> 0.5 at high frequency
+    assert main(["check", "--order", "UAV1,UAV7"]) == 2
