@@ -47,6 +47,7 @@ __all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustInfeasibleE
            "predicted_errors", "design_ratios"]
 
 _OK = ("optimal", "optimal_inaccurate")
+_DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl here (design notes section 5)
 _INFEASIBLE = ("infeasible", "infeasible_inaccurate")
 _CLARABEL_STATUS = {"Solved": "optimal", "AlmostSolved": "optimal_inaccurate",
                     "PrimalInfeasible": "infeasible", "AlmostPrimalInfeasible": "infeasible_inaccurate",
@@ -349,6 +350,7 @@ class RobustDesigner:
         b += [np.concatenate([[rho * self._norms_s[i]], np.zeros(n)]) for i in range(k)]
         settings = clarabel.DefaultSettings()
         settings.verbose = bool(self.options.verbose)
+        settings.direct_solve_method = _DIRECT_METHOD
         t0 = time.perf_counter()
         try:
             solver = clarabel.DefaultSolver(c["P"], c["q"], c["A"], np.concatenate(b), c["cones"], settings)
