@@ -165,14 +165,15 @@ def _matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, w
     return ZPKFilter(zeros, poles, gain, ts)
 
 
-def inverse_gd_filter(loop: LoopSystem) -> ZPKFilter:
-    """``Gd^{-1} = D / (P (1 - Q))`` of ``loop``'s model, for non-causal application.
+def inverse_gd_filter(loop: LoopSystem, model: bool = True) -> ZPKFilter:
+    """``Gd^{-1} = D / (P (1 - Q))`` of ``loop``'s model (or of ``loop`` itself if ``model`` is
+    False: its plant, with the model's C, Q and M), for non-causal application.
 
     Poles: zeros of P_hat, of (1 - Q) (including z = 1) and the poles of M and C; zeros: the
     closed-loop poles. Two poles sit at z = 1 (constant disturbances leave no trace in the
     error, so their reconstruction integrates twice from rest).
     """
-    src = loop.nominal
+    src = loop.nominal if model else loop
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)
     q_zeros = np.asarray(_one_minus(src.Q).zeros(), dtype=complex)
     zeros = np.linalg.eigvals(src.closed_loop.A)
@@ -186,16 +187,20 @@ def inverse_gd_filter(loop: LoopSystem) -> ZPKFilter:
     return _matched(zeros, poles, src.ts, exact, f"Gd^-1 of {loop.name!r}")
 
 
-def reconstruct_disturbance(loop: LoopSystem, e: object, d_f: object) -> np.ndarray:
-    """Disturbance that explains a flight of ``loop``'s model: ``-Gd^{-1}{e + Gf{d_f}}`` (m/s^2).
+def reconstruct_disturbance(loop: LoopSystem, e: object, d_f: object, model: bool = True) -> np.ndarray:
+    """Disturbance that explains a flight of ``loop``: ``-Gd^{-1}{e + Gf{d_f}}`` (m/s^2).
 
-    Exact for the model (Case I); the constant part of a disturbance is invisible in the
+    With ``model=True`` (the closed form) the maps are those of ``loop``'s model, exact in
+    Case I; with ``model=False`` they are those of ``loop`` itself, i.e. of a sampled true
+    plant flown with the model's DOB (used by the robust design to reconstruct under every
+    hypothesis of the Delta set). The constant part of a disturbance is invisible in the
     error and is reconstructed from rest.
     """
     e = as_signal(e, "e")
     df = as_signal(d_f, "d_f", e.size)
-    e_virtual = e + simulate_map(loop.nominal.G_f, df) if np.any(df) else e
-    return -inverse_gd_filter(loop).apply(e_virtual, "e")
+    src = loop.nominal if model else loop
+    e_virtual = e + simulate_map(src.G_f, df) if np.any(df) else e
+    return -inverse_gd_filter(loop, model).apply(e_virtual, "e")
 
 
 def closed_form_filters(prev: LoopSystem, nxt: LoopSystem) -> LearningFilters:

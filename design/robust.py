@@ -36,15 +36,18 @@ import clarabel
 import control as ct
 import cvxpy as cp
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
+import slycot
+from slycot.exceptions import SlycotResultWarning
 
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
-from .closed_form import simulate_map
+from .closed_form import reconstruct_disturbance, simulate_map
 
-__all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustInfeasibleError", "RobustSolverError",
-           "predicted_errors", "design_ratios"]
+__all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustPairDesigner", "RobustInfeasibleError",
+           "RobustSolverError", "predicted_errors", "design_ratios", "reduced_realisation"]
 
 _OK = ("optimal", "optimal_inaccurate")
 _DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl here (design notes section 5)
@@ -105,6 +108,11 @@ class RobustOptions:
         ``"cvxpy"``: solve the DPP cvxpy problem (any cvxpy solver). cvxpy's one-time DPP
         compilation grows about quadratically with size (3.7 s at K=5, N=300; 16 s at N=600),
         so use it for small problems or other solvers only (design notes section 5).
+    reduction_tol : float
+        Balanced truncation of each ``Gf_k``: states with Hankel singular value below
+        ``reduction_tol`` times the largest are dropped (:func:`reduced_realisation`). The
+        truncation error bound ``eps_k`` is added to the improvement constraint, which stays
+        a guarantee for the full model. In [0, 0.1); default 1e-5 (6-7 of 11-12 states).
     """
 
     rho: float = 0.95
@@ -115,6 +123,7 @@ class RobustOptions:
     verbose: bool = False
     bisection_tol: float = 1e-3
     backend: str = "direct"
+    reduction_tol: float = 1e-5
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.rho) and self.rho > 0):
@@ -135,6 +144,9 @@ class RobustOptions:
         if self.backend == "direct" and str(self.solver).upper() != "CLARABEL":
             raise SpecError(f"`solver`: got {self.solver!r} with backend='direct', which calls Clarabel itself; "
                             "use backend='cvxpy' for other solvers")
+        if not (np.isfinite(self.reduction_tol) and 0 <= self.reduction_tol < 0.1):
+            raise SpecError(f"`reduction_tol`: got {self.reduction_tol!r}, expected a relative Hankel singular "
+                            "value in [0, 0.1) (0 keeps every state of the minimal realisation)")
         if not (0 < self.bisection_tol <= 0.1):
             raise SpecError(f"`bisection_tol`: got {self.bisection_tol!r}, expected a value in (0, 0.1]")
 
@@ -203,16 +215,36 @@ def design_ratios(d_f: object, e0: object, loops: Sequence[LoopSystem]) -> np.nd
     return np.linalg.norm(e, axis=1) / np.linalg.norm(e0, axis=1)
 
 
-def _balanced(sys: ct.StateSpace) -> ct.StateSpace:
-    """Minimal balanced realisation of a stable discrete SISO map (falls back to minimal)."""
+def hankel_singular_values(sys: ct.StateSpace) -> np.ndarray:
+    """Hankel singular values of a stable discrete SISO map, largest first (discrete Gramians)."""
+    a, b, c = (np.asarray(m, float) for m in (sys.A, sys.B, sys.C))
+    wc = sla.solve_discrete_lyapunov(a, b @ b.T)
+    wo = sla.solve_discrete_lyapunov(a.T, c.T @ c)
+    return np.sqrt(np.sort(np.abs(np.linalg.eigvals(wc @ wo)))[::-1])
+
+
+def reduced_realisation(sys: ct.StateSpace, tol: float) -> tuple[ct.StateSpace, float]:
+    """Balanced truncation of a stable discrete SISO map, and its error bound.
+
+    States whose Hankel singular value is below ``tol`` times the largest are truncated
+    (SLICOT AB09AD, square-root balance & truncate, ``dico='D'``). The returned bound
+    ``2 sum(discarded HSV)`` bounds ``||G - G_r||_inf`` and hence the l2 gain of the error
+    on any finite trial from rest.
+
+    Note: ``control.balred`` (python-control 0.10) hard-codes continuous time and returns a
+    ``dt = 0`` system, so it cannot be used on discrete maps; slycot is called directly.
+    """
     m = ct.minreal(sys, verbose=False)
     if m.nstates == 0:
-        return m
-    try:
-        b = ct.balred(m, m.nstates)
-    except Exception:  # slycot missing or balancing failed: a minimal realisation still works
-        return m
-    return b
+        return m, 0.0
+    hsv = hankel_singular_values(m)
+    order = max(1, int(np.sum(hsv > tol * hsv[0])))
+    with warnings.catch_warnings():  # AB09AD lowers nr itself to the minimal order, with a warning
+        warnings.simplefilter("ignore", SlycotResultWarning)
+        nr, ar, br, cr, _ = slycot.ab09ad("D", "B", "N", m.nstates, 1, 1, np.asarray(m.A, float),
+                                          np.asarray(m.B, float), np.asarray(m.C, float), nr=order)
+    red = ct.ss(ar[:nr, :nr], br[:nr, :], cr[:, :nr], m.D, m.dt)
+    return red, float(2.0 * np.sum(hsv[nr:]))
 
 
 def _state_space_blocks(sys: ct.StateSpace, n: int, gain: float):
@@ -265,7 +297,9 @@ class RobustDesigner:
             raise SpecError(f"`weight`: got {w.size} weights, expected a scalar or n = {self.n} weights")
         self._w = np.broadcast_to(w, (self.n,)).copy()
         k = len(self.loops)
-        self.realisations = tuple(_balanced(lp.G_f) for lp in self.loops)
+        reduced = [reduced_realisation(lp.G_f, self.options.reduction_tol) for lp in self.loops]
+        self.realisations = tuple(r for r, _ in reduced)
+        self.truncation_bounds = np.array([b for _, b in reduced])
         # input scaling: peak gain of the first model's Gf on a grid up to Nyquist
         lp0 = self.loops[0]
         grid = np.logspace(-3, np.log10(0.999 * np.pi / lp0.ts), 400)
@@ -296,7 +330,9 @@ class RobustDesigner:
                       self._e == self._e0 - pick @ (out @ self._x + feed @ self._d)]
         self._errors = [self._e[i * self.n:(i + 1) * self.n] for i in range(k)]
         cons += [cp.sum_squares(cp.multiply(self._w, e)) <= self._t for e in self._errors]
-        self._improve = [cp.norm(e, 2) <= self._rhs[i] for i, e in enumerate(self._errors)]
+        eps = self.truncation_bounds / self._gain  # l2-gain bound of the truncation, normalised units
+        self._improve = [cp.norm(e, 2) + eps[i] * cp.norm(self._d, 2) <= self._rhs[i]
+                         for i, e in enumerate(self._errors)]
         cons += self._improve
         self._conic = self._conic_data(lhs, inp, out, feed, pick, k) if self.options.backend == "direct" else None
         self._lam_s = cp.Parameter(nonneg=True, name="lam")
@@ -312,42 +348,59 @@ class RobustDesigner:
 
     # ------------------------------------------------------------------ internals
     def _conic_data(self, lhs, inp, out, feed, pick, k: int) -> dict:
-        """Clarabel form ``min 1/2 z'Pz + q'z, A z + s = b, s in cones``, z = [d, x, e, t]."""
+        """Clarabel form ``min 1/2 z'Pz + q'z, A z + s = b, s in cones``, z = [d, x, e, t, u, v].
+
+        ``u_i >= ||e_i||``, ``v >= ||d||`` and ``u_i + eps_i v <= rho ||e0_i||`` (the improvement
+        constraint with the truncation error bound ``eps_i``); only the last right-hand sides and
+        ``e0`` change per solve.
+        """
         n, nx = self.n, lhs.shape[0]
         ne = k * n
-        nz = n + nx + ne + 1
+        zt = n + nx + ne
+        nz = zt + 1 + k + 1
+        zu, zv = zt + 1, nz - 1
         lam, mu = self.options.lam / self._gain**2, self.options.mu / self._gain**2
         diff = sp.diags([-np.ones(n - 1), np.ones(n - 1)], [0, 1], shape=(n - 1, n))
         pd = 2.0 * (lam * sp.eye(n) + mu * (diff.T @ diff))
         P = sp.block_diag([sp.triu(pd), sp.csc_matrix((nz - n, nz - n))], format="csc")
         q = np.zeros(nz)
-        q[-1] = 1.0
-        zx, ze, zt = sp.csr_matrix, n + nx, nz - 1
-        rows = [sp.hstack([-inp, lhs, zx((nx, ne)), zx((nx, 1))]),
-                sp.hstack([pick @ feed, pick @ out, sp.eye(ne), zx((ne, 1))])]
+        q[zt] = 1.0
+        zx = sp.csr_matrix
+
+        def unit(rows: list[int], cols: list[int], vals: list[float]) -> sp.csr_matrix:
+            return sp.csr_matrix((vals, (rows, cols)), shape=(max(rows) + 1, nz))
+
+        def error_rows(i: int, scale) -> sp.csr_matrix:  # rows selecting scale * e_i
+            return sp.hstack([zx((n, n + nx + i * n)), scale, zx((n, nz - n - nx - (i + 1) * n))])
+
+        rows = [sp.hstack([-inp, lhs, zx((nx, nz - n - nx))]),
+                sp.hstack([pick @ feed, pick @ out, sp.eye(ne), zx((ne, nz - n - nx - ne))])]
         b = [np.zeros(nx), None]  # None: e0, filled per solve
         cones = [clarabel.ZeroConeT(nx + ne)]
+        eps = self.truncation_bounds / self._gain
+        rows.append(sp.hstack([zx((k, zu)), sp.eye(k), sp.csr_matrix(eps[:, None])]))  # u + eps v <= r
+        b.append(None)
+        cones.append(clarabel.NonnegativeConeT(k))
         wdiag = sp.diags(2.0 * self._w)
         for i in range(k):  # ||W e_i||^2 <= t  <=>  ||(t - 1, 2 W e_i)|| <= t + 1
-            sel = sp.hstack([zx((n, ze + i * n)), -wdiag, zx((n, ne - (i + 1) * n + 1))])
-            tcol = sp.csr_matrix(([-1.0, -1.0], ([0, 1], [zt, zt])), shape=(2, nz))
-            rows.append(sp.vstack([tcol, sel]))
+            rows.append(sp.vstack([unit([0, 1], [zt, zt], [-1.0, -1.0]), error_rows(i, -wdiag)]))
             b.append(np.concatenate([[1.0, -1.0], np.zeros(n)]))
             cones.append(clarabel.SecondOrderConeT(n + 2))
-        for i in range(k):  # ||e_i|| <= r_i
-            sel = sp.hstack([zx((n, ze + i * n)), -sp.eye(n), zx((n, ne - (i + 1) * n + 1))])
-            rows.append(sp.vstack([zx((1, nz)), sel]))
-            b.append(None)
+        for i in range(k):  # ||e_i|| <= u_i
+            rows.append(sp.vstack([unit([0], [zu + i], [-1.0]), error_rows(i, -sp.eye(n))]))
+            b.append(np.zeros(n + 1))
             cones.append(clarabel.SecondOrderConeT(n + 1))
+        rows.append(sp.vstack([unit([0], [zv], [-1.0]), sp.hstack([-sp.eye(n), zx((n, nz - n))])]))  # ||d|| <= v
+        b.append(np.zeros(n + 1))
+        cones.append(clarabel.SecondOrderConeT(n + 1))
         A = sp.vstack(rows, format="csc")
-        return {"P": P, "q": q, "A": A, "b": b, "cones": cones, "nx": nx, "ne": ne}
+        return {"P": P, "q": q, "A": A, "b": b, "cones": cones}
 
     def _run_direct(self, rho: float):
-        c, n = self._conic, self.n
-        k = len(self.loops)
-        e0 = (self._e0_raw / self._scale).ravel()
-        b = [c["b"][0], e0] + c["b"][2:2 + k]
-        b += [np.concatenate([[rho * self._norms_s[i]], np.zeros(n)]) for i in range(k)]
+        c = self._conic
+        b = list(c["b"])
+        b[1] = (self._e0_raw / self._scale).ravel()
+        b[2] = rho * self._norms_s
         settings = clarabel.DefaultSettings()
         settings.verbose = bool(self.options.verbose)
         settings.direct_solve_method = _DIRECT_METHOD
@@ -485,3 +538,62 @@ class RobustDesigner:
                           f"{rho:g}; check the returned ratios, or try solver='SCS' / verbose=True",
                           RuntimeWarning, stacklevel=2)
         return self._result(rho, status, elapsed)
+
+
+class RobustPairDesigner:
+    """Robust learning of system j from a trial of system j-1 over paired Delta samples.
+
+    Model ``k`` is the hypothesis "system j-1 flew with true plant ``sources[k]`` and system j
+    will fly with ``targets[k]``" (both loops keep their models' C, Q and M). For a trial
+    ``(e_{j-1}, d_f,{j-1})`` the disturbance is reconstructed under each hypothesis
+    (:func:`~ilcdob.design.reconstruct_disturbance` with ``model=False``, the inverse of
+    Theorem's ``Gd_{j-1}``), giving ``e0_k = -Gd_{j,k}{d_rec,k}``, and
+    :class:`RobustDesigner` chooses ``d_f,j`` (design notes section 3). Designers are built
+    once per trial length and re-solved per trial.
+
+    Parameters
+    ----------
+    sources, targets : sequence of LoopSystem
+        Equal-length lists of sampled loops of systems j-1 and j (e.g. the nominal loop first,
+        then ``DeltaSet.loops``).
+    options : RobustOptions, optional
+    relax : bool
+        If the requested rho is infeasible, design at the smallest feasible rho found by
+        bisection (plus ``2 * bisection_tol``) with a warning instead of raising.
+    """
+
+    def __init__(self, sources: Sequence[LoopSystem], targets: Sequence[LoopSystem],
+                 options: RobustOptions | None = None, relax: bool = False):
+        self.sources, self.targets = tuple(sources), tuple(targets)
+        if not self.sources or len(self.sources) != len(self.targets):
+            raise SpecError(f"`sources`/`targets`: got {len(self.sources)} and {len(self.targets)} loops, "
+                            "expected the same number (>= 1) of paired samples")
+        self.options = options if options is not None else RobustOptions()
+        self.relax = bool(relax)
+        self._designers: dict[int, RobustDesigner] = {}
+
+    def predicted_errors(self, e_prev: object, df_prev: object) -> np.ndarray:
+        """``e0_k`` (K, N), m: system j's error without learning under every hypothesis."""
+        return np.array([-simulate_map(tgt.G_d, reconstruct_disturbance(src, e_prev, df_prev, model=False))
+                         for src, tgt in zip(self.sources, self.targets)])
+
+    def design(self, e_prev: object, df_prev: object) -> RobustDesign:
+        """Robust learning signal of system j for one trial of system j-1 (m, m/s^2)."""
+        e0 = self.predicted_errors(e_prev, df_prev)
+        n = e0.shape[1]
+        if n not in self._designers:
+            self._designers[n] = RobustDesigner(self.targets, n, self.options)
+        designer = self._designers[n]
+        try:
+            return designer.solve(e0)
+        except RobustInfeasibleError as exc:
+            if not self.relax:
+                raise
+            rho = exc.rho_feasible + 2 * self.options.bisection_tol
+            warnings.warn(f"robust design: rho = {exc.rho:g} infeasible, designed at rho = {rho:.4g} "
+                          f"(binding models {list(exc.binding)})", RuntimeWarning, stacklevel=2)
+            return designer.solve(e0, rho=rho)
+
+    def learn(self, e_prev: object, df_prev: object) -> np.ndarray:
+        """The learning signal only (``design(...).d_f``), m/s^2."""
+        return self.design(e_prev, df_prev).d_f
