@@ -8,6 +8,9 @@ runs the paper's validation on a fleet (default: the built-in three UAVs) and wr
 [--integrators K] [--delay auto|SECONDS] [--validate FILE ...] --out model.json [--plot DIR]``
 fits a continuous-time transfer function to flight data (CSV, Parquet, PX4 ULog with
 TOPIC.FIELD, ArduPilot DataFlash with MESSAGE.FIELD) and writes ``model.json``.
+
+``ilcdob report DIR [DIR ...] --out report.html`` writes one self-contained HTML report from
+output folders of ``reproduce``, ``compare`` and ``campaign`` (see ``ilcdob.html_report``).
 """
 
 from __future__ import annotations
@@ -78,6 +81,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="multiplicative uncertainty bound for every system (default: identified covariance)")
     chk.add_argument("--scale", type=float, default=1.0, help="scale of the identified standard deviations")
     chk.add_argument("--out", default=None, help="write the check as JSON here")
+
+    rpt = sub.add_parser("report", help="one self-contained HTML report from reproduce/compare/campaign folders")
+    rpt.add_argument("dirs", nargs="+", help="folders holding results.json, compare.json or campaign.json")
+    rpt.add_argument("--out", required=True, help="HTML file to write")
+    rpt.add_argument("--fleet", default=None, help="fleet TOML for results whose own fleet file is not found")
 
     ifl = sub.add_parser("identify-fleet", help="fly synthetic step/chirp experiments with the nonlinear "
                                                 "vehicles and identify every plant of the fleet")
@@ -217,6 +225,14 @@ def _identify_fleet(args: argparse.Namespace) -> int:
     return 0
 
 
+def _report(args: argparse.Namespace) -> int:
+    from .html_report import ReportOptions, write_report
+
+    path = write_report(args.dirs, args.out, ReportOptions(fleet=args.fleet))
+    print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ilcdob`` command; returns the exit status."""
     parser = build_parser()
@@ -232,6 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _design(args)
         if args.command == "check":
             return _check(args)
+        if args.command == "report":
+            return _report(args)
     except IlcdobError as exc:
         print(f"ilcdob: error: {exc}", file=sys.stderr)
         return 2

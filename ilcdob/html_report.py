@@ -1,0 +1,764 @@
+"""One self-contained HTML report from the output folders of ilcdob: ``ilcdob report``.
+
+``ilcdob report DIR [DIR ...] --out report.html`` reads every ``DIR`` and writes one HTML
+file that opens offline: figures are embedded as base64 PNG ``data:`` URIs, the style sheet
+is inline, and the page refers to no external URL. Each section is rendered when its input
+is among the folders and otherwise says which input it lacks; no number in the report is
+made up or defaulted, every one is read from an input file or computed from the fleet those
+files name.
+
+Inputs, detected by file name in each folder
+--------------------------------------------
+``results.json`` (``ilcdob reproduce``, see :meth:`ReproductionResult.to_dict`)
+    ``{"plant": "linear" | "nonlinear", "fleet": PATH, "sample_time": s, "iterations": n,
+    "scenarios": [{"id", "title", "order": [names], "systems": {name: {"rmse_no_dob",
+    "rmse_dob", "rmse_learning": [n], "rmse_dhat_dob", "rmse_dhat_learning": [n]}}}]}``,
+    RMSE in m and m/s^2, with the figures written beside it (``rmse_bars.png``,
+    ``error_s<N>.png``, ``disturbance_s<N>.png``, ``bode_loops.png``, ``bode_learning.png``,
+    ``bode_te.png``, ``identified_models.png``). Sections: the fleet and its identified
+    models, the Bode figures, RMSE table and bars, error and disturbance-estimate time series
+    per scenario (one section per plant), and the Theorem check.
+``compare.json`` (``ilcdob compare``) and ``campaign.json`` (``ilcdob campaign``)
+    Rendered generically, so their schemas can evolve: scalars at the top level become a
+    key/value table, and every *method table* found anywhere in the document becomes an
+    HTML table, rows = methods, columns = the rows' numeric (and boolean, then short text)
+    fields, nested dicts flattened with dotted names (``ratio.median``). A method table is
+
+    * a dict of dicts, each inner dict holding a number (or null) directly, e.g.
+      ``{"methods": {"closed-form": {"median": 0.02, "p95": 0.05, "worst": 0.09,
+      "share_improved": 1.0}, "robust": {...}}}`` -- rows named by the keys; or
+    * a list of such dicts, e.g.
+      ``{"rows": [{"method": "fir", "pair": "UAV1 -> UAV2", "ratio": 0.03}, ...]}`` --
+      rows named by ``method``, ``name``, ``label`` or ``id`` (plus ``source -> target`` or
+      ``from -> to`` when present), else by position.
+
+    The campaign's statistics are expected per method as ``median``, ``p95``, ``worst`` and
+    ``share_improved`` of the ratio ``||e_j|| / ||e'_j||`` (< 1: learning improved), but any
+    numeric field is shown. Lists of numbers (frequency grids, samples) are not tabulated;
+    the report says how many values it left out.
+
+The fleet of a ``results.json`` is found as: the file its ``"fleet"`` key names (absolute, or
+relative to the folder); else ``identified_fleet.toml`` in the folder; else, when that key
+names the packaged ``ilcdob/data/default_fleet.toml`` of another checkout, the installed
+built-in fleet (the report says so); else the ``fleet`` option of :class:`ReportOptions`
+(``--fleet``). Without a fleet the fleet table and Theorem check of that folder say why they
+are missing.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from html import escape
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .atomic import write_text_atomic
+from .errors import IlcdobError
+from .fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
+
+__all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonTable", "KNOWN_FILES",
+           "discover_inputs", "json_tables", "build_report", "write_report"]
+
+#: File name -> the command that writes it.
+KNOWN_FILES: dict[str, str] = {
+    "results.json": "ilcdob reproduce [--plant linear|nonlinear] --out DIR",
+    "compare.json": "ilcdob compare --out DIR",
+    "campaign.json": "ilcdob campaign --samples N --out DIR",
+}
+PLANTS = ("linear", "nonlinear")
+_PLANT_TITLE = {"linear": "Linear plant (exact models, simulation)",
+                "nonlinear": "Nonlinear plant (6-DOF quadrotors flown with identified models)"}
+_LABEL_KEYS = ("method", "name", "label", "id", "key")
+_PAIR_KEYS = (("source", "target"), ("from", "to"))
+_MAX_TEXT = 60
+_DPI = 110
+
+_BODE_FIGURES = {
+    "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB).",
+    "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown.",
+    "bode_te.png": "Te1, Te2 (error propagation with learning under the model error stated in the "
+                   "figure) and Omega (disturbance -> DOB estimate).",
+}
+
+
+class ReportError(IlcdobError, ValueError):
+    """A report input folder is missing, empty of known files, or holds an unreadable file."""
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    """Settings of :func:`build_report`.
+
+    Attributes
+    ----------
+    title : str
+        Page title and top heading.
+    fleet : str or Path or None
+        Fleet TOML used for a ``results.json`` whose own fleet cannot be found (see the
+        module docstring); None: such folders get no fleet table or Theorem check.
+    theorem_samples : int
+        Sampled plants per Delta set of the Theorem check (``ilcdob check`` uses 8).
+    seed : int
+        Seed of the Delta-set sampling.
+    """
+
+    title: str = "ilcdob report: learning among systems with mismatched dynamics"
+    fleet: str | Path | None = None
+    theorem_samples: int = 8
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.title, str) or not self.title.strip():
+            raise ReportError(f"`title`: got {self.title!r}, expected a non-empty string")
+        if isinstance(self.theorem_samples, bool) or not isinstance(self.theorem_samples, int) \
+                or self.theorem_samples < 1:
+            raise ReportError(f"`theorem_samples`: got {self.theorem_samples!r}, expected an integer >= 1")
+        if self.fleet is not None and not Path(self.fleet).is_file():
+            raise ReportError(f"`fleet`: {self.fleet} is not a file; pass a fleet TOML file or leave it unset")
+
+
+@dataclass(frozen=True)
+class _Json:
+    """One JSON input: its folder, file and parsed content."""
+
+    folder: Path
+    path: Path
+    data: Any
+
+
+@dataclass(frozen=True)
+class ReportInputs:
+    """The known files found in the report's folders, in the order the folders were given.
+
+    Attributes
+    ----------
+    folders : tuple of Path
+    results, compare, campaign : tuple of _Json
+        Parsed ``results.json``, ``compare.json`` and ``campaign.json`` files.
+    """
+
+    folders: tuple[Path, ...]
+    results: tuple[_Json, ...] = ()
+    compare: tuple[_Json, ...] = ()
+    campaign: tuple[_Json, ...] = ()
+
+
+@dataclass(frozen=True)
+class JsonTable:
+    """A method table found in a JSON document (see the module docstring).
+
+    Attributes
+    ----------
+    path : str
+        Where in the document, e.g. ``methods`` or ``pairs[0].methods``.
+    columns : tuple of str
+        Column names (dotted for nested fields), numeric columns first.
+    rows : tuple of (str, dict)
+        Row label and its values by column.
+    omitted : int
+        Numbers in lists that were left out of the table.
+    """
+
+    path: str
+    columns: tuple[str, ...]
+    rows: tuple[tuple[str, dict[str, Any]], ...]
+    omitted: int = 0
+
+
+# ---------------------------------------------------------------------------------------------
+# inputs
+
+def _read_json(path: Path) -> Any:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ReportError(f"{path}: cannot read ({exc.strerror})") from exc
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ReportError(f"{path}: not valid JSON ({exc}); regenerate it with `{KNOWN_FILES[path.name]}`") from exc
+
+
+def _check_results(path: Path, data: Any) -> None:
+    if not isinstance(data, dict):
+        raise ReportError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    plant = data.get("plant")
+    if plant not in PLANTS:
+        raise ReportError(f"{path}: key \"plant\" is {plant!r}, expected one of {list(PLANTS)}")
+    scs = data.get("scenarios")
+    if not isinstance(scs, list) or not all(isinstance(s, dict) and isinstance(s.get("systems"), dict)
+                                            for s in scs):
+        raise ReportError(f"{path}: key \"scenarios\" must be a list of objects with \"systems\"; "
+                          f"regenerate it with `{KNOWN_FILES['results.json']}`")
+
+
+def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
+    """Find and parse the known files (:data:`KNOWN_FILES`) in every folder of ``dirs``.
+
+    Raises
+    ------
+    ReportError
+        No folder given; a folder that does not exist or is a file; a folder with none of
+        the known files; a known file that is not valid JSON; a ``results.json`` without a
+        valid ``"plant"`` or ``"scenarios"``.
+    """
+    if not dirs:
+        raise ReportError("`dirs`: got no folder; pass at least one output folder of "
+                          + ", ".join(f"`{c.split(' ')[0]} {c.split(' ')[1]}`" for c in KNOWN_FILES.values()))
+    found: dict[str, list[_Json]] = {name: [] for name in KNOWN_FILES}
+    folders = []
+    expected = ", ".join(KNOWN_FILES)
+    for d in dirs:
+        folder = Path(d)
+        if not folder.exists():
+            raise ReportError(f"report input {str(d)!r}: no such folder; expected an output folder holding "
+                              f"one of {expected}")
+        if not folder.is_dir():
+            hint = f"; pass its folder {str(folder.parent)!r}" if folder.name in KNOWN_FILES else ""
+            raise ReportError(f"report input {str(d)!r}: is a file, expected a folder holding one of {expected}{hint}")
+        present = [name for name in KNOWN_FILES if (folder / name).is_file()]
+        if not present:
+            held = sorted(p.name for p in folder.iterdir())
+            shown = ", ".join(held[:8]) + (" ..." if len(held) > 8 else "") if held else "nothing"
+            raise ReportError(
+                f"report input {str(d)!r}: none of {expected} found (it holds {shown}); pass a folder written by "
+                + ", ".join(f"`{c}`" for c in KNOWN_FILES.values()))
+        for name in present:
+            path = folder / name
+            data = _read_json(path)
+            if name == "results.json":
+                _check_results(path, data)
+            found[name].append(_Json(folder, path, data))
+        folders.append(folder)
+    return ReportInputs(tuple(folders), tuple(found["results.json"]), tuple(found["compare.json"]),
+                        tuple(found["campaign.json"]))
+
+
+def _resolve_fleet(res: _Json, fallback: str | Path | None) -> tuple[Fleet | None, str]:
+    """The fleet of a results.json and a sentence saying where it came from (or why none)."""
+    src = res.data.get("fleet")
+    tried = []
+    if isinstance(src, str) and src and not src.startswith("<"):
+        p = Path(src)
+        p = p if p.is_absolute() else res.folder / p
+        if p.is_file():
+            return load_fleet(p), f"fleet file {p}"
+        tried.append(str(p))
+    ident = res.folder / "identified_fleet.toml"
+    if ident.is_file():
+        return load_fleet(ident), f"fleet file {ident}"
+    tried.append(str(ident))
+    if isinstance(src, str) and Path(src).name == DEFAULT_FLEET_PATH.name \
+            and Path(src).parent.parts[-2:] == ("ilcdob", "data"):
+        return default_fleet(), (f"the installed built-in fleet {DEFAULT_FLEET_PATH} ({res.path} names the "
+                                 f"built-in fleet of another checkout, {src})")
+    if fallback is not None:
+        return load_fleet(fallback), f"fleet file {fallback} (given as fallback; {res.path} names {src!r})"
+    return None, (f"{res.path} names fleet {src!r}, which was not found (tried {', '.join(tried)}); "
+                  "pass --fleet FILE")
+
+
+# ---------------------------------------------------------------------------------------------
+# generic JSON tables
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _is_table(rows: list[Any]) -> bool:
+    """Rows of a method table: dicts, each with a number or null directly, one number at least."""
+    return (bool(rows) and all(isinstance(r, dict) for r in rows)
+            and all(any(_is_number(x) or x is None for x in r.values()) for r in rows)
+            and any(_is_number(x) for r in rows for x in r.values()))
+
+
+def _flatten(row: dict, prefix: str = "", depth: int = 0) -> tuple[dict[str, Any], int]:
+    out: dict[str, Any] = {}
+    omitted = 0
+    for k, v in row.items():
+        key = f"{prefix}{k}"
+        if v is None or isinstance(v, (bool, int, float)):
+            out[key] = v
+        elif isinstance(v, str):
+            if len(v) <= _MAX_TEXT:
+                out[key] = v
+        elif isinstance(v, dict) and depth < 2:
+            sub, n = _flatten(v, key + ".", depth + 1)
+            out.update(sub)
+            omitted += n
+        elif isinstance(v, list):
+            omitted += sum(1 for x in v if _is_number(x))
+    return out, omitted
+
+
+def _row_label(row: dict, index: int) -> tuple[str, set[str]]:
+    parts, used = [], set()
+    for key in _LABEL_KEYS:
+        if isinstance(row.get(key), (str, int)) and not isinstance(row.get(key), bool):
+            parts.append(str(row[key]))
+            used.add(key)
+            break
+    for a, b in _PAIR_KEYS:
+        if isinstance(row.get(a), str) and isinstance(row.get(b), str):
+            parts.append(f"{row[a]} -> {row[b]}")
+            used |= {a, b}
+            break
+    return (" ".join(parts) if parts else f"#{index}"), used
+
+
+def _make_table(path: str, rows: list[tuple[str, dict, set[str]]]) -> JsonTable:
+    flat, omitted = [], 0
+    for label, row, used in rows:
+        values, n = _flatten({k: v for k, v in row.items() if k not in used})
+        flat.append((label, values))
+        omitted += n
+    numeric: list[str] = []
+    other: list[str] = []
+    for _, values in flat:
+        for k, v in values.items():
+            if _is_number(v) or isinstance(v, bool) or v is None:
+                if k not in numeric:
+                    numeric.append(k)
+    for _, values in flat:
+        for k, v in values.items():
+            if isinstance(v, str) and k not in numeric and k not in other:
+                other.append(k)
+    # a column that only ever holds null carries nothing
+    numeric = [k for k in numeric if any(values.get(k) is not None for _, values in flat)]
+    return JsonTable(path, tuple(numeric + other), tuple(flat), omitted)
+
+
+def _join(path: str, key: Any) -> str:
+    return f"{path}[{key}]" if isinstance(key, int) else (f"{path}.{key}" if path else str(key))
+
+
+def json_tables(data: Any, path: str = "") -> list[JsonTable]:
+    """Every method table of a JSON document (see the module docstring), in document order.
+
+    Parameters
+    ----------
+    data : object
+        Parsed JSON (``compare.json``, ``campaign.json``).
+    path : str
+        Location prefix for the tables' ``path``.
+
+    Returns
+    -------
+    list of JsonTable
+    """
+    if isinstance(data, dict):
+        if _is_table(list(data.values())):
+            return [_make_table(path, [(str(k), v, set()) for k, v in data.items()])]
+        out = []
+        for k, v in data.items():
+            if isinstance(v, (dict, list)):
+                out += json_tables(v, _join(path, k))
+        return out
+    if isinstance(data, list):
+        if _is_table(data):
+            rows = []
+            for i, v in enumerate(data):
+                label, used = _row_label(v, i)
+                rows.append((label, v, used))
+            return [_make_table(path, rows)]
+        out = []
+        for i, v in enumerate(data):
+            if isinstance(v, (dict, list)):
+                out += json_tables(v, _join(path, i))
+        return out
+    return []
+
+
+# ---------------------------------------------------------------------------------------------
+# HTML pieces
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return "NaN" if math.isnan(v) else (("inf" if v > 0 else "-inf") if math.isinf(v) else f"{v:.4g}")
+    return str(v)
+
+
+def _table(header: list[str], rows: list[list[str]], cls: str = "") -> str:
+    """An HTML table; cells are escaped here."""
+    head = "".join(f"<th>{escape(h)}</th>" for h in header)
+    body = "\n".join("<tr>" + "".join(f"<td>{escape(c)}</td>" for c in r) + "</tr>" for r in rows)
+    c = f' class="{cls}"' if cls else ""
+    return f"<table{c}><thead><tr>{head}</tr></thead>\n<tbody>\n{body}\n</tbody></table>"
+
+
+def _png_uri(data: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def _figure(data: bytes, alt: str, caption: str) -> str:
+    return (f'<figure><img src="{_png_uri(data)}" alt="{escape(alt)}">'
+            f"<figcaption>{escape(caption)}</figcaption></figure>")
+
+
+def _file_figure(folder: Path, name: str, caption: str) -> str:
+    path = folder / name
+    if not path.is_file():
+        return f'<p class="missing">Figure {escape(name)} is not in {escape(str(folder))} (it was written without ' \
+               "figures, or by an older version): not shown.</p>"
+    data = path.read_bytes()
+    if not data.startswith(b"\x89PNG\r\n\x1a\n"):
+        raise ReportError(f"{path}: not a PNG file; regenerate the folder with `{KNOWN_FILES['results.json']}`")
+    return _figure(data, name, f"{caption} ({path})")
+
+
+def _matplotlib_png(fig: Any) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=_DPI)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _missing(what: str, expected: str) -> str:
+    return f'<p class="missing"><strong>No input:</strong> {escape(what)} Expected {escape(expected)}.</p>'
+
+
+def _poly(c: tuple[float, ...]) -> str:
+    n = len(c) - 1
+    terms = []
+    for i, v in enumerate(c):
+        if v == 0:
+            continue
+        p = n - i
+        s = "" if p == 0 else ("s" if p == 1 else f"s^{p}")
+        terms.append(f"{v:.4g}" + (f" {s}" if s else ""))
+    return " + ".join(terms).replace("+ -", "- ") or "0"
+
+
+# ---------------------------------------------------------------------------------------------
+# sections
+
+@dataclass
+class _Section:
+    """One section: id, heading, HTML body, and which inputs fed it (empty: no input)."""
+
+    sid: str
+    heading: str
+    body: str
+    sources: list[str] = field(default_factory=list)
+    expected: str = ""
+
+
+def _fleet_html(fleet: Fleet, origin: str) -> str:
+    from .validation.figures import identified_bounds
+
+    ts = fleet.sample_time
+    w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 300)
+    bounds = identified_bounds(fleet, np.concatenate([[1.0, 10.0], w]))
+    rows = []
+    for s in fleet.systems:
+        model = s.nominal_plant
+        ident = s.identification
+        c = s.controller
+        row = [s.name, f"({_poly(model.num)}) / ({_poly(model.den)})", f"{model.delay:.4g}",
+               f"{c.kp:.4g} / {c.ki:.4g} / {c.kd:.4g}", f"{s.dob.q_order}, {s.dob.q_time_constant:.4g}",
+               "exact (model = plant)" if s.model is None else "differs from the true plant"]
+        if ident is not None:
+            sd = np.sqrt(np.diag(np.asarray(ident.covariance)))
+            pars = ", ".join(f"{v:.4g} ± {e:.2g}" for v, e in zip(ident.parameters, sd))
+            b = bounds[s.name][1]
+            row += [f"{ident.fit_estimation:.2f}", f"{ident.fit_validation:.2f}", pars,
+                    f"{100 * b[0]:.3g}", f"{100 * b[1]:.3g}", f"{100 * np.max(b[2:]):.3g}"]
+        else:
+            row += ["not identified"] + ["-"] * 5
+        rows.append(row)
+    header = ["system", "model P_hat(s)", "delay (s)", "PID kp / ki / kd", "Q order, time constant (s)",
+              "model vs plant", "fit estimation (%)", "fit held-out (%)", "parameters (1 sigma)",
+              "|Delta| 3 sigma at 1 rad/s (%)", "at 10 rad/s (%)", f"max to Nyquist {np.pi / ts:.3g} rad/s (%)"]
+    return (f"<p>Fleet from {escape(origin)}: {len(fleet.systems)} systems, sample time {ts:g} s. Fit in % "
+            "(MATLAB definition) on estimation and held-out flights; parameters as in "
+            "<code>IdentificationSpec</code> (free denominator then numerator coefficients) with 1-sigma "
+            "uncertainty; |Delta| is the 3-sigma multiplicative uncertainty of the identified model from its "
+            "parameter covariance.</p>\n" + _table(header, rows, "wide"))
+
+
+def _rmse_table(data: dict) -> str:
+    n = int(data.get("iterations") or max((len(m.get("rmse_learning", [])) for sc in data["scenarios"]
+                                            for m in sc["systems"].values()), default=0))
+    header = (["scenario", "system", "no DOB (mm)", "only DOB (mm)"] + [f"learning {i + 1} (mm)" for i in range(n)]
+              + [f"learning {n} / DOB", "d est. DOB (m/s^2)"] + [f"d est. learning {i + 1} (m/s^2)" for i in range(n)])
+    rows = []
+    for sc in data["scenarios"]:
+        order = sc.get("order") or list(sc["systems"])
+        for name in order:
+            m = sc["systems"][name]
+            learn = list(m.get("rmse_learning", []))
+            dl = list(m.get("rmse_dhat_learning", []))
+            mm = lambda v: "-" if v is None else f"{1e3 * v:.4g}"  # noqa: E731
+            ratio = learn[-1] / m["rmse_dob"] if learn and m.get("rmse_dob") else None
+            rows.append([str(sc.get("id", "?")), name, mm(m.get("rmse_no_dob")), mm(m.get("rmse_dob"))]
+                        + [mm(v) for v in learn] + ["-"] * (n - len(learn))
+                        + [_fmt(ratio) if ratio is not None else "-", _fmt(m.get("rmse_dhat_dob"))]
+                        + [_fmt(v) for v in dl] + ["-"] * (n - len(dl)))
+    return _table(header, rows)
+
+
+def _plant_section(res: _Json) -> str:
+    data = res.data
+    folder = res.folder
+    parts = [f"<p>From {escape(str(res.path))}: {len(data['scenarios'])} scenario(s), "
+             f"{escape(_fmt(data.get('iterations')))} learning iteration(s), sample time "
+             f"{escape(_fmt(data.get('sample_time')))} s. Tracking RMSE in mm (no DOB, only DOB, learning "
+             "iterations) and RMSE of the total disturbance estimate (d_hat + d_f) against the true disturbance "
+             "in m/s^2.</p>", _rmse_table(data),
+             _file_figure(folder, "rmse_bars.png", "Tracking RMSE per scenario and system (log scale)")]
+    for sc in data["scenarios"]:
+        sid = sc.get("id", "?")
+        parts.append(f"<h3>Scenario {escape(str(sid))}: {escape(str(sc.get('title', '')))}</h3>")
+        parts.append(_file_figure(folder, f"error_s{sid}.png", f"Scenario {sid}: tracking error against time"))
+        parts.append(_file_figure(folder, f"disturbance_s{sid}.png",
+                                  f"Scenario {sid}: disturbance estimates against the true disturbance"))
+    return "\n".join(parts)
+
+
+def _orders(data: dict) -> list[list[str]]:
+    out: list[list[str]] = []
+    for sc in data["scenarios"]:
+        order = list(sc.get("order") or sc["systems"])
+        if order not in out:
+            out.append(order)
+    return out
+
+
+def _theorem_html(fleet: Fleet, origin: str, orders: list[list[str]], options: ReportOptions) -> str:
+    from .design.pair import fleet_delta_sets
+    from .design.theorem import format_theorem_table, theorem_check
+
+    missing = [s.name for s in fleet.systems if s.identification is None]
+    if missing:
+        return _missing(f"the fleet from {origin} has no identified covariance for {missing}, so no Delta set "
+                        "and no Theorem check.",
+                        "a fleet identified with `ilcdob identify-fleet` (or run `ilcdob check --bound B`)")
+    parts = [f"<p>Fleet from {escape(origin)}. Learning helps at frequencies where |Delta_(j-1)| &lt; "
+             "|1 + P_(j-1) C_(j-1)| / 2 (design notes section 2); |Delta| is the 3-sigma bound of the "
+             f"identification ({options.theorem_samples} sampled plants per Delta set, seed {options.seed}); margin "
+             "= rhs / |Delta| (&gt; 1: holds).</p>"]
+    first = None
+    for order in orders:
+        deltas = fleet_delta_sets(fleet, order, k=options.theorem_samples, seed=options.seed)
+        checks = theorem_check(fleet, order, deltas)
+        first = first or checks
+        rows = []
+        for c in checks:
+            band = c.failing_band
+            rows.append([f"{c.source} -> {c.target}", "yes" if c.holds_everywhere else "NO", _fmt(c.min_margin),
+                         f"{c.worst_w:.4g}", "-" if band is None else f"{band[0]:.4g} .. {band[1]:.4g}"])
+        parts.append(f"<h3>Order {escape(' -> '.join(order))}</h3>")
+        parts.append(_table(["pair", "holds", "min margin", "worst w (rad/s)", "failing band (rad/s)"], rows))
+        parts.append("<details><summary>as printed by <code>ilcdob check</code></summary>"
+                     f'<pre class="plain">{escape(format_theorem_table(checks))}</pre></details>')
+    if first:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, len(first), figsize=(4.0 * len(first), 3.2), squeeze=False)
+        for ax, c in zip(axes[0], first):
+            ax.loglog(c.w, c.delta, label="|Delta_(j-1)| (3 sigma)")
+            ax.loglog(c.w, c.rhs, label="|1 + P C|_(j-1) / 2")
+            ax.set_title(f"source {c.source}", fontsize=9)
+            ax.set_xlabel("frequency (rad/s)")
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0][0].legend(fontsize=7)
+        parts.append(_figure(_matplotlib_png(fig), "theorem check",
+                             "The Theorem's condition per source system: the uncertainty must stay below the "
+                             "right-hand side (computed for this report from the fleet)."))
+    return "\n".join(parts)
+
+
+def _json_section(j: _Json, what: str) -> str:
+    data = j.data
+    parts = [f"<h3>{escape(str(j.path))}</h3>"]
+    if isinstance(data, dict):
+        meta = [[k, _fmt(v)] for k, v in data.items() if v is None or isinstance(v, (str, int, float, bool))]
+        if meta:
+            parts.append(_table(["field", "value"], meta, "meta"))
+    tables = json_tables(data)
+    if not tables:
+        text = json.dumps(data, indent=1)
+        cut = text[:4000] + ("\n..." if len(text) > 4000 else "")
+        parts.append(_missing(f"{j.path} holds no table of {what} (rows = methods with numeric fields); its content "
+                              "is shown as is.", "an object of methods, e.g. {\"methods\": {name: {field: number}}}"))
+        parts.append(f'<pre class="plain">{escape(cut)}</pre>')
+    for t in tables:
+        rows = [[label] + [_fmt(values[c]) if c in values else "-" for c in t.columns] for label, values in t.rows]
+        note = f" ({t.omitted} list values not tabulated)" if t.omitted else ""
+        parts.append(f"<p class=\"where\">{escape(t.path or '(top level)')}{escape(note)}</p>")
+        parts.append(_table(["method"] + list(t.columns), rows))
+    return "\n".join(parts)
+
+
+_CSS = """
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1200px; padding: 0 1em; color: #222; }
+h1 { font-size: 1.5em; } h2 { border-bottom: 1px solid #ccc; margin-top: 2em; } h3 { margin-top: 1.4em; }
+table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.85em; }
+th, td { border: 1px solid #ccc; padding: 0.2em 0.5em; text-align: right; }
+th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
+table.wide td, table.wide th { text-align: left; }
+figure { margin: 1em 0; } img { max-width: 100%; height: auto; }
+figcaption { font-size: 0.85em; color: #555; }
+.missing { background: #fff4e5; border-left: 4px solid #e8a33d; padding: 0.4em 0.8em; }
+.status-ok { color: #1a7f37; } .status-none { color: #b35900; font-weight: bold; }
+.where { font-family: monospace; font-size: 0.85em; color: #555; margin-bottom: 0; }
+pre.plain { font-size: 0.8em; background: #f7f7f7; padding: 0.5em; overflow-x: auto; }
+"""
+
+
+def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -> str:
+    """The HTML text of the report of the folders ``dirs`` (see the module docstring).
+
+    Parameters
+    ----------
+    dirs : list of str or Path
+        Output folders of ``ilcdob reproduce``, ``ilcdob compare`` and ``ilcdob campaign``.
+    options : ReportOptions, optional
+
+    Returns
+    -------
+    str
+        A self-contained HTML document.
+
+    Raises
+    ------
+    ReportError
+        See :func:`discover_inputs`.
+    """
+    options = options if options is not None else ReportOptions()
+    if not isinstance(options, ReportOptions):
+        raise ReportError(f"`options`: got {type(options).__name__}, expected a ReportOptions")
+    inputs = discover_inputs(list(dirs))
+    fleets = []  # (res, fleet or None, origin)
+    for res in inputs.results:
+        fleet, origin = _resolve_fleet(res, options.fleet)
+        fleets.append((res, fleet, origin))
+
+    def plant_name(res: _Json) -> str:
+        return _PLANT_TITLE[res.data["plant"]].split(" (")[0].lower()
+
+    sections: list[_Section] = []
+    reproduce_cmd = f"results.json from `{KNOWN_FILES['results.json']}`"
+
+    # fleet and identified models
+    body, srcs = [], []
+    for res, fleet, origin in fleets:
+        body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
+        if fleet is None:
+            body.append(_missing(f"the fleet of {res.path} could not be loaded: {origin}.", "its fleet file"))
+        else:
+            body.append(_fleet_html(fleet, origin))
+            srcs.append(str(res.path))
+        body.append(_file_figure(res.folder, "identified_models.png",
+                                 "Identified plant models with their 3-sigma multiplicative uncertainty band")
+                    if (res.folder / "identified_models.png").is_file() or
+                    (fleet is not None and any(s.identification for s in fleet.systems)) else
+                    "<p>No identified models in this fleet, so no uncertainty-band figure.</p>")
+    sections.append(_Section("fleet", "Fleet and identified models", "\n".join(body), srcs, reproduce_cmd))
+
+    # Bode figures
+    body, srcs = [], []
+    for res in inputs.results:
+        body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
+        for name, caption in _BODE_FIGURES.items():
+            body.append(_file_figure(res.folder, name, caption))
+        srcs.append(str(res.path))
+    sections.append(_Section("bode", "Bode figures of the paper", "\n".join(body), srcs, reproduce_cmd))
+
+    # one section per plant
+    for plant in PLANTS:
+        mine = [r for r in inputs.results if r.data["plant"] == plant]
+        sections.append(_Section(plant, _PLANT_TITLE[plant], "\n".join(_plant_section(r) for r in mine),
+                                 [str(r.path) for r in mine],
+                                 f"results.json with \"plant\": \"{plant}\" from `ilcdob reproduce"
+                                 + (" --plant nonlinear" if plant == "nonlinear" else "") + " --out DIR`"))
+
+    # Theorem check
+    body, srcs = [], []
+    for res, fleet, origin in fleets:
+        body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
+        if fleet is None:
+            body.append(_missing(f"the fleet of {res.path} could not be loaded: {origin}.", "its fleet file"))
+            continue
+        body.append(_theorem_html(fleet, origin, _orders(res.data), options))
+        if fleet is not None and all(s.identification for s in fleet.systems):
+            srcs.append(str(res.path))
+    sections.append(_Section("theorem", "Theorem check", "\n".join(body), srcs,
+                             f"{reproduce_cmd}, naming a fleet with identified models"))
+
+    sections.append(_Section(
+        "compare", "Design comparison",
+        "\n".join(_json_section(j, "design methods") for j in inputs.compare),
+        [str(j.path) for j in inputs.compare], f"compare.json from `{KNOWN_FILES['compare.json']}`"))
+    sections.append(_Section(
+        "campaign", "Campaign statistics",
+        "<p>Statistics per method of the improvement ratio ||e_j|| / ||e'_j|| over the sampled plants "
+        "(&lt; 1: learning improved on what system j would have had without it).</p>\n"
+        + "\n".join(_json_section(j, "campaign statistics") for j in inputs.campaign)
+        if inputs.campaign else "",
+        [str(j.path) for j in inputs.campaign], f"campaign.json from `{KNOWN_FILES['campaign.json']}`"))
+
+    # assemble
+    status_rows = []
+    for s in sections:
+        if s.sources:
+            status = f'<span class="status-ok">rendered</span> from {escape(", ".join(s.sources))}'
+        else:
+            status = f'<span class="status-none">no input</span>: expected {escape(s.expected)}'
+        status_rows.append(f'<tr><td><a href="#{s.sid}">{escape(s.heading)}</a></td><td>{status}</td></tr>')
+    out = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+           '<meta name="viewport" content="width=device-width, initial-scale=1">',
+           f"<title>{escape(options.title)}</title><style>{_CSS}</style></head><body>",
+           f"<h1>{escape(options.title)}</h1>",
+           "<p>Modi, Chen, Liang, Zheng (2024), <em>Improving Disturbance Estimation and Suppression via "
+           "Learning among Systems with Mismatched Dynamics</em>: quadrotors with PID + disturbance observer "
+           "learn a repetitive task in wind from each other through the learning filters L1, L2. Generated by "
+           "<code>ilcdob report</code> from: " + escape(", ".join(str(f) for f in inputs.folders)) + ".</p>",
+           '<h2 id="contents">Sections and their inputs</h2>',
+           '<table class="wide"><thead><tr><th>section</th><th>input</th></tr></thead><tbody>',
+           *status_rows, "</tbody></table>"]
+    for s in sections:
+        out.append(f'<h2 id="{s.sid}">{escape(s.heading)}</h2>')
+        if s.sources:
+            out.append(s.body)
+        else:
+            out.append(s.body if s.body.strip() else "")
+            out.append(_missing(f"no input for this section among the report's folders, so it shows no numbers.",
+                                s.expected))
+    out.append("</body></html>")
+    return "\n".join(out) + "\n"
+
+
+def write_report(dirs: list[str | Path], out: str | Path, options: ReportOptions | None = None) -> Path:
+    """Build the report of ``dirs`` (:func:`build_report`) and write it atomically to ``out``.
+
+    Returns the path written.
+    """
+    out = Path(out)
+    if out.is_dir():
+        raise ReportError(f"`out`: {out} is a folder; expected the path of an HTML file, e.g. {out / 'report.html'}")
+    html = build_report(dirs, options)
+    write_text_atomic(out, html)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(out, 0o666 & ~umask)  # the temporary file of the atomic write is private (0600)
+    return out
