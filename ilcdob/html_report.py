@@ -37,12 +37,12 @@ Inputs, detected by file name in each folder
     numeric field is shown. Lists of numbers (frequency grids, samples) are not tabulated;
     the report says how many values it left out.
 
-The fleet of a ``results.json`` is found as: the file its ``"fleet"`` key names (absolute, or
-relative to the folder); else ``identified_fleet.toml`` in the folder; else, when that key
-names the packaged ``ilcdob/data/default_fleet.toml`` of another checkout, the installed
-built-in fleet (the report says so); else the ``fleet`` option of :class:`ReportOptions`
-(``--fleet``). Without a fleet the fleet table and Theorem check of that folder say why they
-are missing.
+The fleet of a ``results.json`` is found as: ``identified_fleet.toml`` in its folder (the
+models a nonlinear run identified); else the file its ``"fleet"`` key names (absolute, or
+relative to the folder); else, when that key names the packaged
+``ilcdob/data/default_fleet.toml`` of another checkout, the installed built-in fleet (the
+report says so); else the ``fleet`` option of :class:`ReportOptions` (``--fleet``). Without
+a fleet the fleet table and Theorem check of that folder say why they are missing.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ from .atomic import write_text_atomic
 from .errors import IlcdobError
 from .fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
 
-__all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonTable", "KNOWN_FILES",
+__all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "write_report"]
 
 #: File name -> the command that writes it.
@@ -125,8 +125,18 @@ class ReportOptions:
 
 
 @dataclass(frozen=True)
-class _Json:
-    """One JSON input: its folder, file and parsed content."""
+class JsonInput:
+    """One JSON input file found by :func:`discover_inputs`.
+
+    Attributes
+    ----------
+    folder : Path
+        The report input folder.
+    path : Path
+        The file (``folder / name``).
+    data : object
+        Its parsed JSON.
+    """
 
     folder: Path
     path: Path
@@ -140,14 +150,14 @@ class ReportInputs:
     Attributes
     ----------
     folders : tuple of Path
-    results, compare, campaign : tuple of _Json
+    results, compare, campaign : tuple of JsonInput
         Parsed ``results.json``, ``compare.json`` and ``campaign.json`` files.
     """
 
     folders: tuple[Path, ...]
-    results: tuple[_Json, ...] = ()
-    compare: tuple[_Json, ...] = ()
-    campaign: tuple[_Json, ...] = ()
+    results: tuple[JsonInput, ...] = ()
+    compare: tuple[JsonInput, ...] = ()
+    campaign: tuple[JsonInput, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -212,7 +222,7 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
     if not dirs:
         raise ReportError("`dirs`: got no folder; pass at least one output folder of "
                           + ", ".join(f"`{c.split(' ')[0]} {c.split(' ')[1]}`" for c in KNOWN_FILES.values()))
-    found: dict[str, list[_Json]] = {name: [] for name in KNOWN_FILES}
+    found: dict[str, list[JsonInput]] = {name: [] for name in KNOWN_FILES}
     folders = []
     expected = ", ".join(KNOWN_FILES)
     for d in dirs:
@@ -235,26 +245,26 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
             data = _read_json(path)
             if name == "results.json":
                 _check_results(path, data)
-            found[name].append(_Json(folder, path, data))
+            found[name].append(JsonInput(folder, path, data))
         folders.append(folder)
     return ReportInputs(tuple(folders), tuple(found["results.json"]), tuple(found["compare.json"]),
                         tuple(found["campaign.json"]))
 
 
-def _resolve_fleet(res: _Json, fallback: str | Path | None) -> tuple[Fleet | None, str]:
+def _resolve_fleet(res: JsonInput, fallback: str | Path | None) -> tuple[Fleet | None, str]:
     """The fleet of a results.json and a sentence saying where it came from (or why none)."""
     src = res.data.get("fleet")
-    tried = []
+    ident = res.folder / "identified_fleet.toml"
+    if ident.is_file():  # the models a nonlinear run identified and flew with
+        return load_fleet(ident), f"fleet file {ident}"
+    tried = [str(ident)]
     if isinstance(src, str) and src and not src.startswith("<"):
         p = Path(src)
         p = p if p.is_absolute() else res.folder / p
         if p.is_file():
             return load_fleet(p), f"fleet file {p}"
-        tried.append(str(p))
-    ident = res.folder / "identified_fleet.toml"
-    if ident.is_file():
-        return load_fleet(ident), f"fleet file {ident}"
-    tried.append(str(ident))
+        if str(p) not in tried:
+            tried.append(str(p))
     if isinstance(src, str) and Path(src).name == DEFAULT_FLEET_PATH.name \
             and Path(src).parent.parts[-2:] == ("ilcdob", "data"):
         return default_fleet(), (f"the installed built-in fleet {DEFAULT_FLEET_PATH} ({res.path} names the "
@@ -513,7 +523,7 @@ def _rmse_table(data: dict) -> str:
     return _table(header, rows)
 
 
-def _plant_section(res: _Json) -> str:
+def _plant_section(res: JsonInput) -> str:
     data = res.data
     folder = res.folder
     parts = [f"<p>From {escape(str(res.path))}: {len(data['scenarios'])} scenario(s), "
@@ -587,7 +597,7 @@ def _theorem_html(fleet: Fleet, origin: str, orders: list[list[str]], options: R
     return "\n".join(parts)
 
 
-def _json_section(j: _Json, what: str) -> str:
+def _json_section(j: JsonInput, what: str) -> str:
     data = j.data
     parts = [f"<h3>{escape(str(j.path))}</h3>"]
     if isinstance(data, dict):
@@ -653,7 +663,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
         fleet, origin = _resolve_fleet(res, options.fleet)
         fleets.append((res, fleet, origin))
 
-    def plant_name(res: _Json) -> str:
+    def plant_name(res: JsonInput) -> str:
         return _PLANT_TITLE[res.data["plant"]].split(" (")[0].lower()
 
     sections: list[_Section] = []
@@ -742,7 +752,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
             out.append(s.body)
         else:
             out.append(s.body if s.body.strip() else "")
-            out.append(_missing(f"no input for this section among the report's folders, so it shows no numbers.",
+            out.append(_missing("no input for this section among the report's folders, so it shows no numbers.",
                                 s.expected))
     out.append("</body></html>")
     return "\n".join(out) + "\n"
