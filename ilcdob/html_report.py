@@ -677,6 +677,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
             body.append(_missing(f"the fleet of {res.path} could not be loaded: {origin}.", "its fleet file"))
         else:
             body.append(_fleet_html(fleet, origin))
+        if fleet is not None or (res.folder / "identified_models.png").is_file():
             srcs.append(str(res.path))
         body.append(_file_figure(res.folder, "identified_models.png",
                                  "Identified plant models with their 3-sigma multiplicative uncertainty band")
@@ -691,7 +692,8 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
         body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
         for name, caption in _BODE_FIGURES.items():
             body.append(_file_figure(res.folder, name, caption))
-        srcs.append(str(res.path))
+        if any((res.folder / name).is_file() for name in _BODE_FIGURES):
+            srcs.append(str(res.path))
     sections.append(_Section("bode", "Bode figures of the paper", "\n".join(body), srcs, reproduce_cmd))
 
     # one section per plant
@@ -710,7 +712,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
             body.append(_missing(f"the fleet of {res.path} could not be loaded: {origin}.", "its fleet file"))
             continue
         body.append(_theorem_html(fleet, origin, _orders(res.data), options))
-        if fleet is not None and all(s.identification for s in fleet.systems):
+        if all(s.identification for s in fleet.systems):
             srcs.append(str(res.path))
     sections.append(_Section("theorem", "Theorem check", "\n".join(body), srcs,
                              f"{reproduce_cmd}, naming a fleet with identified models"))
