@@ -21,10 +21,11 @@ from .delta import DeltaSet, delta_set
 from .export import zpk_to_coefficients
 from .fir import FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
+from .robust import RobustOptions, RobustPairDesigner
 
 __all__ = ["PairDesign", "design_pair", "fleet_delta_sets", "METHODS"]
 
-METHODS = ("closed-form", "fir", "norm-optimal")
+METHODS = ("closed-form", "fir", "norm-optimal", "robust")
 
 
 @dataclass(frozen=True)
@@ -37,15 +38,28 @@ class PairDesign:
     filters : dict
         ``filters.json`` content.
     lifted : dict of str -> array, or None
-        ``L1``, ``L2`` (N x N) for the lifted methods.
+        ``L1``, ``L2`` (N x N) for the norm-optimal method.
     learn : callable (e_prev, df_prev) -> d_f
         Learning signal of the target from a trial of the source (m, m/s^2 -> m/s^2).
+    robust : RobustPairDesigner or None
+        For the robust method: the per-trial SOCP (its ``design`` gives ratios per model).
     """
 
     method: str
     filters: dict[str, Any]
     learn: Callable[[np.ndarray, np.ndarray], np.ndarray]
     lifted: dict[str, np.ndarray] | None = field(default=None)
+    robust: RobustPairDesigner | None = field(default=None, repr=False)
+
+    @property
+    def order(self) -> str:
+        """Implementation size: filter orders (zpk/FIR), lifted matrix size, or SOCP models."""
+        f = self.filters
+        if self.method == "norm-optimal":
+            return f"lifted {f['n']}x{f['n']}"
+        if self.method == "robust":
+            return f"per-trial SOCP, {f['models']} models"
+        return ", ".join(f"{k}: {len(f[k]['num']) - 1}/{len(f[k]['den']) - 1}" for k in ("L1", "L2"))
 
 
 def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | None = None,
@@ -58,7 +72,8 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
 
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
                 norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
-                deltas: dict[str, DeltaSet] | None = None) -> PairDesign:
+                deltas: dict[str, DeltaSet] | None = None, robust: RobustOptions | None = None,
+                relax: bool = False) -> PairDesign:
     """Design the learning filters of ``target`` from ``source`` with ``method``.
 
     Parameters
@@ -66,14 +81,20 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     fleet : Fleet
     source, target : str
         System names (j-1 and j).
-    method : {"closed-form", "fir", "norm-optimal"}
+    method : {"closed-form", "fir", "norm-optimal", "robust"}
     n : int, optional
         Trial length in samples for the lifted matrices of the lifted methods (default 500).
     norm_optimal : NormOptimalOptions, optional
     fir : FIROptions, optional
     deltas : dict name -> DeltaSet, optional
         Sampled true loops of ``source`` and ``target`` for the robust constraint of the FIR
-        design (default: :func:`fleet_delta_sets` with K = 8 from the identifications).
+        design and the models of the robust design (default: :func:`fleet_delta_sets` with
+        K = 8 from the identifications).
+    robust : RobustOptions, optional
+        Options of the robust SOCP; its models are the nominal pair plus the paired samples.
+    relax : bool
+        Robust method: design at the smallest feasible rho (with a warning) when ``rho`` is
+        infeasible for a trial, instead of raising.
     """
     if method not in METHODS:
         raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
@@ -84,8 +105,17 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         filters = {**head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
                    "units": {"L1": "(m/s^2)/m", "L2": "1"}}
         return PairDesign(method, filters, lf.apply)
-    if method == "fir":
+    if method in ("fir", "robust"):
         deltas = deltas or fleet_delta_sets(fleet, [source, target])
+    if method == "robust":
+        opts = robust or RobustOptions()
+        designer = RobustPairDesigner([src, *deltas[source].loops], [tgt, *deltas[target].loops], opts, relax)
+        filters = {**head, "models": len(designer.sources),
+                   "delta_set": {source: deltas[source].source, target: deltas[target].source},
+                   "options": {"rho": opts.rho, "lam": opts.lam, "mu": opts.mu, "reduction_tol": opts.reduction_tol},
+                   "learning": "per trial (SOCP over the models): learning_signal.csv and lifted.npz"}
+        return PairDesign(method, filters, designer.learn, robust=designer)
+    if method == "fir":
         fd = design_fir(src, tgt, deltas[source], deltas[target], fir)
         info = fd.to_dict()
         filters = {**head, "L1": info.pop("L1"), "L2": info.pop("L2"),

@@ -67,7 +67,14 @@ def build_parser() -> argparse.ArgumentParser:
     des.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
     des.add_argument("--from", dest="source", required=True, help="system learned from (j-1)")
     des.add_argument("--to", dest="target", required=True, help="system that learns (j)")
-    des.add_argument("--method", default="closed-form", help="closed-form, fir or norm-optimal (default closed-form)")
+    des.add_argument("--method", default="closed-form",
+                     help="closed-form, fir, norm-optimal or robust (default closed-form; robust needs --trial)")
+    des.add_argument("--rho", type=float, default=0.95,
+                     help="robust: guaranteed improvement ||e_k|| <= rho ||e'_k|| on every model (default 0.95)")
+    des.add_argument("--samples", type=_positive_int, default=8,
+                     help="fir/robust: Delta-set samples per system (default 8)")
+    des.add_argument("--bound", type=float, default=None,
+                     help="fir/robust: multiplicative uncertainty bound instead of the identified covariance")
     des.add_argument("--n", type=_positive_int, default=None,
                      help="trial length in samples for lifted matrices (default: the trial's, else 500)")
     des.add_argument("--trial", default=None,
@@ -163,7 +170,9 @@ def _design(args: argparse.Namespace) -> int:
 
     from .atomic import atomic_path, write_json_atomic, write_text_atomic
     from .design.export import c_header
-    from .design.pair import design_pair
+    from .design.pair import design_pair, fleet_delta_sets
+    from .design.robust import RobustOptions
+    from .errors import SpecError
     from .identification.data import FlightData
     from .identification.loaders import load_csv
 
@@ -173,20 +182,35 @@ def _design(args: argparse.Namespace) -> int:
         from .errors import SignalError
 
         raise SignalError(f"{args.trial}: sample time {trial.ts} s differs from the fleet's {fleet.sample_time} s")
+    if args.method == "robust" and trial is None:
+        raise SpecError("`--method robust`: the robust learning signal is an SOCP solved per trial; give the "
+                        "previous system's trial with --trial CSV (columns time, error, learning)")
     n = args.n or (len(trial) if trial is not None else None)
-    design = design_pair(fleet, args.source, args.target, args.method, n=n)
+    deltas = None
+    if args.method in ("fir", "robust"):
+        deltas = fleet_delta_sets(fleet, [args.source, args.target], k=args.samples, bound=args.bound)
+    design = design_pair(fleet, args.source, args.target, args.method, n=n, deltas=deltas,
+                         robust=RobustOptions(rho=args.rho) if args.method == "robust" else None)
     from pathlib import Path
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if design.lifted is not None:
-        with atomic_path(out / "lifted.npz") as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **design.lifted)
     if "L1" in design.filters:
         write_text_atomic(out / "filters.h", c_header(design.filters))
-    if trial is not None:
+    arrays = design.lifted
+    if trial is not None and design.robust is not None:
+        res = design.robust.design(trial["e"], trial["d_f"])
+        df = res.d_f
+        design.filters["trial"] = {"worst_ratio": res.worst_ratio, "ratios": res.ratios.tolist(), "rho": res.rho,
+                                   "status": res.status, "solve_time_s": res.solve_time}
+        arrays = {"d_f": res.d_f, "ratios": res.ratios, "predicted_errors": res.errors}
+    elif trial is not None:
         df = design.learn(trial["e"], trial["d_f"])
+    if arrays is not None:
+        with atomic_path(out / "lifted.npz") as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+    if trial is not None:
         FlightData(trial.t, {"learning": df}, {"learning": "m/s^2"},
                    source=f"learning signal of {args.target} from {args.trial}").to_csv(out / "learning_signal.csv")
         print(f"wrote {out / 'learning_signal.csv'}", file=sys.stderr)

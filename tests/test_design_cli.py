@@ -109,3 +109,23 @@ def test_check_cli_reports_the_theorem_condition(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "NO" in text  # |Delta| = 0.9 > |1 + PC|/2 -> 0.5 at high frequency
     assert main(["check", "--order", "UAV1,UAV7"]) == 2
+
+
+def test_robust_design_via_cli(fleet, tmp_path, capsys):
+    trial = tmp_path / "trial.csv"
+    d, fl = _trial(fleet, trial, n=400)
+    out = tmp_path / "robust"
+    assert main(["design", "--from", "UAV1", "--to", "UAV2", "--method", "robust", "--out", str(out)]) == 2
+    assert "--trial" in capsys.readouterr().err and not (out / "filters.json").exists()
+    assert main(["design", "--from", "UAV1", "--to", "UAV2", "--method", "robust", "--trial", str(trial),
+                 "--rho", "0.5", "--samples", "3", "--out", str(out)]) == 0
+    filters = json.loads((out / "filters.json").read_text())
+    assert filters["method"] == "robust" and filters["models"] == 4  # nominal + 3 samples
+    assert len(filters["trial"]["ratios"]) == 4 and filters["trial"]["worst_ratio"] <= 0.5 + 1e-6
+    arrays = np.load(out / "lifted.npz")
+    ls = load_csv(out / "learning_signal.csv", {"d_f": "learning"})
+    np.testing.assert_allclose(ls["d_f"], arrays["d_f"], rtol=1e-9, atol=1e-12)
+    base = simulate_flight(fleet.loop("UAV2"), np.zeros(400), d)
+    learned = simulate_flight(fleet.loop("UAV2"), np.zeros(400), d, d_f=ls["d_f"])
+    # the nominal pair is model 0: its predicted ratio is what UAV2 flies (same disturbance, exact model)
+    assert rmse(learned.e) / rmse(base.e) == pytest.approx(filters["trial"]["ratios"][0], rel=1e-3, abs=1e-4)
