@@ -73,7 +73,7 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
                 norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
                 deltas: dict[str, DeltaSet] | None = None, robust: RobustOptions | None = None,
-                relax: bool = False) -> PairDesign:
+                relax: bool = False, lifted: bool = True) -> PairDesign:
     """Design the learning filters of ``target`` from ``source`` with ``method``.
 
     Parameters
@@ -95,6 +95,8 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     relax : bool
         Robust method: design at the smallest feasible rho (with a warning) when ``rho`` is
         infeasible for a trial, instead of raising.
+    lifted : bool
+        Norm-optimal: build the N x N matrices L1, L2 (O(N^2) memory; not needed to learn).
     """
     if method not in METHODS:
         raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
@@ -126,8 +128,11 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     n = 500 if n is None else int(n)
     if n < 2:
         raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
-    l1, l2 = NormOptimalDesigner(tgt, n, opts).lifted_matrices(src)
+    matrices = None
+    if lifted:
+        l1, l2 = NormOptimalDesigner(tgt, n, opts).lifted_matrices(src)
+        matrices = {"L1": l1, "L2": l2}
     filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
                "lifted": "lifted.npz (L1, L2: d_f,j = L1 e_{j-1} + L2 d_f,{j-1})"}
     return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts),
-                      {"L1": l1, "L2": l2})
+                      matrices)

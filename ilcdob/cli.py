@@ -81,6 +81,21 @@ def build_parser() -> argparse.ArgumentParser:
                      help="CSV of the previous system's trial: columns time (s), error (m), learning (m/s^2)")
     des.add_argument("--out", required=True, help="output folder")
 
+    cmp = sub.add_parser("compare", help="fly every learning design through a scenario, nominal and over the "
+                                         "Delta set, and tabulate RMSE, worst case, order and design time")
+    cmp.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
+    cmp.add_argument("--scenario", type=_positive_int, required=True, help="scenario id 1-4")
+    cmp.add_argument("--methods", default="closed-form,fir,norm-optimal,robust",
+                     help="comma-separated designs (default: all four)")
+    cmp.add_argument("--samples", type=_positive_int, default=8, help="Delta-set samples per system (default 8)")
+    cmp.add_argument("--bound", type=float, default=None,
+                     help="multiplicative uncertainty bound instead of the identified covariance")
+    cmp.add_argument("--scale", type=float, default=1.0, help="scale of the identified standard deviations")
+    cmp.add_argument("--rho", type=float, default=0.95, help="robust: guaranteed improvement factor (default 0.95)")
+    cmp.add_argument("--duration", type=float, default=None, help="fly only the first SECONDS of the scenario")
+    cmp.add_argument("--seed", type=int, default=0, help="seed of the Delta-set draw (default 0)")
+    cmp.add_argument("--out", default=None, help="folder for compare.json, compare.txt and compare_ratios.png")
+
     chk = sub.add_parser("check", help="the Theorem's condition |Delta| < |1 + P C|/2 per pair and frequency")
     chk.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
     chk.add_argument("--order", default=None, help="learning order, comma-separated names (default: file order)")
@@ -220,6 +235,23 @@ def _design(args: argparse.Namespace) -> int:
     return 0
 
 
+def _compare(args: argparse.Namespace) -> int:
+    from .design.robust import RobustOptions
+    from .validation.compare import CompareOptions, compare_designs, write_comparison
+    from .validation.scenarios import parse_scenarios
+
+    fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
+    (sid,) = parse_scenarios(str(args.scenario))
+    opts = CompareOptions(samples=args.samples, bound=args.bound, scale=args.scale, seed=args.seed,
+                          duration=args.duration, robust=RobustOptions(rho=args.rho))
+    cmp = compare_designs(fleet, sid, [m.strip() for m in args.methods.split(",")], opts)
+    print(cmp.table(), end="")
+    if args.out:
+        write_comparison(cmp, args.out, rho=args.rho)
+        print(f"wrote {args.out}/compare.json", file=sys.stderr)
+    return 0
+
+
 def _check(args: argparse.Namespace) -> int:
     from .atomic import write_json_atomic
     from .design.pair import fleet_delta_sets
@@ -272,6 +304,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _design(args)
         if args.command == "check":
             return _check(args)
+        if args.command == "compare":
+            return _compare(args)
         if args.command == "report":
             return _report(args)
     except IlcdobError as exc:

@@ -1,0 +1,257 @@
+"""Design comparison: every learning design flown through one scenario, nominal and over the Delta set.
+
+For scenario ``N`` the first pair of its learning order (system j-1 -> system j) is flown
+under ``1 + K`` cases: case 0 with the nominal plants (true plant = model), cases 1..K with
+paired samples of both systems' Delta sets (:func:`ilcdob.design.delta_set`; the DOB, PID and
+every learning design keep using the models). In every case system j-1 flies its DOB-only
+trial, each design turns that trial into system j's learning signal, and system j flies with
+it. The figure of merit is the paper's improvement ratio ``||e_j|| / ||e'_j||`` (Theorem:
+< 1 means learning helped), ``e'_j`` being system j's DOB-only error in the same case. The
+robust design's models are exactly these 1 + K cases (its own sample set), so theory promises
+its ratio <= rho on them, up to what its predictions cannot know: the two systems' own
+noises differ (design notes section 4), and the reference term ``(1 - G_r) r`` of moving
+scenarios enters its predictions only through the reconstruction.
+
+Design time is the time to build the design plus its mean time per trial.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ilcdob.design.fir import FIROptions
+from ilcdob.design.norm_optimal import NormOptimalOptions
+from ilcdob.design.pair import METHODS, design_pair, fleet_delta_sets
+from ilcdob.design.robust import RobustOptions
+from ilcdob.errors import IlcdobError, SpecError
+from ilcdob.fleet import Fleet
+from ilcdob.loop import LoopSystem
+
+from .scenarios import scenario
+from .simulate import rmse, simulate_flight
+
+__all__ = ["CompareOptions", "MethodComparison", "Comparison", "compare_designs", "write_comparison"]
+
+
+@dataclass(frozen=True)
+class CompareOptions:
+    """Options of :func:`compare_designs`.
+
+    Attributes
+    ----------
+    samples : int
+        Delta-set samples K per system (paired), >= 1.
+    bound : float, optional
+        Multiplicative uncertainty bound for both systems instead of their identification.
+    scale : float
+        Scale of the identified standard deviations (> 1 goes beyond the identified uncertainty).
+    seed : int
+        Seed of the Delta-set draw.
+    duration : float, optional
+        Fly only the first ``duration`` seconds of the scenario (default: all of it).
+    robust, fir, norm_optimal : options of the designs (defaults: their own).
+    """
+
+    samples: int = 8
+    bound: float | None = None
+    scale: float = 1.0
+    seed: int = 0
+    duration: float | None = None
+    robust: RobustOptions = field(default_factory=RobustOptions)
+    fir: FIROptions | None = None
+    norm_optimal: NormOptimalOptions | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
+            raise SpecError(f"`samples`: got {self.samples!r}, expected an integer >= 1")
+        if self.duration is not None and not (np.isfinite(self.duration) and self.duration > 0):
+            raise SpecError(f"`duration`: got {self.duration!r}, expected a duration > 0 s")
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise SpecError(f"`scale`: got {self.scale!r}, expected a factor > 0")
+
+
+@dataclass(frozen=True)
+class MethodComparison:
+    """One design's row of the comparison (ratios ``||e_j|| / ||e'_j||``, RMSE in m)."""
+
+    method: str
+    order: str
+    design_time_s: float
+    rmse_nominal: float
+    ratio_nominal: float
+    rmse_worst: float
+    ratio_worst: float
+    ratio_median: float
+    improved_share: float
+    ratios: list[float]
+    error: str | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+    @classmethod
+    def failed(cls, method: str, error: str, design_time_s: float) -> "MethodComparison":
+        """A design that could not be made (e.g. FIR convergence constraint not met): no figures."""
+        nan = float("nan")
+        return cls(method, "-", design_time_s, nan, nan, nan, nan, nan, nan, [], error)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """All designs on one scenario (see module docstring)."""
+
+    scenario: int
+    source: str
+    target: str
+    samples: int
+    delta_set: str
+    rmse_without_nominal: float
+    rmse_without_worst: float
+    methods: list[MethodComparison]
+
+    def row(self, method: str) -> MethodComparison:
+        return next(m for m in self.methods if m.method == method)
+
+    def to_dict(self) -> dict[str, object]:
+        return {"scenario": self.scenario, "source": self.source, "target": self.target, "samples": self.samples,
+                "delta_set": self.delta_set, "units": {"rmse": "m", "ratio": "||e_j|| / ||e'_j||",
+                                                        "design_time": "s"},
+                "rmse_without_learning": {"nominal": self.rmse_without_nominal, "worst": self.rmse_without_worst},
+                "methods": {m.method: m.to_dict() for m in self.methods}}
+
+    def table(self) -> str:
+        """Plain-text table, one row per design."""
+        head = (f"scenario {self.scenario}: {self.target} learning from {self.source}; nominal plants and "
+                f"{self.samples} Delta samples ({self.delta_set}); ratio = ||e_j|| / ||e'_j||\n"
+                f"without learning: RMSE {1e3 * self.rmse_without_nominal:.2f} mm nominal, "
+                f"{1e3 * self.rmse_without_worst:.2f} mm worst sample\n")
+        cols = f"{'method':<13}{'RMSE nom mm':>12}{'ratio nom':>11}{'RMSE worst':>12}{'ratio worst':>12}" \
+               f"{'median':>9}{'improved':>10}{'design s':>10}  order\n"
+        rows = "".join(f"{m.method:<13}design failed: {m.error}\n" if m.error else
+                       f"{m.method:<13}{1e3 * m.rmse_nominal:>12.3f}{m.ratio_nominal:>11.4f}"
+                       f"{1e3 * m.rmse_worst:>12.3f}{m.ratio_worst:>12.4f}{m.ratio_median:>9.4f}"
+                       f"{100 * m.improved_share:>9.0f}%{m.design_time_s:>10.2f}  {m.order}\n" for m in self.methods)
+        return head + cols + rows
+
+
+def _parse_methods(methods: Sequence[str]) -> list[str]:
+    bad = [m for m in methods if m not in METHODS]
+    if bad or not methods:
+        raise SpecError(f"`methods`: got {list(methods)!r}, expected a non-empty list from {list(METHODS)}")
+    return list(dict.fromkeys(methods))
+
+
+def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = METHODS,
+                    options: CompareOptions | None = None,
+                    progress: Callable[[str], None] | None = None) -> Comparison:
+    """Fly every design of ``methods`` through scenario ``scenario_id`` (see module docstring).
+
+    Parameters
+    ----------
+    fleet : Fleet
+    scenario_id : int
+        1-4 (:mod:`ilcdob.validation.scenarios`); its learning order's first pair is used.
+    methods : sequence of str
+        Subset of :data:`ilcdob.design.pair.METHODS`.
+    options : CompareOptions, optional
+    progress : callable, optional
+        Receives one line per design (default: printed to stderr).
+    """
+    opts = options or CompareOptions()
+    methods = _parse_methods(methods)
+    say = progress if progress is not None else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    sc = scenario(scenario_id)
+    order = sc.order(fleet.names)
+    if len(order) < 2:
+        raise SpecError(f"fleet {fleet.source}: comparing designs needs at least two systems, got {order}")
+    source, target = order[0], order[1]
+    ts = fleet.sample_time
+    t = sc.time(ts)
+    if opts.duration is not None:
+        t = t[t < opts.duration]
+    r, a_ref, wind = sc.reference(t), sc.acceleration(t), sc.disturbance(t)
+    specs = {s.name: s for s in fleet.systems}
+    dist = {name: wind + specs[name].noise(t) for name in (source, target)}
+    deltas = fleet_delta_sets(fleet, [source, target], k=opts.samples, bound=opts.bound, scale=opts.scale,
+                              seed=opts.seed)
+    cases: list[tuple[LoopSystem, LoopSystem]] = [(fleet.loop(source), fleet.loop(target))]
+    cases += list(zip(deltas[source].loops, deltas[target].loops))
+
+    def fly(lp: LoopSystem, name: str, d_f: np.ndarray | None = None) -> np.ndarray:
+        return simulate_flight(lp, r, dist[name], d_f=d_f, a_ref=a_ref).e
+
+    trials = [fly(src, source) for src, _ in cases]
+    without = [fly(tgt, target) for _, tgt in cases]
+    zero = np.zeros(t.size)
+    rows = []
+    for method in methods:
+        t0 = time.perf_counter()
+        try:
+            design = design_pair(fleet, source, target, method, n=t.size, norm_optimal=opts.norm_optimal,
+                                 fir=opts.fir, deltas=deltas, robust=opts.robust, lifted=False)
+            build = time.perf_counter() - t0
+            ratios, rmses, per_trial = [], [], []
+            d_fs = []
+            for e_prev in trials:
+                t1 = time.perf_counter()
+                d_fs.append(design.learn(e_prev, zero))
+                per_trial.append(time.perf_counter() - t1)
+        except IlcdobError as exc:  # a design that cannot be made is a result of the comparison
+            rows.append(MethodComparison.failed(method, str(exc), time.perf_counter() - t0))
+            say(f"scenario {scenario_id} {method}: design failed: {exc}")
+            continue
+        for (src, tgt), d_f, e_wo in zip(cases, d_fs, without):
+            e = fly(tgt, target, d_f)
+            ratios.append(float(np.linalg.norm(e) / np.linalg.norm(e_wo)))
+            rmses.append(rmse(e))
+        sample_ratios = np.asarray(ratios[1:])
+        rows.append(MethodComparison(
+            method=method, order=design.order, design_time_s=build + float(np.mean(per_trial)),
+            rmse_nominal=rmses[0], ratio_nominal=ratios[0], rmse_worst=float(max(rmses[1:])),
+            ratio_worst=float(sample_ratios.max()), ratio_median=float(np.median(sample_ratios)),
+            improved_share=float(np.mean(sample_ratios < 1.0)), ratios=ratios))
+        say(f"scenario {scenario_id} {method}: nominal ratio {ratios[0]:.4f}, worst {sample_ratios.max():.4f} "
+            f"({time.perf_counter() - t0:.1f} s)")
+    return Comparison(scenario=scenario_id, source=source, target=target, samples=opts.samples,
+                      delta_set=deltas[source].source, rmse_without_nominal=rmse(without[0]),
+                      rmse_without_worst=float(max(rmse(e) for e in without[1:])), methods=rows)
+
+
+def write_comparison(cmp: Comparison, out: str | Path, rho: float | None = None) -> list[Path]:
+    """Write ``compare.json``, ``compare.txt`` and ``compare_ratios.png`` (ratio per case and design)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ilcdob.atomic import atomic_path, write_json_atomic, write_text_atomic
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "compare.json", cmp.to_dict())
+    write_text_atomic(out / "compare.txt", cmp.table())
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    rows = [m for m in cmp.methods if m.error is None]
+    for i, m in enumerate(rows):
+        ax.scatter(np.full(len(m.ratios) - 1, i) + np.linspace(-0.15, 0.15, len(m.ratios) - 1), m.ratios[1:],
+                   s=14, color="0.4", label="Delta samples" if i == 0 else None)
+        ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if i == 0 else None)
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    if rho is not None:
+        ax.axhline(rho, color="C0", lw=0.8, ls=":", label=f"robust rho = {rho:g}")
+    ax.set_xticks(range(len(rows)), [m.method for m in rows])
+    ax.set_yscale("log")
+    ax.set_ylabel("||e_j|| / ||e'_j||")
+    ax.set_title(f"Scenario {cmp.scenario}: {cmp.target} learning from {cmp.source}")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(out / "compare_ratios.png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return [out / "compare.json", out / "compare.txt", out / "compare_ratios.png"]
