@@ -1,0 +1,84 @@
+"""Keeping the reference term exactly (beyond the paper; its future work).
+
+The Theorem's filters treat all of system j-1's error as disturbance-driven: the reference
+term ``(1 - G_r) r`` (plus the acceleration feed-forward's share, if the controller has one)
+is dropped. On aggressive trajectories that term is not small; it leaks into the
+reconstructed disturbance and is missing from what system j must cancel. Kept exactly::
+
+    e_ref,i = r - G_r,i{r} + G_f,i{a_ref}          (model maps; a_ref only with feed-forward)
+    d_f,j   = L1{e_{j-1} - e_ref,{j-1}} + L2{d_f,{j-1}}  +  G_f,j^{-1}{e_ref,j}
+
+(design notes section 2; ``G_f,j^{-1} = -D_j / P_hat_j = -(1 - Q_j)/P_hat_j - (M_j + C_j)``
+applied non-causally with the same stable inversion as ``L1``). With exact models and no
+noise the learning flight of system j has zero error, on any trajectory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ilcdob.loop import LoopSystem, freqresp
+
+from .closed_form import LearningFilters, _matched, simulate_map
+from .noncausal import ZPKFilter, as_signal
+
+__all__ = ["reference_error", "inverse_gf_filter", "ExactReferenceLearning"]
+
+
+def reference_error(loop: LoopSystem, r: object, a_ref: object | None = None) -> np.ndarray:
+    """Error of ``loop``'s model flying reference ``r`` (m) without disturbance or learning, m.
+
+    ``a_ref`` (m/s^2) is fed forward only if the controller's ``acceleration_feedforward`` is on,
+    as in :func:`ilcdob.validation.simulate.simulate_flight`.
+    """
+    src = loop.nominal
+    r = as_signal(r, "r")
+    e = r - simulate_map(src.G_r, r)
+    if a_ref is not None and loop.spec.controller.acceleration_feedforward:
+        e = e + simulate_map(src.G_f, as_signal(a_ref, "a_ref", r.size))
+    return e
+
+
+def inverse_gf_filter(loop: LoopSystem) -> ZPKFilter:
+    """``G_f^{-1} = -D / P_hat`` of ``loop``'s model, for non-causal application.
+
+    Zeros: the closed-loop poles; poles: zeros of P_hat (the ZOH sampling zero outside the unit
+    circle becomes anti-causal) and the poles of Q, M and C.
+    """
+    src = loop.nominal
+    p_zeros = np.asarray(src.P.zeros(), dtype=complex)
+    poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], np.linalg.eigvals(src.Q.A),
+                            np.linalg.eigvals(src.M.A), np.linalg.eigvals(src.C.A)])
+    zeros = np.linalg.eigvals(src.closed_loop.A)
+
+    def exact(w):
+        p, m, c, q = (freqresp(s, w) for s in (src.P, src.M, src.C, src.Q))
+        return -((1 - q) / p + m + c)
+
+    return _matched(zeros, poles, src.ts, exact, f"Gf^-1 of {loop.name!r}")
+
+
+class ExactReferenceLearning:
+    """The closed-form learning of system j from j-1 with the reference term kept (module docstring).
+
+    Parameters
+    ----------
+    filters : LearningFilters
+        The Theorem's pair for (j-1 -> j) (:func:`~ilcdob.design.closed_form_filters`).
+    r : array, m
+        Reference of the trial (both systems fly the same task).
+    a_ref : array, m/s^2, optional
+        Reference acceleration (fed forward by controllers that have it).
+    """
+
+    def __init__(self, filters: LearningFilters, r: object, a_ref: object | None = None):
+        self.filters = filters
+        self.r = as_signal(r, "r")
+        self.e_ref_prev = reference_error(filters.source, self.r, a_ref)
+        self.correction = inverse_gf_filter(filters.target).apply(reference_error(filters.target, self.r, a_ref),
+                                                                  "e_ref")
+
+    def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
+        """Learning signal of system j (m/s^2) from system j-1's trial (m, m/s^2)."""
+        e = as_signal(e_prev, "e_prev", self.r.size)
+        return self.filters.apply(e - self.e_ref_prev, df_prev) + self.correction
