@@ -6,6 +6,7 @@ from .delta import DeltaSet, delta_set
 from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .pair import METHODS, PairDesign, design_pair
+from .robust import RobustDesigner, RobustOptions, RobustPairDesigner
 from .theorem import PairCheck, format_theorem_table, theorem_check
 from .lifted_filters import LiftedLearningFilters, lifted_filters
 from .noncausal import ZPKFilter
@@ -15,4 +16,4 @@ __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter"
            "FIRDesign", "FIRDesignError", "FIRFilter", "FIROptions", "design_fir",
            "NormOptimalDesigner", "NormOptimalOptions", "norm_optimal_learning",
            "METHODS", "PairDesign", "design_pair", "PairCheck", "format_theorem_table", "theorem_check",
-           "LiftedLearningFilters", "lifted_filters"]
+           "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner"]

@@ -51,7 +51,6 @@ import base64
 import io
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from html import escape
 from pathlib import Path
@@ -770,7 +769,4 @@ def write_report(dirs: list[str | Path], out: str | Path, options: ReportOptions
         raise ReportError(f"`out`: {out} is a folder; expected the path of an HTML file, e.g. {out / 'report.html'}")
     html = build_report(dirs, options)
     write_text_atomic(out, html)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(out, 0o666 & ~umask)  # the temporary file of the atomic write is private (0600)
     return out

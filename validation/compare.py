@@ -93,7 +93,8 @@ class MethodComparison:
     error: str | None = None
 
     def to_dict(self) -> dict[str, object]:
-        return asdict(self)
+        """Fields as JSON values (figures of a failed design become null)."""
+        return {k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in asdict(self).items()}
 
     @classmethod
     def failed(cls, method: str, error: str, design_time_s: float) -> "MethodComparison":
