@@ -32,7 +32,7 @@ from ilcdob.specs import IdentificationSpec, PlantSpec
 from .data import FlightData
 from .excitation import Chirp, StepSequence
 from .model import ModelStructure
-from .quadrotor import fly, table_i_vehicles
+from .quadrotor import QuadrotorParams, fly, table_i_vehicles
 from .results import TFEstimate
 from .tfest import FitOptions, tfest
 
@@ -70,10 +70,14 @@ class VehicleIdentification:
 
 
 def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 0.003,
-                     progress: Callable[[str], None] | None = None) -> VehicleIdentification:
-    """Fly the estimation and validation experiments of ``name`` and fit its plant."""
+                     progress: Callable[[str], None] | None = None,
+                     vehicle: QuadrotorParams | None = None) -> VehicleIdentification:
+    """Fly the estimation and validation experiments of ``name`` and fit its plant.
+
+    ``vehicle`` is the nonlinear vehicle flown (default: the Table I vehicle ``name``).
+    """
     say = progress or (lambda msg: None)
-    params = table_i_vehicles()[name]
+    params = vehicle if vehicle is not None else table_i_vehicles()[name]
     spec = next(s for s in fleet.systems if s.name == name)
     ts = fleet.sample_time
     step_est = fly(params, spec, 30.0, ts, reference=StepSequence((0, 0.05, -0.05, 0.03, -0.03, 0.0), 5.0).signal,

@@ -1,8 +1,9 @@
 """Command-line interface: a thin layer over the public API.
 
-``ilcdob reproduce [--fleet FILE] [--scenarios 1,2,3,4] [--iterations 3] --out DIR``
-runs the paper's validation on a fleet (default: the built-in three UAVs) and writes
-``DIR/results.json``, the figures and ``DIR/README.md``.
+``ilcdob reproduce [--fleet FILE] [--scenarios 1,2,3,4] [--iterations 3] [--plant linear|nonlinear]
+--out DIR`` runs the paper's validation on a fleet (default: the built-in three UAVs) and writes
+``DIR/results.json``, the figures and ``DIR/README.md``; ``--plant nonlinear`` flies it on the
+nonlinear quadrotors with identified models (``ilcdob.validation.nonlinear``).
 
 ``ilcdob identify FILE [FILE ...] --input COL --output COL [--time COL] --poles N [--zeros M]
 [--integrators K] [--delay auto|SECONDS] [--validate FILE ...] --out model.json [--plot DIR]``
@@ -19,6 +20,7 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 from .errors import IlcdobError
 from .fleet import default_fleet, load_fleet
@@ -46,6 +48,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--iterations", type=_positive_int, default=3, help="learning iterations (default 3)")
     rep.add_argument("--out", required=True, help="output folder")
     rep.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    rep.add_argument("--plant", choices=("linear", "nonlinear"), default="linear",
+                     help="linear: the fleet's models (default); nonlinear: identify and fly the nonlinear "
+                          "6-DOF quadrotors (Table I vehicles)")
+    rep.add_argument("--seed", type=int, default=0, help="--plant nonlinear: seed of the sensor noise (default 0)")
 
     idf = sub.add_parser("identify", help="fit a continuous-time transfer function to flight data")
     idf.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
@@ -126,7 +132,15 @@ def _reproduce(args: argparse.Namespace) -> int:
     ids = parse_scenarios(args.scenarios)
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     start = time.perf_counter()
-    res = reproduce(fleet, ids, args.iterations)
+    if args.plant == "nonlinear":
+        from .atomic import write_text_atomic
+        from .validation.nonlinear import NonlinearSettings, reproduce_nonlinear
+
+        res = reproduce_nonlinear(fleet if args.fleet else None, ids, args.iterations,
+                                  NonlinearSettings(seed=args.seed))
+        write_text_atomic(Path(args.out) / "identified_fleet.toml", res.identified_toml)
+    else:
+        res = reproduce(fleet, ids, args.iterations)
     path = write_reproduction(res, args.out, figures=not args.no_figures)
     print(f"wrote {path} ({time.perf_counter() - start:.1f} s)", file=sys.stderr)
     for sr in res.scenarios:

@@ -30,13 +30,15 @@ _FIGURE_TEXT = {
 
 def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
     """A README.md for the output folder: the RMSE table and every figure."""
+    plant_lines = getattr(res, "markdown_plant", None)  # nonlinear plant: its own description
     lines = [
         "# Reproduction of Modi et al. (2024), Section IV",
         "",
-        f"Fleet: `{Path(res.fleet.source).name}` ({', '.join(res.fleet.names)}), sample time "
-        f"{res.fleet.sample_time} s, exact models (Case I of the Theorem: each simulated plant is its "
-        f"model), {res.iterations} learning "
-        "iterations. Regenerate with `ilcdob reproduce --out <dir>`; numbers are in `results.json`.",
+        *(plant_lines() if plant_lines else [
+            f"Fleet: `{Path(res.fleet.source).name}` ({', '.join(res.fleet.names)}), sample time "
+            f"{res.fleet.sample_time} s, exact models (Case I of the Theorem: each simulated plant is its "
+            f"model), {res.iterations} learning "
+            "iterations. Regenerate with `ilcdob reproduce --out <dir>`; numbers are in `results.json`."]),
         "",
         "Tracking RMSE in mm (no DOB / only DOB / learning 1..n) and RMSE of the total disturbance "
         "estimate d_hat + d_f against the true disturbance in m/s^2 (only DOB / learning 1):",
