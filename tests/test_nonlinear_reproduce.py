@@ -1,0 +1,223 @@
+"""The paper's validation on the nonlinear quadrotors (ilcdob.validation.nonlinear).
+
+The acceptance of issue 5 is checked on a shortened run (two scenarios of 30 s, the built-in
+fleet whose plants were identified from these vehicles) in the default suite, and on the
+full run (identification included, four scenarios) behind the ``slow`` marker.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import ilcdob
+from ilcdob.cli import main
+from ilcdob.design import closed_form_filters
+from ilcdob.errors import SpecError
+from ilcdob.identification.quadrotor import table_i_vehicles
+from ilcdob.validation.nonlinear import (NonlinearReproduction, NonlinearSettings, VehicleLearning,
+                                         airframe_path_filter, fly_loop, learning_horizon, model_attitude,
+                                         reproduce_nonlinear, robustness_filter, run_nonlinear_scenario)
+from ilcdob.validation.reproduce import reproduce
+from ilcdob.validation.scenarios import scenario
+from ilcdob.validation.simulate import simulate_flight
+
+
+def _acceptance_failures(res: NonlinearReproduction) -> list[str]:
+    return [f"scenario {row['scenario']} {row['system']}: learning 3 / DOB {row['error_ratio']:.4f}, "
+            f"non-increasing {row['monotone']}, d est. learning 3 / DOB {row['dhat_ratio']:.3f}"
+            for row in res.acceptance() if not row["passed"]]
+
+
+@pytest.fixture(scope="module")
+def short_run() -> NonlinearReproduction:
+    """Scenarios 1 (order 1-2-3) and 4 (order 1-3-2) shortened to 30 s, fleet models as given."""
+    scs = [dataclasses.replace(scenario(1), duration=30.0), dataclasses.replace(scenario(4), duration=30.0)]
+    return reproduce_nonlinear(ilcdob.default_fleet(), iterations=3, settings=NonlinearSettings(identify=False),
+                               progress=lambda msg: None, scenarios=scs)
+
+
+def test_short_run_meets_the_acceptance(short_run):
+    assert _acceptance_failures(short_run) == []
+
+
+def test_short_run_chain_and_schema(short_run, fleet):
+    assert [sr.order for sr in short_run.scenarios] == [["UAV1", "UAV2", "UAV3"], ["UAV1", "UAV3", "UAV2"]]
+    assert short_run.scenarios[1].chain[:3] == [("UAV1", "UAV3"), ("UAV3", "UAV2"), ("UAV2", "UAV1")]
+    data = short_run.to_dict()
+    assert data["plant"] == "nonlinear"
+    linear = reproduce(fleet, [1], 1, progress=lambda msg: None).to_dict()
+    assert set(data) == set(linear)
+    assert set(data["scenarios"][0]) == set(linear["scenarios"][0])
+    assert set(data["scenarios"][0]["systems"]["UAV1"]) == set(linear["scenarios"][0]["systems"]["UAV1"])
+    json.dumps(data)  # plain JSON types only
+
+
+def test_learning_flights_keep_the_true_and_measured_signals_apart(short_run):
+    fl = short_run.scenarios[0].systems["UAV2"].learning[2]
+    assert fl.rmse == pytest.approx(np.sqrt(np.mean((fl.r - fl.y) ** 2)))
+    noise = fl.y_meas - fl.y
+    assert np.std(noise) == pytest.approx(short_run.settings.sensor_noise_std, rel=0.1)
+    assert fl.saturated == 0
+    assert np.max(np.abs(fl.d_f)) < 5.0  # m/s^2: the learning signal stays physical
+
+
+@pytest.mark.slow
+def test_full_run_with_identification_meets_the_acceptance():
+    res = reproduce_nonlinear(progress=lambda msg: None)
+    assert set(res.identification) == {"UAV1", "UAV2", "UAV3"}
+    assert all(v.estimate.fit_validation > 95.0 for v in res.identification.values())
+    assert _acceptance_failures(res) == []
+
+
+# ------------------------------------------------------------------ building blocks
+def test_hover_without_wind_stays_at_rest(fleet):
+    lp = fleet.loop("UAV1")
+    fl = fly_loop(table_i_vehicles()["UAV1"], lp, np.zeros(500), lambda t: np.zeros_like(t))
+    assert np.max(np.abs(fl.e)) < 1e-9
+    assert np.max(np.abs(fl.d_hat)) < 1e-6
+
+
+def test_dob_flight_is_close_to_the_linear_loop_of_its_model(fleet):
+    """Small wind: the nonlinear vehicle behaves like its identified model (fit ~96-98 %)."""
+    lp = fleet.loop("UAV3")
+    t = np.arange(1500) * fleet.sample_time
+    wind = lambda tt: 0.5 * np.sin(0.9425 * tt)  # noqa: E731
+    nl = fly_loop(table_i_vehicles()["UAV3"], lp, np.zeros(t.size), wind)
+    lin = simulate_flight(lp, np.zeros(t.size), wind(t), mode="dob")
+    assert nl.rmse == pytest.approx(lin.rmse, rel=0.1)
+    assert np.sqrt(np.mean((nl.y - lin.y) ** 2)) < 0.15 * lin.rmse
+
+
+def test_model_attitude_has_the_model_dc_gain(fleet):
+    lp = fleet.loop("UAV2")
+    b, a, delay = model_attitude(lp)
+    num, den = lp.spec.nominal_plant.num, lp.spec.nominal_plant.den
+    assert np.sum(b) / np.sum(a) == pytest.approx(num[-1] / den[-3])
+    assert delay == 0
+
+
+def test_airframe_correction_is_one_around_a_cycle_and_for_equal_models(fleet):
+    w = np.array([0.3, 1.0, 5.0, 20.0])
+    z = np.exp(-1j * w * fleet.sample_time)
+
+    def resp(src: str, tgt: str) -> np.ndarray:
+        b, a = airframe_path_filter(fleet.loop(src), fleet.loop(tgt))
+        return np.polyval(b[::-1], z) / np.polyval(a[::-1], z)
+
+    cycle = resp("UAV1", "UAV2") * resp("UAV2", "UAV3") * resp("UAV3", "UAV1")
+    np.testing.assert_allclose(cycle, 1.0, atol=1e-9)
+    np.testing.assert_allclose(resp("UAV1", "UAV1"), 1.0, atol=1e-12)
+    assert abs(resp("UAV1", "UAV3")[0]) == pytest.approx(1.0, abs=0.02)  # DC: both ~unit gain
+
+
+def test_robustness_filter_is_zero_phase_in_band_and_cuts_noise():
+    ts = 0.02
+    t = np.arange(3000) * ts
+    slow = np.sin(0.9425 * t)
+    fast = np.sin(60.0 * t)
+    pad = 200
+    y = robustness_filter(learning_horizon(slow + fast, ts, pad), ts, 10.0)[pad:-pad]
+    core = slice(300, -300)
+    np.testing.assert_allclose(y[core], slow[core], atol=1e-3)
+
+
+def test_learning_horizon_rest_before_and_line_after():
+    x = 1.0 + 0.5 * np.arange(100)
+    ext = learning_horizon(x, 0.02, 10)
+    np.testing.assert_array_equal(ext[:10], 0.0)
+    np.testing.assert_allclose(ext[-10:], 1.0 + 0.5 * np.arange(100, 110))
+
+
+def test_vehicle_learning_without_extras_is_the_theorem(fleet):
+    lf = closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2"))
+    t = np.arange(600) * fleet.sample_time
+    e = 0.01 * np.sin(0.9425 * t) * (1 - np.exp(-t))
+    df = 0.2 * np.sin(0.9425 * t + 0.3) * (1 - np.exp(-t))
+    plain = VehicleLearning(lf, None, None, gain=1.0)
+    np.testing.assert_allclose(plain.apply(e, df), lf.apply(e, df), atol=1e-12)
+
+
+def test_scenario_run_rejects_fleets_without_vehicles(fleet_file):
+    fleet = ilcdob.load_fleet(fleet_file())  # systems "A" and "B"
+    with pytest.raises(SpecError, match=r"system\(s\) \['A', 'B'\] have no nonlinear vehicle"):
+        run_nonlinear_scenario(fleet, None, scenario(1))
+    with pytest.raises(SpecError, match="no nonlinear vehicle"):
+        reproduce_nonlinear(fleet, [1], progress=lambda msg: None)
+
+
+# ------------------------------------------------------------------ bad inputs
+@pytest.mark.parametrize("kwargs, match", [
+    ({"sensor_noise_std": -0.001}, "sensor_noise_std"),
+    ({"sensor_noise_std": 0.5}, "sensor_noise_std"),
+    ({"seed": -1}, "seed"),
+    ({"identify": "yes"}, "identify"),
+    ({"learning_cutoff": 0.0}, "learning_cutoff"),
+    ({"learning_cutoff": float("nan")}, "learning_cutoff"),
+    ({"learning_filter_order": 9}, "learning_filter_order"),
+    ({"learning_gain": 0.0}, "learning_gain"),
+    ({"learning_gain": 1.5}, "learning_gain"),
+    ({"airframe_disturbance": 1}, "airframe_disturbance"),
+    ({"inner_rate_hz": 10.0}, "inner_rate_hz"),
+])
+def test_settings_reject_bad_values(kwargs, match):
+    with pytest.raises(SpecError, match=match):
+        NonlinearSettings(**kwargs)
+
+
+def test_fly_loop_rejects_bad_inputs(fleet):
+    v = table_i_vehicles()["UAV1"]
+    lp = fleet.loop("UAV1")
+    r = np.zeros(50)
+    calm = lambda t: np.zeros_like(t)  # noqa: E731
+    with pytest.raises(SpecError, match="`mode`"):
+        fly_loop(v, lp, r, calm, mode="pid")
+    with pytest.raises(SpecError, match="`vehicle`"):
+        fly_loop("UAV1", lp, r, calm)
+    with pytest.raises(SpecError, match="`loop`"):
+        fly_loop(v, fleet, r, calm)
+    with pytest.raises(SpecError, match="`disturbance`: got ndarray"):
+        fly_loop(v, lp, r, np.zeros(50))
+    with pytest.raises(SpecError, match="`d_f`"):
+        fly_loop(v, lp, r, calm, d_f=np.ones(50), mode="no_dob")
+    with pytest.raises(SpecError, match="`rng`"):
+        fly_loop(v, lp, r, calm, noise_std=0.001)
+    with pytest.raises(SpecError, match="`noise_std`"):
+        fly_loop(v, lp, r, calm, noise_std=-1.0)
+    with pytest.raises(SpecError, match="inner_rate_hz"):
+        fly_loop(dataclasses.replace(v, inner_rate_hz=130.0), lp, r, calm)
+    with pytest.raises(ilcdob.SignalError, match="`d_f`"):
+        fly_loop(v, lp, r, calm, d_f=np.ones(49))
+
+
+def test_reproduce_rejects_bad_arguments():
+    with pytest.raises(SpecError, match="`iterations`"):
+        reproduce_nonlinear(iterations=0, progress=lambda msg: None)
+    with pytest.raises(SpecError, match="`settings`"):
+        reproduce_nonlinear(settings={"seed": 1}, progress=lambda msg: None)
+    with pytest.raises(SpecError, match="`fleet`"):
+        reproduce_nonlinear(fleet="fleet.toml", progress=lambda msg: None)
+    with pytest.raises(SpecError, match="`cutoff`"):
+        robustness_filter(np.zeros(10), 0.02, 200.0)
+
+
+def test_cli_reproduce_nonlinear_writes_the_schema(tmp_path):
+    out = tmp_path / "nl"
+    assert main(["reproduce", "--plant", "nonlinear", "--scenarios", "3", "--iterations", "1", "--no-figures",
+                 "--out", str(out)]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert data["plant"] == "nonlinear"
+    assert data["fleet"] == "identified_fleet.toml"
+    assert ilcdob.load_fleet(out / "identified_fleet.toml").names == ["UAV1", "UAV2", "UAV3"]
+    assert "**Plant: nonlinear.**" in (out / "README.md").read_text()
+
+
+def test_cli_plant_option(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["reproduce", "--plant", "quadrotor", "--out", str(tmp_path)])
+    assert "invalid choice: 'quadrotor'" in capsys.readouterr().err
+    assert main(["reproduce", "--plant", "nonlinear", "--seed", "-3", "--out", str(tmp_path)]) == 2
+    assert "`seed`: got -3" in capsys.readouterr().err
