@@ -348,15 +348,14 @@ class RobustDesigner:
 
     # ------------------------------------------------------------------ internals
     def _conic_data(self, lhs, inp, out, feed, pick, k: int) -> dict:
-        """Clarabel form ``min 1/2 z'Pz + q'z, A z + s = b, s in cones``, z = [d, x, e, t, u, v].
+        """Clarabel form ``min 1/2 z'Pz + q'z, A z + s = b, s in cones``, z = [d, x, t, u, v].
 
-        ``u_i >= ||e_i||``, ``v >= ||d||`` and ``u_i + eps_i v <= rho ||e0_i||`` (the improvement
-        constraint with the truncation error bound ``eps_i``); only the last right-hand sides and
-        ``e0`` change per solve.
+        The errors are not variables: ``e_i = e0_i - M_i z`` with ``M_i z`` model i's output, so
+        ``e0`` enters ``b`` only. ``u_i >= ||e_i||``, ``v >= ||d||`` and ``u_i + eps_i v <= rho ||e0_i||``
+        (the improvement constraint with the truncation error bound ``eps_i``); ``||W e_i||^2 <= t``.
         """
         n, nx = self.n, lhs.shape[0]
-        ne = k * n
-        zt = n + nx + ne
+        zt = n + nx
         nz = zt + 1 + k + 1
         zu, zv = zt + 1, nz - 1
         lam, mu = self.options.lam / self._gain**2, self.options.mu / self._gain**2
@@ -370,25 +369,22 @@ class RobustDesigner:
         def unit(rows: list[int], cols: list[int], vals: list[float]) -> sp.csr_matrix:
             return sp.csr_matrix((vals, (rows, cols)), shape=(max(rows) + 1, nz))
 
-        def error_rows(i: int, scale) -> sp.csr_matrix:  # rows selecting scale * e_i
-            return sp.hstack([zx((n, n + nx + i * n)), scale, zx((n, nz - n - nx - (i + 1) * n))])
-
-        rows = [sp.hstack([-inp, lhs, zx((nx, nz - n - nx))]),
-                sp.hstack([pick @ feed, pick @ out, sp.eye(ne), zx((ne, nz - n - nx - ne))])]
-        b = [np.zeros(nx), None]  # None: e0, filled per solve
-        cones = [clarabel.ZeroConeT(nx + ne)]
+        outputs = sp.hstack([pick @ feed, pick @ out, zx((k * n, nz - n - nx))], format="csr")  # rows M_i
+        rows = [sp.hstack([-inp, lhs, zx((nx, nz - n - nx))])]
+        b: list = [np.zeros(nx)]
+        cones = [clarabel.ZeroConeT(nx)]
         eps = self.truncation_bounds / self._gain
         rows.append(sp.hstack([zx((k, zu)), sp.eye(k), sp.csr_matrix(eps[:, None])]))  # u + eps v <= r
-        b.append(None)
+        b.append(("rhs",))
         cones.append(clarabel.NonnegativeConeT(k))
         wdiag = sp.diags(2.0 * self._w)
         for i in range(k):  # ||W e_i||^2 <= t  <=>  ||(t - 1, 2 W e_i)|| <= t + 1
-            rows.append(sp.vstack([unit([0, 1], [zt, zt], [-1.0, -1.0]), error_rows(i, -wdiag)]))
-            b.append(np.concatenate([[1.0, -1.0], np.zeros(n)]))
+            rows.append(sp.vstack([unit([0, 1], [zt, zt], [-1.0, -1.0]), wdiag @ outputs[i * n:(i + 1) * n]]))
+            b.append(("epigraph", i))
             cones.append(clarabel.SecondOrderConeT(n + 2))
         for i in range(k):  # ||e_i|| <= u_i
-            rows.append(sp.vstack([unit([0], [zu + i], [-1.0]), error_rows(i, -sp.eye(n))]))
-            b.append(np.zeros(n + 1))
+            rows.append(sp.vstack([unit([0], [zu + i], [-1.0]), outputs[i * n:(i + 1) * n]]))
+            b.append(("improvement", i))
             cones.append(clarabel.SecondOrderConeT(n + 1))
         rows.append(sp.vstack([unit([0], [zv], [-1.0]), sp.hstack([-sp.eye(n), zx((n, nz - n))])]))  # ||d|| <= v
         b.append(np.zeros(n + 1))
@@ -398,9 +394,20 @@ class RobustDesigner:
 
     def _run_direct(self, rho: float):
         c = self._conic
-        b = list(c["b"])
-        b[1] = (self._e0_raw / self._scale).ravel()
-        b[2] = rho * self._norms_s
+        e0 = self._e0_raw / self._scale
+        w2 = 2.0 * self._w
+
+        def fill(part):
+            if not isinstance(part, tuple):
+                return part
+            if part[0] == "rhs":
+                return rho * self._norms_s
+            i = part[1]
+            if part[0] == "epigraph":
+                return np.concatenate([[1.0, -1.0], w2 * e0[i]])
+            return np.concatenate([[0.0], e0[i]])
+
+        b = [fill(part) for part in c["b"]]
         settings = clarabel.DefaultSettings()
         settings.verbose = bool(self.options.verbose)
         settings.direct_solve_method = _DIRECT_METHOD
