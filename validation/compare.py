@@ -21,13 +21,13 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
 from ilcdob.design.fir import FIROptions
 from ilcdob.design.norm_optimal import NormOptimalOptions
-from ilcdob.design.pair import METHODS, design_pair, fleet_delta_sets
+from ilcdob.design.pair import METHODS, PairDesign, design_pair, fleet_delta_sets
 from ilcdob.design.robust import RobustOptions
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.fleet import Fleet
@@ -36,7 +36,8 @@ from ilcdob.loop import LoopSystem
 from .scenarios import scenario
 from .simulate import rmse, simulate_flight
 
-__all__ = ["CompareOptions", "MethodComparison", "Comparison", "compare_designs", "write_comparison"]
+__all__ = ["CompareOptions", "MethodComparison", "Comparison", "PairScenario", "CaseResult", "pair_scenario",
+           "evaluate_case", "compare_designs", "write_comparison"]
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,123 @@ def _parse_methods(methods: Sequence[str]) -> list[str]:
     return list(dict.fromkeys(methods))
 
 
+@dataclass(frozen=True)
+class PairScenario:
+    """The signals of one scenario for the first pair of its learning order (system j-1 -> j).
+
+    Attributes
+    ----------
+    scenario : int
+    source, target : str
+        Systems j-1 and j.
+    t : array, s
+    r : array, m
+        Reference position.
+    a_ref : array, m/s^2
+        Reference acceleration.
+    d_source, d_target : array, m/s^2
+        Total disturbance of each system: the scenario's wind plus the system's own noise.
+    """
+
+    scenario: int
+    source: str
+    target: str
+    t: np.ndarray
+    r: np.ndarray
+    a_ref: np.ndarray
+    d_source: np.ndarray
+    d_target: np.ndarray
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """One case (a pair of true loops) flown with every design.
+
+    Attributes
+    ----------
+    rmse_without : float, m
+        RMSE of system j's DOB-only flight ``e'_j``.
+    ratios : dict method -> float
+        ``||e_j|| / ||e'_j||`` of system j's flight with the design's learning signal.
+    rmses : dict method -> float, m
+        RMSE of that flight.
+    learn_times : dict method -> float, s
+        Time the design took to turn system j-1's trial into the learning signal.
+    errors : dict method -> str
+        Designs that could not make a learning signal for this case (no ratio then).
+    """
+
+    rmse_without: float
+    ratios: dict[str, float]
+    rmses: dict[str, float]
+    learn_times: dict[str, float]
+    errors: dict[str, str]
+
+
+def pair_scenario(fleet: Fleet, scenario_id: int, duration: float | None = None) -> PairScenario:
+    """Signals of scenario ``scenario_id`` for the first pair of its learning order.
+
+    Parameters
+    ----------
+    fleet : Fleet
+    scenario_id : int
+        1-4 (:mod:`ilcdob.validation.scenarios`).
+    duration : float, optional
+        Keep only the first ``duration`` seconds (default: the whole scenario).
+    """
+    sc = scenario(scenario_id)
+    order = sc.order(fleet.names)
+    if len(order) < 2:
+        raise SpecError(f"fleet {fleet.source}: comparing designs needs at least two systems, got {order}")
+    source, target = order[0], order[1]
+    t = sc.time(fleet.sample_time)
+    if duration is not None:
+        t = t[t < duration]
+    wind = sc.disturbance(t)
+    specs = {s.name: s for s in fleet.systems}
+    return PairScenario(scenario_id, source, target, t, sc.reference(t), sc.acceleration(t),
+                        wind + specs[source].noise(t), wind + specs[target].noise(t))
+
+
+def evaluate_case(pair: PairScenario, source_loop: LoopSystem, target_loop: LoopSystem,
+                  designs: Mapping[str, PairDesign]) -> CaseResult:
+    """Fly one case: system j-1's DOB-only trial, then system j without and with each design.
+
+    Parameters
+    ----------
+    pair : PairScenario
+    source_loop, target_loop : LoopSystem
+        True loops of systems j-1 and j (true plants; C, Q, M from the models).
+    designs : mapping method -> PairDesign
+        Designs that turn system j-1's trial ``(e_{j-1}, d_f,{j-1} = 0)`` into system j's
+        learning signal; a design raising :class:`IlcdobError` is recorded in ``errors``.
+    """
+
+    def fly(lp: LoopSystem, d: np.ndarray, d_f: np.ndarray | None = None) -> np.ndarray:
+        return simulate_flight(lp, pair.r, d, d_f=d_f, a_ref=pair.a_ref).e
+
+    e_prev = fly(source_loop, pair.d_source)
+    e_wo = fly(target_loop, pair.d_target)
+    norm_wo = float(np.linalg.norm(e_wo))
+    zero = np.zeros(pair.t.size)
+    ratios: dict[str, float] = {}
+    rmses: dict[str, float] = {}
+    times: dict[str, float] = {}
+    errors: dict[str, str] = {}
+    for method, design in designs.items():
+        t0 = time.perf_counter()
+        try:
+            d_f = design.learn(e_prev, zero)
+        except IlcdobError as exc:  # e.g. a robust rho infeasible for this trial: a result, not a crash
+            errors[method] = str(exc)
+            continue
+        times[method] = time.perf_counter() - t0
+        e = fly(target_loop, pair.d_target, d_f)
+        ratios[method] = float(np.linalg.norm(e) / norm_wo)
+        rmses[method] = rmse(e)
+    return CaseResult(rmse(e_wo), ratios, rmses, times, errors)
+
+
 def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = METHODS,
                     options: CompareOptions | None = None,
                     progress: Callable[[str], None] | None = None) -> Comparison:
@@ -167,61 +285,48 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = MET
     opts = options or CompareOptions()
     methods = _parse_methods(methods)
     say = progress if progress is not None else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    sc = scenario(scenario_id)
-    order = sc.order(fleet.names)
-    if len(order) < 2:
-        raise SpecError(f"fleet {fleet.source}: comparing designs needs at least two systems, got {order}")
-    source, target = order[0], order[1]
-    ts = fleet.sample_time
-    t = sc.time(ts)
-    if opts.duration is not None:
-        t = t[t < opts.duration]
-    r, a_ref, wind = sc.reference(t), sc.acceleration(t), sc.disturbance(t)
-    specs = {s.name: s for s in fleet.systems}
-    dist = {name: wind + specs[name].noise(t) for name in (source, target)}
+    pair = pair_scenario(fleet, scenario_id, opts.duration)
+    source, target = pair.source, pair.target
     deltas = fleet_delta_sets(fleet, [source, target], k=opts.samples, bound=opts.bound, scale=opts.scale,
                               seed=opts.seed)
     cases: list[tuple[LoopSystem, LoopSystem]] = [(fleet.loop(source), fleet.loop(target))]
     cases += list(zip(deltas[source].loops, deltas[target].loops))
-
-    def fly(lp: LoopSystem, name: str, d_f: np.ndarray | None = None) -> np.ndarray:
-        return simulate_flight(lp, r, dist[name], d_f=d_f, a_ref=a_ref).e
-
-    trials = [fly(src, source) for src, _ in cases]
-    without = [fly(tgt, target) for _, tgt in cases]
-    zero = np.zeros(t.size)
-    rows = []
+    designs: dict[str, PairDesign] = {}
+    build: dict[str, float] = {}
+    failed: dict[str, MethodComparison] = {}
     for method in methods:
         t0 = time.perf_counter()
         try:
-            design = design_pair(fleet, source, target, method, n=t.size, norm_optimal=opts.norm_optimal,
-                                 fir=opts.fir, deltas=deltas, robust=opts.robust, lifted=False)
-            build = time.perf_counter() - t0
-            ratios, rmses, per_trial = [], [], []
-            d_fs = []
-            for e_prev in trials:
-                t1 = time.perf_counter()
-                d_fs.append(design.learn(e_prev, zero))
-                per_trial.append(time.perf_counter() - t1)
+            designs[method] = design_pair(fleet, source, target, method, n=pair.t.size,
+                                          norm_optimal=opts.norm_optimal, fir=opts.fir, deltas=deltas,
+                                          robust=opts.robust, lifted=False)
         except IlcdobError as exc:  # a design that cannot be made is a result of the comparison
-            rows.append(MethodComparison.failed(method, str(exc), time.perf_counter() - t0))
-            say(f"scenario {scenario_id} {method}: design failed: {exc}")
+            failed[method] = MethodComparison.failed(method, str(exc), time.perf_counter() - t0)
+        build[method] = time.perf_counter() - t0
+    results = [evaluate_case(pair, src, tgt, designs) for src, tgt in cases]
+    rows = []
+    for method in methods:
+        error = failed[method].error if method in failed else next(
+            (r.errors[method] for r in results if method in r.errors), None)
+        if error is not None:
+            spent = build[method] + sum(r.learn_times.get(method, 0.0) for r in results)
+            rows.append(failed.get(method) or MethodComparison.failed(method, error, spent))
+            say(f"scenario {scenario_id} {method}: design failed: {error}")
             continue
-        for (src, tgt), d_f, e_wo in zip(cases, d_fs, without):
-            e = fly(tgt, target, d_f)
-            ratios.append(float(np.linalg.norm(e) / np.linalg.norm(e_wo)))
-            rmses.append(rmse(e))
+        ratios = [r.ratios[method] for r in results]
+        rmses = [r.rmses[method] for r in results]
+        per_trial = [r.learn_times[method] for r in results]
         sample_ratios = np.asarray(ratios[1:])
         rows.append(MethodComparison(
-            method=method, order=design.order, design_time_s=build + float(np.mean(per_trial)),
+            method=method, order=designs[method].order, design_time_s=build[method] + float(np.mean(per_trial)),
             rmse_nominal=rmses[0], ratio_nominal=ratios[0], rmse_worst=float(max(rmses[1:])),
             ratio_worst=float(sample_ratios.max()), ratio_median=float(np.median(sample_ratios)),
             improved_share=float(np.mean(sample_ratios < 1.0)), ratios=ratios))
         say(f"scenario {scenario_id} {method}: nominal ratio {ratios[0]:.4f}, worst {sample_ratios.max():.4f} "
-            f"({time.perf_counter() - t0:.1f} s)")
+            f"({build[method] + sum(per_trial):.1f} s)")
     return Comparison(scenario=scenario_id, source=source, target=target, samples=opts.samples,
-                      delta_set=deltas[source].source, rmse_without_nominal=rmse(without[0]),
-                      rmse_without_worst=float(max(rmse(e) for e in without[1:])), methods=rows)
+                      delta_set=deltas[source].source, rmse_without_nominal=results[0].rmse_without,
+                      rmse_without_worst=float(max(r.rmse_without for r in results[1:])), methods=rows)
 
 
 def write_comparison(cmp: Comparison, out: str | Path, rho: float | None = None) -> list[Path]:
