@@ -8,12 +8,12 @@ without hardware: the nonlinear vehicles of :mod:`ilcdob.identification.quadroto
 1. fly step and chirp experiments with every vehicle and identify its plant
    ``P_hat(s) = b0 / (s^2 (s + a0))`` (:func:`ilcdob.identification.fleet_id.identify_vehicle`);
 2. build every loop (PID ``C``, ``Q``, ``M = Q/P_hat``) and the closed-form learning filters
-   of the Theorem (paper Eq. (9)-(10), :func:`ilcdob.design.closed_form_filters`) from the
+   of the Theorem (paper Sec. III, :func:`ilcdob.design.closed_form_filters`) from the
    identified models;
 3. fly the four scenarios with no DOB, only DOB and learning iterations 1..n, passed around
    the fleet cyclically as in :mod:`ilcdob.validation.reproduce`.
 
-The outer loop of one vehicle (x axis, paper Eq. (1)-(3)), at the flight computer's rate
+The outer loop of one vehicle (x axis, the loop of paper Sec. II), at the flight computer's rate
 ``Ts`` (the fleet's sample time), is the same discrete blocks as the linear loop
 (:class:`ilcdob.loop.LoopSystem` ``C``, ``Q``, ``M``) stepped sample by sample with the
 nonlinear vehicle in between::
@@ -282,7 +282,7 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
              d_f: object | None = None, mode: str = "dob", a_ref: object | None = None,
              noise_std: float = 0.0, rng: np.random.Generator | None = None) -> NonlinearFlight:
     """Fly one trial of the nonlinear ``vehicle`` under ``loop``'s outer loop (see module
-    docstring; paper Eq. (1)-(3) with the vehicle in place of ``P``).
+    docstring; the loop of paper Sec. II with the vehicle in place of ``P``).
 
     Parameters
     ----------
@@ -452,13 +452,13 @@ def airframe_path_filter(source: LoopSystem, target: LoopSystem) -> tuple[np.nda
     """Discrete ``W = A_hat_{j-1} / A_hat_j = P_hat_{j-1} / P_hat_j`` (Tustin): the
     airframe-wind correction of the learning filter.
 
-    The wind acts on the rigid body (``x'' = A{u2} + d``), not at the command input that the
-    paper's Eq. (1) assumes. Its command-side equivalent differs per vehicle,
-    ``A_j^{-1}{d}``, so vehicle j-1's data reconstruct *its* equivalent and vehicle j needs
-    its own. With the wind maps ``Gd_j = P_j (1 - Q_j)/D_j * A_j^{-1}`` in the Theorem's
-    ``L1_j = (Gf_j Gd_{j-1})^{-1} Gd_j`` (paper Eq. (9)) the paper's L1 gains exactly the
-    factor ``A_{j-1}/A_j``, built here from the models (``A_hat = s^2 P_hat``). Around a
-    cycle of the fleet the factors multiply to 1.
+    The wind acts on the rigid body (``x'' = A{u2} + d``), not at the command input that
+    the paper's loop ``y = P{u2 + d}`` (Sec. II) assumes. Its command-side equivalent
+    differs per vehicle, ``A_j^{-1}{d}``, so vehicle j-1's data reconstruct *its* equivalent
+    and vehicle j needs its own. With the wind maps ``Gd_j = P_j (1 - Q_j)/D_j * A_j^{-1}``
+    in the Theorem's ``L1_j = (Gf_j Gd_{j-1})^{-1} Gd_j`` (paper Sec. III) the paper's L1
+    gains exactly the factor ``A_{j-1}/A_j``, built here from the models
+    (``A_hat = s^2 P_hat``). Around a cycle of the fleet the factors multiply to 1.
 
     Returns
     -------
@@ -492,7 +492,8 @@ class VehicleLearning:
         d_f,j = F{ W{ L1_j{ F{gamma e_{j-1} + Gf_{j-1}{d_f,{j-1}}} } } }
 
     which with ``F = W = gamma = 1`` is the Theorem's ``L1_j{e_{j-1}} + L2_j{d_f,{j-1}}``
-    (paper Eq. (9)-(10)), evaluated as in :meth:`ilcdob.design.LearningFilters.apply`
+    (the Theorem, paper Sec. III), evaluated as in
+    :meth:`ilcdob.design.LearningFilters.apply`
     (``L2 = L1 Gf_{j-1}``).
 
     Attributes
@@ -706,8 +707,6 @@ class NonlinearReproduction(ReproductionResult):
     vehicles: dict = field(default_factory=dict)
     identification: dict = field(default_factory=dict)
     identified_toml: str = ""
-
-    plant = "nonlinear"
 
     def to_dict(self) -> dict[str, object]:
         """The schema of :meth:`ReproductionResult.to_dict` with ``"plant": "nonlinear"``."""
