@@ -19,7 +19,7 @@ written as CSV and Parquet, so the same data can be re-fitted with ``ilcdob iden
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 

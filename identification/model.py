@@ -138,7 +138,6 @@ def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts
     u = np.asarray(u, dtype=float)
     ud = np.concatenate([np.zeros(nd), u])[: u.size]
     ud1 = np.concatenate([[0.0], ud])[: u.size]
-    n = phi.shape[0]
     if x0 is not None:
         # x[k+1] = Phi x[k] + G0 ud[k] + G1 ud1[k]: a 2-input state-space simulation
         sys = signal.dlti(phi, np.hstack([g0, g1]), c, np.zeros((1, 2)), dt=ts)

@@ -34,18 +34,17 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import casadi as cs
 import numpy as np
-from scipy import signal
 
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 
 from .data import FlightData
 from .model import ModelStructure, simulate_zoh
-from .results import TFEstimate, fit_percent
+from .results import TFEstimate
 from .srivc import srivc
 
 __all__ = ["FitOptions", "tfest"]

@@ -84,7 +84,7 @@ def test_fir_learning_reduces_the_hover_error_like_the_closed_form(pair, design)
 
 
 def test_l2_path_is_used_when_the_source_flew_learning(fleet, design):
-    a, b = fleet.loops[0], fleet.loops[1]
+    a = fleet.loops[0]
     n = 2000
     x = np.sin(0.9425 * np.arange(n) * a.ts)
     df = 0.3 * np.cos(1.3 * np.arange(n) * a.ts)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ilcdob.cli import main
-from ilcdob.design import closed_form_filters, delta_set
+from ilcdob.design import closed_form_filters
 from ilcdob.design.multi_source import SourceTrial, joint_disturbance, multi_source_learning
 from ilcdob.errors import SpecError
 from ilcdob.validation.beyond import extensions_study

@@ -96,7 +96,7 @@ from ilcdob.identification.quadrotor import (GRAVITY, QuadrotorParams, _Discrete
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
 
-from .reproduce import ReproductionResult, ScenarioResult, SystemResult
+from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain
 from .scenarios import Scenario, scenario
 from .simulate import Flight, rmse
 
@@ -669,19 +669,14 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
                         noise_std=settings.sensor_noise_std, rng=_rng(settings, sc.id, index[name], trial))
 
     base = {name: (flight(name, 0, "no_dob"), flight(name, 1, "dob")) for name in order}
-    learning: dict[str, list[Flight]] = {name: [] for name in order}
-    chain = []
-    prev = base[order[0]][1]
-    n = len(order)
-    for step in range(iterations * n):
-        src, tgt = order[step % n], order[(step + 1) % n]
-        if n == 1:
-            src = tgt = order[0]
+    flown = {name: 0 for name in order}  # learning flights so far: trial index of the noise seed
+
+    def step(src: str, tgt: str, prev: NonlinearFlight) -> NonlinearFlight:
         df = _learning_for(fleet, filters, src, tgt, settings).apply(prev.e_meas, prev.d_f)
-        fl = flight(tgt, 2 + len(learning[tgt]), "dob", df)
-        learning[tgt].append(fl)
-        chain.append((src, tgt))
-        prev = fl
+        flown[tgt] += 1
+        return flight(tgt, 1 + flown[tgt], "dob", df)
+
+    learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
     systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name])) for name in order}
     return ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
 

@@ -19,7 +19,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
-import numpy as np
 
 from ilcdob.design import LearningFilters, closed_form_filters
 from ilcdob.errors import SpecError
@@ -28,7 +27,7 @@ from ilcdob.fleet import Fleet
 from .scenarios import Scenario, scenario
 from .simulate import Flight, simulate_flight
 
-__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "run_scenario", "reproduce"]
+__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "learning_chain", "run_scenario", "reproduce"]
 
 
 @dataclass(frozen=True)
@@ -97,6 +96,28 @@ def _filters_for(fleet: Fleet, cache: dict, src: str, tgt: str) -> LearningFilte
     return cache[(src, tgt)]
 
 
+def learning_chain(order: list[str], iterations: int, first: Flight,
+                   step: Callable[[str, str, Flight], Flight]) -> tuple[dict[str, list[Flight]], list[tuple[str, str]]]:
+    """Pass learning around ``order`` cyclically (module docstring), starting from ``first``.
+
+    ``step(source, target, previous_flight)`` designs the target's learning signal from the
+    previous flight and flies it; returns each system's learning flights and the (source,
+    target) of every step.
+    """
+    learning: dict[str, list[Flight]] = {name: [] for name in order}
+    chain = []
+    prev = first
+    n = len(order)
+    for k in range(iterations * n):
+        src, tgt = order[k % n], order[(k + 1) % n]
+        if n == 1:
+            src = tgt = order[0]
+        prev = step(src, tgt, prev)
+        learning[tgt].append(prev)
+        chain.append((src, tgt))
+    return learning, chain
+
+
 def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
                  filters: dict | None = None) -> ScenarioResult:
     """Fly one scenario for every system: no DOB, only DOB, ``iterations`` learning trials."""
@@ -116,19 +137,11 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
         lp = fleet.loop(name)
         base[name] = (simulate_flight(lp, r, dist[name], mode="no_dob", a_ref=a_ref),
                       simulate_flight(lp, r, dist[name], mode="dob", a_ref=a_ref))
-    learning: dict[str, list[Flight]] = {name: [] for name in order}
-    chain = []
-    prev = base[order[0]][1]
-    n = len(order)
-    for step in range(iterations * n):
-        src, tgt = order[step % n], order[(step + 1) % n]
-        if n == 1:
-            src = tgt = order[0]
+    def step(src: str, tgt: str, prev: Flight) -> Flight:
         df = _filters_for(fleet, filters, src, tgt).apply(prev.e, prev.d_f)
-        flight = simulate_flight(fleet.loop(tgt), r, dist[tgt], d_f=df, a_ref=a_ref)
-        learning[tgt].append(flight)
-        chain.append((src, tgt))
-        prev = flight
+        return simulate_flight(fleet.loop(tgt), r, dist[tgt], d_f=df, a_ref=a_ref)
+
+    learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
     systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name]))
                for name in order}
     return ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
