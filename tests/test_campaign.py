@@ -1,0 +1,150 @@
+"""Monte Carlo campaigns (`ilcdob campaign`): resumable after a kill, settings guarded, statistics.
+
+Campaigns here are small (few samples, one scenario cut to 10-20 s, two designs, one local
+worker) so the file stays well under a minute on 2 cores.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ilcdob.cli import main
+from ilcdob.html_report import json_tables
+from ilcdob.validation.campaign import (SAMPLES_FILE, SETTINGS_FILE, CampaignError, CampaignOptions,
+                                        MethodStatistics, SampleStore, draw_true_loops, run_campaign)
+
+# one scenario of 20 s (1000 samples), closed form + robust SOCP (1 + 1 models): ~0.3 s per sample
+KILL_ARGS = ["--samples", "12", "--scenarios", "2", "--methods", "closed-form,robust", "--duration", "20",
+             "--robust-models", "1", "--workers", "1", "--seed", "3"]
+SMALL = CampaignOptions(samples=2, scenarios=(1,), methods=("closed-form",), duration=4.0)
+
+
+def _campaign(out: Path, *, wait: bool = True) -> subprocess.Popen:
+    """``python -P -m ilcdob campaign`` in its own process group (client and its worker processes)."""
+    proc = subprocess.Popen([sys.executable, "-P", "-m", "ilcdob", "campaign", *KILL_ARGS, "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    if wait:
+        _, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err
+    return proc
+
+
+def _lines(path: Path) -> list[str]:
+    return path.read_text().splitlines() if path.exists() else []
+
+
+def _results(rec: dict) -> dict:
+    """A record without its timings (which differ run to run)."""
+    return {k: v for k, v in rec.items() if k not in ("time_s", "cpu_s")}
+
+
+def test_killed_campaign_resumes_to_the_statistics_of_an_uninterrupted_run(tmp_path):
+    killed, clean = tmp_path / "killed", tmp_path / "clean"
+    proc = _campaign(killed, wait=False)
+    samples = killed / SAMPLES_FILE
+    deadline = time.monotonic() + 240
+    while len(_lines(samples)) < 3 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)  # the client and its Dask workers, mid-run
+    proc.communicate()
+    written = len(_lines(samples))
+    assert 3 <= written < 12, f"the kill came at {written} of 12 samples; expected mid-run"
+    assert not (killed / "campaign.json").exists()
+    with open(samples, "a") as f:  # a line torn by a kill during the write
+        f.write('{"sample": 11, "settings": "')
+
+    _campaign(killed)  # resumes: flies only the missing samples
+    _campaign(clean)   # the same campaign, uninterrupted
+
+    recs = [json.loads(line) for line in _lines(samples)]
+    assert sorted(r["sample"] for r in recs) == list(range(12))  # none lost, none duplicated
+    ref = {r["sample"]: r for r in map(json.loads, _lines(clean / SAMPLES_FILE))}
+    assert all(_results(r) == _results(ref[r["sample"]]) for r in recs)
+    a, b = (json.loads((d / "campaign.json").read_text()) for d in (killed, clean))
+    assert a["methods"] == b["methods"] and a["scenarios"] == b["scenarios"]
+    assert a["resumed_samples"] == written and b["resumed_samples"] == 0
+    assert a["methods"]["robust"]["runs"] == 12 and a["methods"]["robust"]["share_improved"] == 1.0
+    assert (killed / "campaign_ratios.png").stat().st_size > 1000
+    # the HTML report's generic renderer finds the per-method and per-scenario tables
+    paths = [t.path for t in json_tables(a)]
+    assert "methods" in paths and any(p.startswith("scenarios.") for p in paths)
+
+
+def test_settings_guard_and_extension(fleet, tmp_path):
+    out = tmp_path / "c"
+    first = run_campaign(fleet, SMALL, out, workers=1, progress=lambda m: None)
+    assert first.methods["closed-form"].runs == 2 and first.resumed == 0
+    with pytest.raises(CampaignError, match=r"different settings \(seed: 0 there, 1 now\).*another --out"):
+        run_campaign(fleet, replace(SMALL, seed=1), out, workers=1)
+    more = run_campaign(fleet, replace(SMALL, samples=3), out, workers=1,
+                        progress=lambda m: None)  # a larger N extends the campaign
+    assert more.resumed == 2 and more.methods["closed-form"].runs == 3
+    assert len(_lines(out / SAMPLES_FILE)) == 3
+    # a resumed run with nothing left to fly starts no cluster and reproduces the statistics
+    again = run_campaign(fleet, SMALL, out, progress=lambda m: None)
+    assert again.workers == 0 and again.methods == first.methods
+    (out / SETTINGS_FILE).unlink()
+    with pytest.raises(CampaignError, match="settings are unknown"):
+        run_campaign(fleet, SMALL, out, workers=1)
+
+
+def test_sample_store_drops_a_torn_line_and_refuses_foreign_records(tmp_path):
+    store = SampleStore(tmp_path / SAMPLES_FILE, "abc")
+    store.append({"sample": 0, "settings": "abc", "x": 1})
+    store.append({"sample": 1, "settings": "abc", "x": 2})
+    with open(store.path, "a") as f:
+        f.write('{"sample": 2, "sett')
+    assert sorted(store.load()) == [0, 1]
+    assert store.path.read_text().endswith("}\n")  # cut back to the last complete line
+    store.append({"sample": 1, "settings": "abc", "x": 2})  # an identical duplicate is harmless
+    assert sorted(store.load()) == [0, 1]
+    store.append({"sample": 1, "settings": "abc", "x": 3})
+    with pytest.raises(CampaignError, match="second, different record of sample 1"):
+        store.load()
+    with pytest.raises(CampaignError, match="line 1: not a sample record of campaign xyz"):
+        SampleStore(store.path, "xyz").load()
+
+
+def test_samples_depend_on_seed_and_index_only(fleet):
+    opts = CampaignOptions(samples=5, seed=7)
+    a, _ = draw_true_loops(fleet, opts, 3)
+    b, _ = draw_true_loops(fleet, CampaignOptions(samples=50, seed=7, methods=("fir",)), 3)
+    c, _ = draw_true_loops(fleet, opts, 4)
+    assert all(a[n].spec.plant == b[n].spec.plant for n in fleet.names)
+    assert a["UAV1"].spec.plant != c["UAV1"].spec.plant
+    wide, _ = draw_true_loops(fleet, CampaignOptions(seed=7, scale=3.0), 3)  # same draw, 3x the deviation
+    nominal = fleet.systems[0].plant.num[0]
+    assert abs(wide["UAV1"].spec.plant.num[0] - nominal) == pytest.approx(3 * abs(a["UAV1"].spec.plant.num[0]
+                                                                                   - nominal), rel=1e-6)
+
+
+def test_statistics_count_failed_runs_as_not_improved():
+    s = MethodStatistics.of([0.5, 2.0, None, 0.1])
+    assert (s.runs, s.failed, s.worst, s.share_improved) == (4, 1, 2.0, 0.5)
+    assert s.median == pytest.approx(0.5) and s.p95 == pytest.approx(np.percentile([0.5, 2.0, 0.1], 95))
+    assert MethodStatistics.of([None]).to_dict()["median"] is None
+
+
+def test_bad_inputs(fleet, tmp_path, capsys):
+    for kwargs, name in [({"samples": 0}, "samples"), ({"methods": ("closed-form", "magic")}, "magic"),
+                         ({"scenarios": (7,)}, "scenarios"), ({"robust_models": -1}, "robust_models"),
+                         ({"scale": 0.0}, "scale"), ({"duration": -1.0}, "duration")]:
+        with pytest.raises(CampaignError, match=name):
+            CampaignOptions(**kwargs)
+    with pytest.raises(CampaignError, match=r"`scheduler`: got 'localhost:8786'.*tcp://HOST:PORT"):
+        run_campaign(fleet, SMALL, tmp_path / "s", scheduler="localhost:8786")
+    assert not (tmp_path / "s").exists()
+    assert main(["campaign", "--samples", "2", "--methods", "fir,bogus", "--out", str(tmp_path / "m")]) == 2
+    assert "bogus" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["campaign", "--samples", "0", "--out", str(tmp_path / "z")])
