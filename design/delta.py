@@ -108,7 +108,8 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
     scale : float
         Multiplier of the identified standard deviations (1: the identified uncertainty).
     bound : float, optional
-        Multiplicative bound to use instead of the identification (or when there is none).
+        Multiplicative bound to use instead of the fleet file's ``uncertainty.bound`` and the
+        identification (in that order of precedence).
     w : array, optional
         Frequencies of the bound, rad/s (default: log grid to Nyquist).
     """
@@ -117,9 +118,12 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
     rng = np.random.default_rng(0) if rng is None else rng
     w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
     nominal = build_loop(spec.exact(), ts)
+    if bound is None and spec.uncertainty is not None:
+        bound = spec.uncertainty.bound
     if bound is None and spec.identification is None:
         raise SpecError(f"system {spec.name!r}: no identification in the fleet and no `bound` given; "
-                        "identify it (ilcdob identify-fleet) or pass bound=<relative error, e.g. 0.2>")
+                        "identify it (ilcdob identify-fleet), state `uncertainty = { bound = 0.2 }` in the "
+                        "fleet file, or pass bound=<relative error, e.g. 0.2>")
     if bound is not None:
         if not (np.isfinite(bound) and 0 < bound < 1):
             raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")

@@ -152,5 +152,7 @@ def fleet_toml(fleet: Fleet, results: dict[str, VehicleIdentification], header: 
                 f"delay_estimated = {'true' if ident.delay_estimated else 'false'}, "
                 f"fit_estimation = {ident.fit_estimation:.4f}, fit_validation = {ident.fit_validation:.4f}, "
                 f'source = "{ident.source}" }}')
+        if spec.uncertainty is not None:
+            lines.append(f"uncertainty = {{ bound = {spec.uncertainty.bound:g} }}")
         lines.append("")
     return "\n".join(lines)

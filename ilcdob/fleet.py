@@ -16,6 +16,7 @@ Schema (one ``[[system]]`` table per vehicle; units in comments)::
     identification = { poles = 3, zeros = 0, integrators = 2, parameters = [...],
                        covariance = [[...]], fit_estimation = 98.0, fit_validation = 97.5,
                        source = "..." }   # written by `ilcdob identify-fleet`
+    uncertainty = { bound = 0.2 }   # |Delta(jw)| <= 0.2: the Delta set, ahead of the identification
 
 Every system's loops are built (and checked for stability) when the fleet is loaded. Any
 problem raises :class:`~ilcdob.errors.FleetError` naming the file, the system and the key.
@@ -31,7 +32,7 @@ from typing import Any
 
 from .errors import FleetError, SpecError, UnstableLoopError
 from .loop import LoopSystem, build_loop
-from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec
+from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
 
 __all__ = ["Fleet", "load_fleet", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict"]
 
@@ -39,7 +40,7 @@ DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_flee
 
 _TOP_KEYS = {"sample_time": True, "system": True, "description": False}
 _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
-                "delay": False, "model": False, "noise": False, "identification": False}
+                "delay": False, "model": False, "noise": False, "identification": False, "uncertainty": False}
 _TABLE_KEYS = {
     "plant": {"num": True, "den": True},
     "model": {"num": True, "den": True, "delay": False},
@@ -50,9 +51,10 @@ _TABLE_KEYS = {
     "identification": {"poles": True, "zeros": True, "integrators": True, "parameters": True,
                        "covariance": True, "delay_estimated": False, "fit_estimation": False,
                        "fit_validation": False, "source": False},
+    "uncertainty": {"bound": True},
 }
 _SPEC_CLASS = {"plant": PlantSpec, "model": PlantSpec, "controller": PIDSpec, "dob": DOBSpec,
-               "noise": NoiseSpec, "identification": IdentificationSpec}
+               "noise": NoiseSpec, "identification": IdentificationSpec, "uncertainty": UncertaintySpec}
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import SpecError
 
-__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "SystemSpec"]
+__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "SystemSpec"]
 
 
 def _poly(name: str, values: object) -> tuple[float, ...]:
@@ -167,6 +167,22 @@ class NoiseSpec:
 
 
 @dataclass(frozen=True)
+class UncertaintySpec:
+    """A multiplicative model-error bound stated in the fleet file: ``|Delta(jw)| <= bound``.
+
+    It defines the system's Delta set (:func:`ilcdob.design.delta_set`) when given, ahead of
+    an identification's covariance; relative error, in (0, 1).
+    """
+
+    bound: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "bound", float(self.bound))
+        if not (math.isfinite(self.bound) and 0 < self.bound < 1):
+            raise SpecError(f"`uncertainty.bound`: got {self.bound!r}, expected a relative error in (0, 1)")
+
+
+@dataclass(frozen=True)
 class IdentificationSpec:
     """Where a plant model came from, when it was identified (``ilcdob identify``).
 
@@ -230,6 +246,8 @@ class SystemSpec:
         The system's own process noise.
     identification : IdentificationSpec or None
         How the plant model was identified (None: derived or given).
+    uncertainty : UncertaintySpec or None
+        A stated multiplicative bound on the model error (defines the Delta set).
     """
 
     name: str
@@ -239,6 +257,7 @@ class SystemSpec:
     model: PlantSpec | None = None
     noise: NoiseSpec = field(default_factory=NoiseSpec)
     identification: IdentificationSpec | None = None
+    uncertainty: UncertaintySpec | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():

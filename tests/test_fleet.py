@@ -63,3 +63,24 @@ def test_unreadable_and_invalid_toml(fleet_file, tmp_path):
 
 def test_fleet_errors_are_value_errors():
     assert issubclass(FleetError, ValueError) and issubclass(FleetError, ilcdob.IlcdobError)
+
+
+def test_uncertainty_bound_in_the_fleet_file_defines_the_delta_set(tmp_path):
+    import numpy as np
+
+    from ilcdob.design import delta_set
+    from ilcdob.fleet import DEFAULT_FLEET_PATH, load_fleet
+
+    text = DEFAULT_FLEET_PATH.read_text().replace('name = "UAV2"', 'name = "UAV2"\nuncertainty = { bound = 0.25 }', 1)
+    path = tmp_path / "fleet.toml"
+    path.write_text(text)
+    fleet = load_fleet(path)
+    spec = next(s for s in fleet.systems if s.name == "UAV2")
+    assert spec.uncertainty.bound == 0.25
+    ds = delta_set(spec, fleet.sample_time, 6, np.random.default_rng(1))
+    assert ds.source == "fleet bound" and np.all(ds.bound == 0.25)
+    assert np.max(np.abs(ds.deltas())) <= 0.25 + 1e-9  # every sample inside the stated bound
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("bound = 0.25", "bound = 1.5"))
+    with pytest.raises(FleetError, match=r"UAV2.*uncertainty.*bound"):
+        load_fleet(bad)
