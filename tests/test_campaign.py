@@ -148,3 +148,16 @@ def test_bad_inputs(fleet, tmp_path, capsys):
     assert "bogus" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["campaign", "--samples", "0", "--out", str(tmp_path / "z")])
+
+
+def test_runs_on_an_existing_cluster(fleet, tmp_path):
+    """``--scheduler tcp://HOST:PORT``: the samples go to that cluster's workers, and give the same records."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address=None) as cluster:
+        res = run_campaign(fleet, SMALL, tmp_path / "ext", scheduler=cluster.scheduler_address,
+                           progress=lambda m: None)
+    assert res.workers == 1 and res.methods["closed-form"].runs == 2
+    local = run_campaign(fleet, SMALL, tmp_path / "loc", workers=1, progress=lambda m: None)
+    assert local.methods == res.methods
