@@ -76,7 +76,7 @@ from .data import FlightData
 
 __all__ = [
     "GRAVITY", "QuadrotorParams", "TauFit", "TABLE_I", "table_i_vehicles", "fly", "equivalent_tau",
-    "linear_equivalent_tau", "fit_first_order",
+    "linear_equivalent_tau", "fit_first_order", "limit_tilt",
 ]
 
 #: Gravity, m/s^2.
@@ -563,6 +563,21 @@ def _make_advance(p: QuadrotorParams) -> Callable[..., Any]:
     return advance
 
 
+def limit_tilt(ax: float, ay: float, az: float, tan_max: float) -> tuple[float, float, float, bool]:
+    """Commanded accelerations (m/s^2) within the vehicle's limits, as a flight controller does.
+
+    ``az`` is clipped to ``[-G/2, G]``; the horizontal command is scaled down (direction kept)
+    to ``(G + az) tan(max_tilt)``, the most a tilt of ``max_tilt`` gives. Returns the limited
+    ``(ax, ay, az)`` and whether the horizontal command was scaled.
+    """
+    az = min(max(az, -0.5 * G), G)
+    amax = (G + az) * tan_max
+    ah = math.hypot(ax, ay)
+    if ah > amax:
+        return ax * amax / ah, ay * amax / ah, az, True
+    return ax, ay, az, False
+
+
 class _DiscretePID:
     """Tustin PID stepped by hand: ``u[k] = C x[k] + D e[k]``, ``x[k+1] = A x[k] + B e[k]``."""
 
@@ -633,12 +648,7 @@ def _simulate(p: QuadrotorParams, x_pid: PIDSpec, ts: float, n_out: int, r: np.n
         xm, ym, zm = mx_ + noise[k, 0], my_ + noise[k, 1], mz_ + noise[k, 2]
         ux = pid_x(r_l[k] - xm)
         ax = w_l[k] if open_loop_x else ux + w_l[k]
-        ay = pid_y(-ym)
-        az = min(max(pid_z(-zm), -0.5 * G), G)
-        amax = (G + az) * tan_max
-        ah = math.hypot(ax, ay)
-        if ah > amax:
-            ax, ay = ax * amax / ah, ay * amax / ah
+        ax, ay, az, _ = limit_tilt(ax, pid_y(-ym), pid_z(-zm), tan_max)
         qw, qx, qy, qz = s[6], s[7], s[8], s[9]
         out["acc_cmd"][k] = ax
         out["x"][k] = xm

@@ -91,7 +91,7 @@ from ilcdob.design.noncausal import as_signal
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.identification.fleet_id import VehicleIdentification, fleet_toml, identify_vehicle
-from ilcdob.identification.quadrotor import (GRAVITY, QuadrotorParams, _DiscretePID, _make_advance,
+from ilcdob.identification.quadrotor import (QuadrotorParams, _DiscretePID, _make_advance, limit_tilt,
                                              table_i_vehicles)
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
@@ -373,13 +373,8 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
             u2k = u1 - dhk - df_l[k]
         else:
             dhk, u2k = 0.0, u1
-        ay = pid_y(-ym)
-        az = min(max(pid_z(-zm), -0.5 * GRAVITY), GRAVITY)
-        amax = (GRAVITY + az) * tan_max
-        ah = math.hypot(u2k, ay)
-        if ah > amax:
-            u2k, ay = u2k * amax / ah, ay * amax / ah
-            saturated += 1
+        u2k, ay, az, limited = limit_tilt(u2k, pid_y(-ym), pid_z(-zm), tan_max)
+        saturated += limited
         if use_dob:
             q_blk.update(u2k)
             m_blk.update(xm)
