@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from ilcdob.cli import main
+from ilcdob.fleet import load_fleet
 from ilcdob.html_report import json_tables
 from ilcdob.validation.campaign import (SAMPLES_FILE, SETTINGS_FILE, CampaignError, CampaignOptions,
                                         MethodStatistics, SampleStore, draw_true_loops, run_campaign)
@@ -135,7 +136,7 @@ def test_statistics_count_failed_runs_as_not_improved():
     assert MethodStatistics.of([None]).to_dict()["median"] is None
 
 
-def test_bad_inputs(fleet, tmp_path, capsys):
+def test_bad_inputs(fleet, fleet_file, tmp_path, capsys):
     for kwargs, name in [({"samples": 0}, "samples"), ({"methods": ("closed-form", "magic")}, "magic"),
                          ({"scenarios": (7,)}, "scenarios"), ({"robust_models": -1}, "robust_models"),
                          ({"scale": 0.0}, "scale"), ({"duration": -1.0}, "duration")]:
@@ -144,6 +145,9 @@ def test_bad_inputs(fleet, tmp_path, capsys):
     with pytest.raises(CampaignError, match=r"`scheduler`: got 'localhost:8786'.*tcp://HOST:PORT"):
         run_campaign(fleet, SMALL, tmp_path / "s", scheduler="localhost:8786")
     assert not (tmp_path / "s").exists()
+    unidentified = load_fleet(fleet_file())  # two systems, no identification, no stated bound
+    with pytest.raises(CampaignError, match=r"\['A', 'B'\] have neither an identification.*--bound"):
+        run_campaign(unidentified, SMALL, tmp_path / "u")
     assert main(["campaign", "--samples", "2", "--methods", "fir,bogus", "--out", str(tmp_path / "m")]) == 2
     assert "bogus" in capsys.readouterr().err
     with pytest.raises(SystemExit):

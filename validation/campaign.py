@@ -27,7 +27,8 @@ command again: finished samples are read back (a line torn by the kill is droppe
 missing ones are flown, and since each sample depends on ``(seed, i)`` alone the statistics
 are those of an uninterrupted run. ``DIR/campaign_settings.json`` records the settings; a
 run with different settings (other than a larger ``samples``, which extends the campaign)
-is refused. At the end ``DIR/campaign.json`` (statistics per method and per scenario x
+is refused. The settings do not cover the code: resume with the ilcdob that started the campaign
+(a changed design gives other ratios for the samples still to fly). At the end ``DIR/campaign.json`` (statistics per method and per scenario x
 method: median, 95th percentile, worst ratio and share of runs that improved),
 ``DIR/campaign.txt`` and ``DIR/campaign_ratios.png`` are written.
 
@@ -167,8 +168,11 @@ def campaign_settings(fleet: Fleet, options: CampaignOptions) -> dict[str, Any]:
     opts = asdict(options)
     opts.pop("samples")
     opts["scenarios"], opts["methods"] = list(options.scenarios), list(options.methods)
+    sources = {s.name: ("identification" if s.uncertainty is None and s.identification is not None
+                        else f"bound {s.uncertainty.bound:g}" if s.uncertainty is not None else "none")
+               for s in fleet.systems}
     body = {"format": FORMAT_VERSION, "fleet": {"source": fleet.source, "sha256": _fleet_fingerprint(fleet),
-                                                  "systems": fleet.names}, **opts}
+                                                  "systems": fleet.names, "uncertainty": sources}, **opts}
     ident = dict(body)
     ident["fleet"] = body["fleet"]["sha256"]  # the file's location does not change the results
     body["id"] = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:16]
@@ -423,12 +427,23 @@ class CampaignResult:
     sample_cpu_s: float
     workers: int
 
+    @property
+    def uncertainty(self) -> str:
+        """Where the true plants come from: ``bound B``, or per system its stated bound / identification."""
+        o = self.options
+        if o.bound is not None:
+            return f"bound {o.bound:g}"
+        srcs = self.settings["fleet"]["uncertainty"]
+        if all(v == "identification" for v in srcs.values()):
+            return f"identification x {o.scale:g}"
+        return ", ".join(f"{n}: {v}" + (f" x {o.scale:g}" if v == "identification" else "") for n, v in srcs.items())
+
     def to_dict(self) -> dict[str, Any]:
         """``campaign.json`` content (statistics per method, then per scenario x method)."""
         o = self.options
         return {
             "samples": o.samples, "seed": o.seed,
-            "uncertainty": f"bound {o.bound:g}" if o.bound is not None else f"identification x {o.scale:g}",
+            "uncertainty": self.uncertainty,
             "scale": o.scale, "robust_models": o.robust_models, "rho": o.rho,
             "duration": o.duration, "runs_per_method": o.samples * len(o.scenarios),
             "rejected_plants": self.rejected, "resumed_samples": self.resumed, "workers": self.workers,
@@ -447,7 +462,7 @@ class CampaignResult:
         """Plain-text tables: every run, then per scenario."""
         o = self.options
         head = (f"campaign: {o.samples} samples x {len(o.scenarios)} scenarios, true plants from "
-                f"{self.to_dict()['uncertainty']}, robust: 1 + {o.robust_models} models, rho {o.rho:g}; "
+                f"{self.uncertainty}, robust: 1 + {o.robust_models} models, rho {o.rho:g}; "
                 "ratio = ||e_j|| / ||e'_j||\n")
 
         def block(title: str, stats: Mapping[str, MethodStatistics]) -> str:
@@ -631,10 +646,11 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
     if len(fleet.systems) < 2:
         raise CampaignError(f"fleet {fleet.source}: a campaign needs at least two systems, got {fleet.names}")
     if options.bound is None:
-        lacking = [s.name for s in fleet.systems if s.identification is None]
+        lacking = [s.name for s in fleet.systems if s.identification is None and s.uncertainty is None]
         if lacking:
-            raise CampaignError(f"fleet {fleet.source}: systems {lacking} have no identification to draw true "
-                                "plants from; identify them (ilcdob identify-fleet) or give a bound (--bound 0.2)")
+            raise CampaignError(f"fleet {fleet.source}: systems {lacking} have neither an identification nor an "
+                                "`uncertainty = { bound }` to draw true plants from; identify them (ilcdob "
+                                "identify-fleet), state a bound in the fleet file, or give one (--bound 0.2)")
     settings = campaign_settings(fleet, options)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -714,7 +730,7 @@ def write_campaign(result: CampaignResult, out: str | Path) -> list[Path]:
         ax.set_ylim(bottom=0.5 * floor)
     ax.set_ylabel("||e_j|| / ||e'_j||")
     o = result.options
-    ax.set_title(f"{o.samples} samples, true plants from {result.to_dict()['uncertainty']} (box: quartiles, "
+    ax.set_title(f"{o.samples} samples, true plants from {result.uncertainty} (box: quartiles, "
                  "whiskers: range)", fontsize=9)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
