@@ -345,7 +345,6 @@ class RobustDesigner:
                          for i, e in enumerate(self._errors)]
         cons += self._improve
         self._conic = self._conic_data(lhs, inp, out, feed, pick, k) if self.options.backend == "direct" else None
-        self._solver = None
         self._lam_s = cp.Parameter(nonneg=True, name="lam")
         self._mu_s = cp.Parameter(nonneg=True, name="mu")
         obj = self._t + self._lam_s * cp.sum_squares(self._d) + self._mu_s * cp.sum_squares(cp.diff(self._d))
@@ -418,22 +417,17 @@ class RobustDesigner:
                 return np.concatenate([[1.0, -1.0], w2 * e0[i]])
             return np.concatenate([[0.0], e0[i]])
 
-        b = np.concatenate([fill(part) for part in c["b"]])
+        b = [fill(part) for part in c["b"]]
+        settings = clarabel.DefaultSettings()
+        settings.verbose = bool(self.options.verbose)
+        settings.direct_solve_method = _DIRECT_METHOD
+        # smaller static regularisation than Clarabel's 1e-8: with near-perfect learning the optimum is ~1e-6
+        # and the default lets the primal residual of the state equations creep up (AlmostSolved at K=20, N=1000)
+        settings.static_regularization_constant = 1e-10
         t0 = time.perf_counter()
         try:
-            if self._solver is None:  # built once (KKT structure, ordering, symbolic factorisation); then only b
-                settings = clarabel.DefaultSettings()
-                settings.verbose = bool(self.options.verbose)
-                settings.direct_solve_method = _DIRECT_METHOD
-                # smaller static regularisation than Clarabel's 1e-8: with near-perfect learning the optimum is
-                # ~1e-6 and the default lets the state equations' primal residual creep up (AlmostSolved at K=20)
-                settings.static_regularization_constant = 1e-10
-                settings.presolve_enable = False  # both needed for data updates
-                settings.input_sparse_dropzeros = False
-                self._solver = clarabel.DefaultSolver(c["P"], c["q"], c["A"], b, c["cones"], settings)
-            else:
-                self._solver.update(b=b)
-            sol = self._solver.solve()
+            solver = clarabel.DefaultSolver(c["P"], c["q"], c["A"], np.concatenate(b), c["cones"], settings)
+            sol = solver.solve()
         except Exception as exc:  # Clarabel raises on malformed data or internal failures
             raise RobustSolverError(
                 f"robust design: Clarabel failed at rho = {rho:g} ({exc}). Next steps: try backend='cvxpy', "
