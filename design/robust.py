@@ -425,7 +425,8 @@ class RobustDesigner:
         # and the default lets the primal residual of the state equations creep up (AlmostSolved at K=20, N=1000)
         settings.static_regularization_constant = 1e-10
         t0 = time.perf_counter()
-        try:
+        try:  # a fresh solver per trial: updating b in a persistent one reuses the first trial's equilibration,
+            # which made designs depend on solve history (~20 % faster; campaigns must reproduce samples exactly)
             solver = clarabel.DefaultSolver(c["P"], c["q"], c["A"], np.concatenate(b), c["cones"], settings)
             sol = solver.solve()
         except Exception as exc:  # Clarabel raises on malformed data or internal failures

@@ -165,3 +165,43 @@ def test_balanced_truncation_bound_and_guarantee(fleet):
     assert np.all(des.truncation_bounds > 0) and max(r.nstates for r in des.realisations) <= 5
     # active constraint (measured max 0.279 with 3-4 states, exactly 0.300 with the full 9), never above rho
     assert opt.rho - 0.05 <= np.max(res.ratios) <= opt.rho + 1e-9
+
+
+class _FakeSolution:
+    def __init__(self, status: str, n: int):
+        self.status, self.x, self.iterations = status, np.zeros(n), 3
+
+
+def _fake_clarabel(monkeypatch, status: str):
+    """Clarabel replaced by a solver that returns ``status`` (and d_f = 0)."""
+    import ilcdob.design.robust as robust
+
+    class Fake:
+        def __init__(self, P, q, A, b, cones, settings):
+            self.n = A.shape[1]
+
+        def solve(self):
+            return _FakeSolution(status, self.n)
+
+    monkeypatch.setattr(robust.clarabel, "DefaultSolver", Fake)
+
+
+def test_inaccurate_solve_warns(fleet, monkeypatch):
+    lp = fleet.loops[0]
+    e0 = predicted_errors(_disturbance(60, fleet.sample_time), [lp])
+    des = RobustDesigner([lp], 60, RobustOptions(rho=1.5))
+    _fake_clarabel(monkeypatch, "AlmostSolved")
+    with pytest.warns(RuntimeWarning, match="optimal_inaccurate"):
+        res = des.solve(e0)
+    assert res.status == "optimal_inaccurate" and res.ratios[0] == pytest.approx(1.0)  # d_f = 0
+
+
+def test_solver_failure_is_an_error_with_next_steps(fleet, monkeypatch):
+    from ilcdob.design.robust import RobustSolverError
+
+    lp = fleet.loops[0]
+    e0 = predicted_errors(_disturbance(60, fleet.sample_time), [lp])
+    des = RobustDesigner([lp], 60, RobustOptions(rho=0.5))
+    _fake_clarabel(monkeypatch, "NumericalError")
+    with pytest.raises(RobustSolverError, match="Next steps"):
+        des.solve(e0)
