@@ -172,8 +172,8 @@ class _FakeSolution:
         self.status, self.x, self.iterations = status, np.zeros(n), 3
 
 
-def _fake_clarabel(monkeypatch, status: str):
-    """Clarabel replaced by a solver that returns ``status`` (and d_f = 0)."""
+def _solve_with_fake_clarabel(fleet, monkeypatch, status: str, rho: float):
+    """Solve a small problem with Clarabel replaced by a solver that returns ``status`` (and d_f = 0)."""
     import ilcdob.design.robust as robust
 
     class Fake:
@@ -183,25 +183,20 @@ def _fake_clarabel(monkeypatch, status: str):
         def solve(self):
             return _FakeSolution(status, self.n)
 
+    lp = fleet.loops[0]
+    des = RobustDesigner([lp], 60, RobustOptions(rho=rho))
     monkeypatch.setattr(robust.clarabel, "DefaultSolver", Fake)
+    return des.solve(predicted_errors(_disturbance(60, fleet.sample_time), [lp]))
 
 
 def test_inaccurate_solve_warns(fleet, monkeypatch):
-    lp = fleet.loops[0]
-    e0 = predicted_errors(_disturbance(60, fleet.sample_time), [lp])
-    des = RobustDesigner([lp], 60, RobustOptions(rho=1.5))
-    _fake_clarabel(monkeypatch, "AlmostSolved")
     with pytest.warns(RuntimeWarning, match="optimal_inaccurate"):
-        res = des.solve(e0)
+        res = _solve_with_fake_clarabel(fleet, monkeypatch, "AlmostSolved", rho=1.5)
     assert res.status == "optimal_inaccurate" and res.ratios[0] == pytest.approx(1.0)  # d_f = 0
 
 
 def test_solver_failure_is_an_error_with_next_steps(fleet, monkeypatch):
     from ilcdob.design.robust import RobustSolverError
 
-    lp = fleet.loops[0]
-    e0 = predicted_errors(_disturbance(60, fleet.sample_time), [lp])
-    des = RobustDesigner([lp], 60, RobustOptions(rho=0.5))
-    _fake_clarabel(monkeypatch, "NumericalError")
     with pytest.raises(RobustSolverError, match="Next steps"):
-        des.solve(e0)
+        _solve_with_fake_clarabel(fleet, monkeypatch, "NumericalError", rho=0.5)

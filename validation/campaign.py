@@ -58,7 +58,7 @@ import numpy as np
 from ilcdob.design.delta import DeltaSet, delta_set
 from ilcdob.design.pair import METHODS, PairDesign, design_pair
 from ilcdob.design.robust import RobustOptions
-from ilcdob.errors import IlcdobError, SpecError
+from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
 
