@@ -76,7 +76,7 @@ from .data import FlightData
 
 __all__ = [
     "GRAVITY", "QuadrotorParams", "TauFit", "TABLE_I", "table_i_vehicles", "fly", "equivalent_tau",
-    "linear_equivalent_tau", "fit_first_order", "limit_tilt",
+    "linear_equivalent_tau", "fit_first_order", "limit_tilt", "make_advance", "DiscretePID",
 ]
 
 #: Gravity, m/s^2.
@@ -443,7 +443,7 @@ def _tune_att_gain(tau: float, rate_gain: float, rate_d_gain: float, tau_m: floa
 
 
 # ---------------------------------------------------------------------- the simulator
-def _make_advance(p: QuadrotorParams) -> Callable[..., Any]:
+def make_advance(p: QuadrotorParams) -> Callable[..., Any]:
     """Build the hot loop: ``advance(s, ax, ay, az, d_list, j0, m, wprev, rec)``.
 
     Runs ``m`` inner steps from state list ``s`` with the acceleration command held, the
@@ -578,7 +578,7 @@ def limit_tilt(ax: float, ay: float, az: float, tan_max: float) -> tuple[float, 
     return ax, ay, az, False
 
 
-class _DiscretePID:
+class DiscretePID:
     """Tustin PID stepped by hand: ``u[k] = C x[k] + D e[k]``, ``x[k+1] = A x[k] + B e[k]``."""
 
     def __init__(self, spec: PIDSpec, ts: float) -> None:
@@ -626,8 +626,8 @@ def _simulate(p: QuadrotorParams, x_pid: PIDSpec, ts: float, n_out: int, r: np.n
               record_inner: bool) -> dict[str, Any]:
     """Core loop; see :func:`fly`. ``noise`` is (n_out, 3); ``d_inner`` on the inner grid."""
     nin = int(round(ts * p.inner_rate_hz))
-    advance = _make_advance(p)
-    pid_x, pid_y, pid_z = _DiscretePID(x_pid, ts), _DiscretePID(x_pid, ts), _DiscretePID(p.z_controller, ts)
+    advance = make_advance(p)
+    pid_x, pid_y, pid_z = DiscretePID(x_pid, ts), DiscretePID(x_pid, ts), DiscretePID(p.z_controller, ts)
     om = p.hover_rotor_speed
     s = [0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3 + [om] * 4
     wprev = (0.0, 0.0)

@@ -91,7 +91,7 @@ from ilcdob.design.noncausal import as_signal
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.identification.fleet_id import VehicleIdentification, fleet_toml, identify_vehicle
-from ilcdob.identification.quadrotor import (QuadrotorParams, _DiscretePID, _make_advance, limit_tilt,
+from ilcdob.identification.quadrotor import (DiscretePID, QuadrotorParams, limit_tilt, make_advance,
                                              table_i_vehicles)
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
@@ -350,10 +350,10 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
     if float(np.asarray(loop.Q.D).ravel()[0]) != 0.0:
         raise SpecError("Q must be strictly proper in discrete time (algebraic loop through the DOB)")
 
-    advance = _make_advance(vehicle)
+    advance = make_advance(vehicle)
     c_blk, q_blk, m_blk = _Block(loop.C), _Block(loop.Q), _Block(loop.M)
-    pid_y = _DiscretePID(loop.spec.controller, ts)
-    pid_z = _DiscretePID(vehicle.z_controller, ts)
+    pid_y = DiscretePID(loop.spec.controller, ts)
+    pid_z = DiscretePID(vehicle.z_controller, ts)
     s = [0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3 + [vehicle.hover_rotor_speed] * 4
     wprev = (0.0, 0.0)
     d_list = d_inner.tolist()
