@@ -409,7 +409,15 @@ def _table(header: list[str], rows: list[list[str]], cls: str = "") -> str:
 
 
 def _png_uri(data: bytes) -> str:
-    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+    """``data:`` URI of a figure, re-encoded as a 256-colour palette PNG (line plots look the same;
+    the report shrinks about 2.5x)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.open(io.BytesIO(data)).convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(
+        buf, "PNG", optimize=True)
+    small = buf.getvalue()
+    return "data:image/png;base64," + base64.b64encode(small if len(small) < len(data) else data).decode("ascii")
 
 
 def _figure(data: bytes, alt: str, caption: str) -> str:
