@@ -28,7 +28,7 @@ from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import LoopSystem, build_loop
 
 from .delta import DeltaSet
-from .fir import FIRDesign, FIROptions, design_fir
+from .fir import FIRDesign, FIRDesignError, FIROptions, design_fir
 
 __all__ = ["JointQDesign", "design_fir_joint_q"]
 
@@ -103,8 +103,6 @@ def design_fir_joint_q(prev_loop: LoopSystem, next_loop: LoopSystem, delta_prev:
     minimize_scalar(objective, bounds=(np.log10(lo), np.log10(hi)), method="bounded",
                     options={"maxiter": max_evaluations, "xatol": 0.01})
     if not designs:
-        from .fir import FIRDesignError
-
         raise FIRDesignError(f"FIR learning filter {prev_loop.name!r} -> {next_loop.name!r}: no Q time constant in "
                              f"[{lo:g}, {hi:g}] s gave a feasible design ({len(evaluations)} tried); widen "
                              "tau_bounds, reduce the margin or the uncertainty, or add taps")

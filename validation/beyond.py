@@ -75,20 +75,23 @@ def extensions_study(fleet: Fleet, scenario_ids=(1, 2, 3, 4), error_gain: float 
         def fly(lp, name, d_f=None):
             return simulate_flight(lp, r, dist[name], d_f=d_f, a_ref=a_ref)
 
-        def ratio(lp, name, d_f):
-            return float(np.linalg.norm(fly(lp, name, d_f).e) / np.linalg.norm(fly(lp, name).e))
-
         l1, l2, l3 = (fleet.loop(n) for n in (first, second, third))
+        without = {name: float(np.linalg.norm(fly(lp, name).e)) for lp, name in ((l2, second), (l3, third))}
+
+        def ratio(lp, name, d_f):  # lp is the fleet's loop of `name`: its DOB-only flight is `without`
+            return float(np.linalg.norm(fly(lp, name, d_f).e) / without[name])
+
         f1 = fly(l1, first)
         cf12 = closed_form_filters(l1, l2)
-        paper_ref = ratio(l2, second, cf12.apply(f1.e, f1.d_f))
+        df12 = cf12.apply(f1.e, f1.d_f)
+        paper_ref = ratio(l2, second, df12)
         exact_ref = ratio(l2, second, ExactReferenceLearning(cf12, r, a_ref).apply(f1.e, f1.d_f))
 
         rng = np.random.default_rng(seed)
         spec2 = specs[second]
         true2 = build_loop(replace(spec2, plant=_high_pass_plant(spec2.nominal_plant, error_gain, error_tau),
                                    model=spec2.nominal_plant), ts)
-        f2 = fly(true2, second, cf12.apply(f1.e, f1.d_f))
+        f2 = fly(true2, second, df12)
         trials = [SourceTrial(l1, f1.e, f1.d_f, delta_set(specs[first], ts, 8, rng, bound=0.05)),
                   SourceTrial(l2, f2.e, f2.d_f, delta_set(spec2, ts, 8, rng, bound=abs(error_gain)))]
         rows.append(ExtensionRow(
