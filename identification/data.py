@@ -22,6 +22,12 @@ __all__ = ["FlightData", "check_time", "check_signal", "resample_onto"]
 #: Relative tolerance on the spacing of a "uniform" time grid.
 UNIFORM_RTOL = 1e-6
 
+#: A step between two time stamps of a signal longer than this many median steps is a gap
+#: (a dropout of the logger): :meth:`FlightData.from_samples` records it in
+#: ``metadata["gaps"]`` and :meth:`FlightData.pieces` cuts the record there, instead of
+#: fitting a model to the straight line that interpolation draws across it.
+GAP_FACTOR = 5.0
+
 
 def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:
     """Check time stamps: finite, strictly increasing (no duplicates); returns float array."""
@@ -52,6 +58,16 @@ def check_signal(x: object, t: np.ndarray, source: str, name: str) -> np.ndarray
         raise SignalError(f"{source}: signal `{name}`: non-finite value {float(arr[bad[0]])!r} at "
                           f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
     return arr
+
+
+def _merge_intervals(intervals: list[list[float]]) -> list[list[float]]:
+    out: list[list[float]] = []
+    for lo, hi in sorted(intervals):
+        if out and lo <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], hi)
+        else:
+            out.append([lo, hi])
+    return out
 
 
 def resample_onto(t_src: np.ndarray, x: np.ndarray, t_new: np.ndarray) -> np.ndarray:
@@ -106,7 +122,9 @@ class FlightData:
             Each signal with its own strictly increasing time stamps (s).
         ts : float, optional
             Sample time of the common grid; default: the finest median step among the signals.
-        The common grid spans the overlap of all signals.
+        The common grid spans the overlap of all signals. Steps longer than
+        :data:`GAP_FACTOR` median steps of a signal are recorded as gaps
+        (``metadata["gaps"]``: ``[t_before, t_after]`` pairs, s).
         """
         if not series:
             raise SignalError(f"{source}: no signals given")
@@ -126,6 +144,13 @@ class FlightData:
         rates = {name: 1.0 / float(np.median(np.diff(t))) for name, (t, _) in checked.items()}
         meta = dict(metadata or {})
         meta.setdefault("original_rates_hz", rates)
+        gaps = []
+        for t, _ in checked.values():
+            dt = np.diff(t)
+            for k in np.flatnonzero(dt > GAP_FACTOR * np.median(dt)):
+                gaps.append([float(t[k]), float(t[k + 1])])
+        if gaps:
+            meta["gaps"] = _merge_intervals(gaps)
         return cls(t=grid, signals={n: resample_onto(t, x, grid) for n, (t, x) in checked.items()},
                    units=dict(units or {}), metadata=meta, source=source)
 
@@ -153,6 +178,22 @@ class FlightData:
                               f"(data span {self.t[0]:.6g} to {self.t[-1]:.6g} s)")
         return FlightData(self.t[keep], {n: x[keep] for n, x in self.signals.items()}, dict(self.units),
                           {**self.metadata, "segment": [lo, hi]}, self.source)
+
+    def pieces(self) -> list["FlightData"]:
+        """The record cut at its gaps (``metadata["gaps"]``): the samples strictly between
+        consecutive gaps, each piece a FlightData of its own (one piece when there is none)."""
+        gaps = self.metadata.get("gaps") or []
+        if not gaps:
+            return [self]
+        edges = [self.t[0] - 1.0] + [v for g in gaps for v in g] + [self.t[-1] + 1.0]
+        out = []
+        for i, (lo, hi) in enumerate(zip(edges[::2], edges[1::2])):
+            keep = (self.t >= lo) & (self.t <= hi)
+            if np.count_nonzero(keep) >= 2:
+                meta = {k: v for k, v in self.metadata.items() if k != "gaps"}
+                out.append(FlightData(self.t[keep], {n: x[keep] for n, x in self.signals.items()},
+                                      dict(self.units), {**meta, "piece": i}, f"{self.source} (piece {i + 1})"))
+        return out
 
     def to_csv(self, path: str) -> None:
         """Write ``time`` and every signal as columns (header row of names), atomically.

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import control as ct
 import numpy as np
-from scipy import signal
 from scipy.linalg import expm
 
 from ilcdob.errors import SpecError
@@ -132,19 +131,13 @@ def zoh_matrices(den: np.ndarray, num: np.ndarray, ts: float, delay: float):
 
 def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts: float,
                  delay: float = 0.0, x0: np.ndarray | None = None) -> np.ndarray:
-    """Output of the model for a ZOH input ``u`` sampled at ``ts`` (from rest unless ``x0``)."""
-    den, num = structure.split(theta)
-    phi, g0, g1, c, nd = zoh_matrices(den, num, ts, delay)
+    """Output of the model for a ZOH input ``u`` sampled at ``ts`` (from rest unless ``x0``,
+    the companion-form state at the first sample); computed by filtering (:mod:`.oe`)."""
+    from .oe import delayed_input, discretise, response
+
+    d = discretise(structure, theta, ts, delay, derivatives=False)
     u = np.asarray(u, dtype=float)
-    ud = np.concatenate([np.zeros(nd), u])[: u.size]
-    ud1 = np.concatenate([[0.0], ud])[: u.size]
-    if x0 is not None:
-        # x[k+1] = Phi x[k] + G0 ud[k] + G1 ud1[k]: a 2-input state-space simulation
-        sys = signal.dlti(phi, np.hstack([g0, g1]), c, np.zeros((1, 2)), dt=ts)
-        _, y, _ = signal.dlsim(sys, np.column_stack([ud, ud1]), x0=x0)
-        return y[:, 0]
-    # from rest: y = (N0(z) + z^-1 N1(z)) / den(z) ud, run by lfilter (C speed)
-    b0, a = signal.ss2tf(phi, g0, c, np.zeros((1, 1)))
-    b1, _ = signal.ss2tf(phi, g1, c, np.zeros((1, 1)))
-    b = np.concatenate([b0[0], [0.0]]) + np.concatenate([[0.0], b1[0]])
-    return signal.lfilter(b, np.concatenate([a, [0.0]]), ud)
+    ud = delayed_input(u, d.nd)
+    inputs = [(d.g0, ud), (d.g1, delayed_input(ud, 1))] if d.f > 0 else [(d.g0, ud)]
+    x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
+    return response(d.phi, d.c[0], d.sos, d.den, u.size, inputs, x0)

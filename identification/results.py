@@ -15,9 +15,10 @@ import control as ct
 import numpy as np
 
 from .data import FlightData
-from .model import ModelStructure, simulate_zoh, zoh_matrices
+from .model import ModelStructure, simulate_zoh
+from .oe import discretise, response
 
-__all__ = ["TFEstimate", "ResidualTest", "fit_percent", "free_response_basis", "frequency_response",
+__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis", "frequency_response",
            "multiplicative_bound"]
 
 
@@ -29,15 +30,10 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
 
 
 def free_response_basis(structure: ModelStructure, theta: np.ndarray, ts: float, n: int) -> np.ndarray:
-    """Columns: output from each unit initial state with zero input (n x states)."""
-    den, num = structure.split(theta)
-    phi, _, _, c, _ = zoh_matrices(den, num, ts, 0.0)
-    out = np.empty((n, phi.shape[0]))
-    m = c.copy()
-    for k in range(n):
-        out[k] = m[0]
-        m = m @ phi
-    return out
+    """Columns: output from each unit initial state with zero input (n x states), by filtering."""
+    d = discretise(structure, theta, ts, 0.0, derivatives=False)
+    eye = np.eye(d.phi.shape[0])
+    return np.column_stack([response(d.phi, d.c[0], d.sos, d.den, n, (), eye[i]) for i in range(eye.shape[0])])
 
 
 def frequency_response(structure: ModelStructure, theta: np.ndarray, delay: float, w: np.ndarray) -> np.ndarray:
@@ -101,14 +97,15 @@ class ResidualTest:
 
 
 def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    """Normalised cross-correlation ``sum_k a[k] b[k - lag]`` at each lag (by FFT)."""
+    from scipy.signal import correlate
+
     a = a - a.mean()
     b = b - b.mean()
     n = a.size
     norm = np.sqrt(np.sum(a * a) * np.sum(b * b))
-    out = []
-    for k in lags:
-        out.append(np.sum(a[k:] * b[: n - k]) if k >= 0 else np.sum(a[: n + k] * b[-k:]))
-    return np.asarray(out) / norm
+    full = correlate(a, b, mode="full", method="fft")       # index n - 1 is lag 0
+    return full[n - 1 + np.asarray(lags)] / norm
 
 
 @dataclass(frozen=True)
@@ -140,7 +137,11 @@ class TFEstimate:
     input_correlation : ResidualTest
         Input-residual cross-correlation, lags -25..25.
     solver : dict
-        IPOPT status, iterations and wall time.
+        Engine, status (``converged``, ``max_iter``, ``time_limit``), iterations, starts and
+        wall time.
+    trend : int or None
+        Degree of the per-experiment output trend that was estimated (None: none), also
+        estimated in :meth:`predict` with ``y`` and in the validation fit.
     """
 
     structure: ModelStructure
@@ -159,16 +160,19 @@ class TFEstimate:
     input: str = "u"
     output: str = "y"
     solver: dict = field(default_factory=dict)
+    trend: int | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_fit(cls, *, structure, theta, delay, covariance, delay_estimated, sigma2, experiments, ts,
-                 validation, input, output, solver) -> "TFEstimate":
+                 validation, input, output, solver, trend=None, fitted=None) -> "TFEstimate":
+        """Assemble the result; ``fitted`` (the model output per experiment, when the fit has
+        it) spares recomputing the estimation data's compare."""
         den, num = structure.split(theta)
         ys, yhats, us = [], [], []
-        for u, y in experiments:
+        for i, (u, y) in enumerate(experiments):
             ys.append(y)
-            yhats.append(_compare(structure, theta, delay, ts, u, y))
+            yhats.append(fitted[i] if fitted is not None else compare(structure, theta, delay, ts, u, y, trend))
             us.append(u)
         y_all, yh_all, u_all = np.concatenate(ys), np.concatenate(yhats), np.concatenate(us)
         resid = y_all - yh_all
@@ -184,13 +188,13 @@ class TFEstimate:
             for fd in vals:
                 u = fd[input]
                 yv.append(fd[output])
-                yhv.append(_compare(structure, theta, delay, fd.ts, u, fd[output]))
+                yhv.append(compare(structure, theta, delay, fd.ts, u, fd[output], trend))
             fit_val = fit_percent(np.concatenate(yv), np.concatenate(yhv))
         return cls(structure=structure, theta=np.asarray(theta, float), num=num, den=den, delay=float(delay),
                    covariance=np.asarray(covariance, float), delay_estimated=bool(delay_estimated),
                    sigma2=float(sigma2), ts=float(ts), fit_estimation=fit_percent(y_all, yh_all),
                    fit_validation=fit_val, whiteness=white, input_correlation=xcor, input=input,
-                   output=output, solver=dict(solver))
+                   output=output, solver=dict(solver), trend=trend)
 
     # ------------------------------------------------------------------ use
     @property
@@ -204,10 +208,11 @@ class TFEstimate:
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def predict(self, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        """Simulated output for input ``u``; with ``y``, the initial state is fitted to it."""
+        """Simulated output for input ``u``; with ``y``, the initial state (and the trend, when
+        one was estimated) is fitted to it."""
         if y is None:
             return simulate_zoh(self.structure, self.theta, u, self.ts, self.delay)
-        return _compare(self.structure, self.theta, self.delay, self.ts, u, y)
+        return compare(self.structure, self.theta, self.delay, self.ts, u, y, self.trend)
 
     def score(self, data: FlightData) -> float:
         """Fit % on ``data`` (signals named as in the fit)."""
@@ -252,6 +257,7 @@ class TFEstimate:
                           "input_correlation_inside_99": self.input_correlation.share_inside},
             "signals": {"input": self.input, "output": self.output},
             "solver": self.solver,
+            "trend": self.trend,
         }
 
     def summary(self) -> str:
@@ -283,9 +289,20 @@ def _poly(c: np.ndarray) -> str:
     return " + ".join(terms) if terms else "0"
 
 
-def _compare(structure, theta, delay, ts, u, y) -> np.ndarray:
-    """Simulated output with the initial state chosen by least squares (MATLAB compare)."""
+def trend_basis(n: int, degree: int) -> np.ndarray:
+    """Legendre polynomials of degree 0..``degree`` over a record of ``n`` samples (columns)."""
+    return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, n), degree)
+
+
+def compare(structure: ModelStructure, theta: np.ndarray, delay: float, ts: float, u: np.ndarray, y: np.ndarray,
+            trend: int | None = None) -> np.ndarray:
+    """Simulated output with the initial state (and a polynomial trend of degree ``trend``)
+    chosen by least squares (MATLAB compare)."""
     forced = simulate_zoh(structure, theta, u, ts, delay)
     basis = free_response_basis(structure, theta, ts, u.size)
-    x0, *_ = np.linalg.lstsq(basis, y - forced, rcond=None)
-    return forced + basis @ x0
+    if trend is not None:
+        basis = np.column_stack([basis, trend_basis(u.size, trend)])
+    scale = np.linalg.norm(basis, axis=0)
+    scale[scale == 0] = 1.0
+    x0, *_ = np.linalg.lstsq(basis / scale, y - forced, rcond=None)
+    return forced + (basis / scale) @ x0

@@ -17,10 +17,9 @@ CasADi/IPOPT refinement in :mod:`ilcdob.identification.tfest`.
 from __future__ import annotations
 
 import numpy as np
-import control as ct
-from scipy import signal
 
 from .model import ModelStructure, simulate_zoh
+from .oe import response
 
 __all__ = ["srivc", "delayed"]
 
@@ -34,14 +33,25 @@ def delayed(u: np.ndarray, delay_samples: float) -> np.ndarray:
 
 def _filter_bank(x: np.ndarray, lpoly: np.ndarray, orders: range, ts: float, hold: str) -> list[np.ndarray]:
     """``s^k / L(s)`` applied to samples of ``x``: ``hold="zoh"`` for the piecewise-constant
-    input, ``"foh"`` (piecewise linear) for the sampled continuous output."""
+    input; ``"foh"`` for the sampled continuous output, approximated by holding the mean of
+    consecutive samples (the trapezoid over each step: an O(ts^2) difference from the exact
+    first-order hold, ample for an initial estimate). All orders come from the states of one
+    companion realisation of ``1/L(s)`` (:func:`~ilcdob.identification.oe.response`)."""
+    from .oe import discretise
+
+    n = lpoly.size - 1
+    lead = lpoly[0]
+    bank_structure = ModelStructure(n, 0, 0)
+    d = discretise(bank_structure, np.concatenate([lpoly[1:] / lead, [1.0]]), ts, 0.0, derivatives=False)
+    v = x if hold == "zoh" else 0.5 * (x + np.concatenate([x[1:], x[-1:]]))
+    rows = n if max(orders) >= n else max(orders) + 1
+    states = np.atleast_2d(response(d.phi, np.eye(n)[:rows], d.sos, d.den, x.size, [(d.g0, v)])) / lead
     out = []
     for k in orders:
-        num = np.zeros(k + 1)
-        num[0] = 1.0
-        sysd = ct.sample_system(ct.tf(num, lpoly), ts, method=hold)
-        b, a = np.asarray(sysd.num[0][0], float), np.asarray(sysd.den[0][0], float)
-        out.append(signal.lfilter(b, a, x))
+        if k < n:
+            out.append(states[k])
+        else:  # s^n / L = (1 - sum_{j<n} l_j s^j / L) / lead
+            out.append(x / lead - (lpoly[1:][::-1] / lead) @ states)
     return out
 
 
@@ -55,7 +65,7 @@ def _stable_prefilter(theta: np.ndarray, structure: ModelStructure, lam: float) 
 
 
 def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndarray]], ts: float,
-          delay: float = 0.0, lam: float | None = None, iterations: int = 8) -> np.ndarray:
+          delay: float = 0.0, lam: float | None = None, iterations: int = 8, tol: float = 1e-6) -> np.ndarray:
     """SRIVC estimate of ``theta`` from experiments ``[(u, y), ...]`` sampled at ``ts``.
 
     Parameters
@@ -71,6 +81,9 @@ def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndar
         Initial prefilter pole (rad/s); default ``0.5 / (10 ts)``... a tenth of Nyquist/5.
     iterations : int
         Refinement passes after the first.
+    tol : float
+        Stop when a pass changes ``theta`` by less than this, relative (an initial estimate
+        needs no more: the output-error fit refines it).
     """
     n_tot = structure.n_poles
     k_int = structure.n_integrators
@@ -78,33 +91,31 @@ def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndar
     lpoly = np.real(np.poly(np.full(n_tot, -lam)))
     data = [(delayed(np.asarray(u, float), delay / ts), np.asarray(y, float)) for u, y in experiments]
     theta = None
+    free_orders = [k_int + i for i in range(structure.n_free_poles - 1, -1, -1)]
     for it in range(iterations + 1):
-        rows, rhs, inst = [], [], []
+        m_zp = 0.0
+        m_zy = 0.0
         for u, y in data:
             yf = _filter_bank(y, lpoly, range(n_tot + 1), ts, "foh")
             uf = _filter_bank(u, lpoly, range(structure.n_zeros + 1), ts, "zoh")
             skip = min(u.size // 4, int(np.ceil(6.0 / (lam * ts))))
-            phi = np.column_stack([-yf[k_int + i] for i in range(structure.n_free_poles - 1, -1, -1)]
-                                  + [uf[j] for j in range(structure.n_zeros, -1, -1)])
+            # regressors as rows (parameters x samples)
+            u_rows = [uf[j][skip:] for j in range(structure.n_zeros, -1, -1)]
+            phi = np.vstack([-yf[k][skip:] for k in free_orders] + u_rows)
             if theta is None:
                 zeta = phi
             else:
                 xh = simulate_zoh(structure, theta, u, ts)
                 xf = _filter_bank(xh, lpoly, range(n_tot + 1), ts, "foh")
-                zeta = np.column_stack([-xf[k_int + i] for i in range(structure.n_free_poles - 1, -1, -1)]
-                                       + [uf[j] for j in range(structure.n_zeros, -1, -1)])
-            rows.append(phi[skip:])
-            inst.append(zeta[skip:])
-            rhs.append(yf[n_tot][skip:])
-        phi_all, zeta_all, y_all = np.vstack(rows), np.vstack(inst), np.concatenate(rhs)
-        if not (np.all(np.isfinite(phi_all)) and np.all(np.isfinite(zeta_all))):
+                zeta = np.vstack([-xf[k][skip:] for k in free_orders] + u_rows)
+            m_zp = m_zp + zeta @ phi.T
+            m_zy = m_zy + zeta @ yf[n_tot][skip:]
+        if not (np.all(np.isfinite(m_zp)) and np.all(np.isfinite(m_zy))):
             raise ValueError("SRIVC diverged (non-finite filtered signals)")
-        scale = np.linalg.norm(phi_all, axis=0)
+        scale = np.sqrt(np.abs(np.diag(m_zp)))
         scale[scale == 0] = 1.0
-        new, *_ = np.linalg.lstsq((zeta_all / scale).T @ (phi_all / scale), (zeta_all / scale).T @ y_all,
-                                  rcond=None)
-        new = new / scale
-        if theta is not None and np.linalg.norm(new - theta) <= 1e-9 * np.linalg.norm(theta):
+        new = np.linalg.lstsq(m_zp / np.outer(scale, scale), m_zy / scale, rcond=None)[0] / scale
+        if theta is not None and np.linalg.norm(new - theta) <= tol * np.linalg.norm(theta):
             theta = new
             break
         theta = new

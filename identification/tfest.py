@@ -1,50 +1,61 @@
-"""Output-error fits of continuous-time transfer functions, solved with CasADi/IPOPT.
+"""Output-error fits of continuous-time transfer functions with delay, for real flight logs.
 
-The criterion is the simulation error (output error, MATLAB's ``tfest`` default with
+The criterion is the simulation error (output error, MATLAB's ``tfest`` with
 ``Focus='simulation'``)::
 
-    minimise  sum_e sum_k ( y_e[k] - yhat_e[k](theta, delay, x0_e) )^2
+    minimise  sum_e sum_k ( y_e[k] - yhat_e[k] )^2,
+    yhat_e = G(theta, delay){u_e} + free response(beta_e) + trend_e
 
-where ``yhat`` is the exact ZOH response of ``G(s) = B(s)/(s^K A(s)) e^{-s delay}`` from
-the initial state ``x0_e`` of each experiment ``e`` (estimated, or zero). The sampled
-dynamics ``Phi = e^{A ts}`` and the input matrices (modified z-transform for the fractional
-part of the delay) are built symbolically with a scaled-and-squared Taylor series, the
-trajectory with ``casadi.Function.mapaccum``, and IPOPT gets exact derivatives.
+with ``G(s) = B(s)/(s^K A(s)) e^{-s delay}`` sampled exactly under a zero-order hold
+(:mod:`.oe`), and per experiment ``e`` an initial condition ``beta_e`` (one coefficient per
+pole) and a polynomial output trend (offset by default; slope for slow drift). The trend
+degrees that the free response already spans (a constant with one integrator, a ramp with
+two) are left out.
 
-Initialisation (so that IPOPT does not stall in a local minimum): candidates from SRIVC
-(:mod:`.srivc`) and from a grid of pole locations with the numerator solved by linear least
-squares; the candidate with the lowest simulation error starts IPOPT. With ``delay="auto"``
-the same grid scans the delay in half-sample steps; IPOPT then refines the fractional part.
+Engine (chosen by measurement against the CasADi/IPOPT formulation it replaces, see
+``benchmarks/bench_tfest.py``):
 
-Closed-loop data (the vehicles fly under their PID, so the commanded acceleration depends on
-the measured position): the direct output-error fit used here is consistent when the
-disturbance on the output is white measurement noise and the plant is strictly proper --
-the noise sample v[k] reaches the input at k and the output only from k+1 on, so the
-output error equals v and is uncorrelated with the regressors (Ljung, System
-Identification, 2nd ed., sec. 13.4: the direct method is consistent when the noise model is
-right). It is biased when the output disturbance is coloured (turbulence, unmodelled
-vibration) and fed back, in proportion to that disturbance's power relative to the
-excitation: fly closed-loop experiments in calm air with a strong external excitation
-(reference steps, an injected chirp), and check ``input_correlation`` of the result,
-which flags residuals correlated with the input.
+* exact sensitivities computed by filtering (:mod:`.oe`): O(N) per parameter in C;
+* a Levenberg-Marquardt loop on the scaled normal equations, assembled experiment by
+  experiment (memory: the Jacobian columns of one experiment at a time, about
+  ``8 (p + 6)`` bytes per sample for ``p`` parameters, plus the data); unstable trial
+  models (a free pole with Re >= 0) are rejected when ``stable``;
+* starts from SRIVC (:mod:`.srivc`) and from a grid of pole locations, each with its
+  numerator, initial conditions and trend solved by linear least squares; LM runs from the
+  best ``starts`` of them and the best result is kept;
+* ``delay="auto"``: the delay is a continuous parameter of the same LM (the fractional-
+  delay ZOH is smooth in it). Its start comes from a profile over a delay grid in which only
+  the linear parameters are re-solved (no fit from scratch per grid point); the LM then
+  runs from the best profile minima;
+* an iteration or time limit returns the best iterate with a ``RuntimeWarning`` and its
+  status in ``solver`` (never an error for a fit that made progress).
+
+Closed-loop data: the direct output-error fit is consistent when the output disturbance
+is white measurement noise and the plant is strictly proper (Ljung, System Identification,
+2nd ed., sec. 13.4); it is biased by coloured disturbances that are fed back, in
+proportion to their power relative to the external excitation. Fly closed-loop experiments
+in calm air with a strong external excitation and check ``input_correlation``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
-import casadi as cs
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 
 from .data import FlightData
-from .model import ModelStructure, simulate_zoh
-from .results import TFEstimate
+from .model import ModelStructure
+from .oe import Discretisation, delayed_input, discretise, response
+from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
 __all__ = ["FitOptions", "tfest"]
@@ -59,277 +70,479 @@ class FitOptions:
     delay : float or "auto"
         Input delay in s (fixed), or ``"auto"`` to estimate it in ``[0, max_delay]``.
     max_delay : float
-        Upper bound of the delay search, s.
+        Upper bound of the delay search, s (default 0.3). Must be below half the shortest
+        experiment's duration.
     estimate_x0 : bool
-        Estimate each experiment's initial state (else: the system starts at rest).
+        Estimate each experiment's initial condition (else: the system starts at rest).
+    trend : int or None
+        Degree (0-5) of a polynomial output trend estimated per experiment (Legendre basis
+        over the record): ``0`` an offset (default), ``1`` offset and slope, higher degrees
+        for a slow, smooth drift (sensor bias, estimator drift); ``None`` none. A drift that
+        wanders faster than the record's few slowest polynomials is coloured noise to the
+        fit: cut such logs into shorter segments.
+    stable : bool
+        Reject models with a free pole in the closed right half plane (default True).
+    starts : int
+        Number of initial estimates the LM runs from (default 2).
     max_iter : int
-        IPOPT iteration limit.
+        LM iteration limit per start (default 100).
+    time_limit : float or None
+        Wall-time limit of the whole fit, s; the best iterate so far is returned.
     tol : float
-        IPOPT tolerance (relative to the scaled problem).
+        Relative tolerance on the predicted decrease of the criterion and on the step.
     verbose : bool
-        Print IPOPT's iteration log.
+        Print every LM iteration through ``progress``.
     """
 
     delay: float | str = 0.0
     max_delay: float = 0.3
     estimate_x0: bool = True
-    max_iter: int = 300
-    tol: float = 1e-10
+    trend: int | None = 0
+    stable: bool = True
+    starts: int = 2
+    max_iter: int = 100
+    time_limit: float | None = None
+    tol: float = 1e-8
     verbose: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.delay, str):
             if self.delay != "auto":
                 raise SpecError(f"`delay`: got {self.delay!r}, expected a number of seconds >= 0 or 'auto'")
-        elif not (math.isfinite(self.delay) and self.delay >= 0):
+        elif not (isinstance(self.delay, (int, float)) and math.isfinite(self.delay) and self.delay >= 0):
             raise SpecError(f"`delay`: got {self.delay!r}, expected a number of seconds >= 0 or 'auto'")
         if not (math.isfinite(self.max_delay) and self.max_delay >= 0):
             raise SpecError(f"`max_delay`: got {self.max_delay!r}, expected a number >= 0 (s)")
-        if self.max_iter < 1:
-            raise SpecError(f"`max_iter`: got {self.max_iter!r}, expected >= 1")
+        if self.trend is not None and (isinstance(self.trend, bool) or self.trend not in range(6)):
+            raise SpecError(f"`trend`: got {self.trend!r}, expected None (no trend) or a polynomial degree 0-5 "
+                            "(0: offset, 1: offset + slope)")
+        for name in ("starts", "max_iter"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise SpecError(f"`{name}`: got {v!r}, expected an integer >= 1")
+        if self.time_limit is not None and not (math.isfinite(self.time_limit) and self.time_limit > 0):
+            raise SpecError(f"`time_limit`: got {self.time_limit!r}, expected None or a number of seconds > 0")
+        if not (math.isfinite(self.tol) and 0 < self.tol < 1):
+            raise SpecError(f"`tol`: got {self.tol!r}, expected a number in (0, 1)")
 
 
-# ---------------------------------------------------------------- symbolic ZOH (CasADi)
+# ---------------------------------------------------------------- experiments and model evaluation
 
-def _sym_expm_aug(a, b, t: float | cs.SX, squarings: int, order: int = 10):
-    """exp([[A, B], [0, 0]] t) -> (e^{At}, int_0^t e^{As} ds B), Taylor with scaling-squaring."""
-    n = a.shape[0]
-    m = cs.vertcat(cs.horzcat(a, b), cs.SX.zeros(1, n + 1)) * (t / 2**squarings)
-    e = cs.SX.eye(n + 1)
-    term = cs.SX.eye(n + 1)
-    for k in range(1, order + 1):
-        term = term @ m / k
-        e = e + term
-    for _ in range(squarings):
-        e = e @ e
-    return e[:n, :n], e[:n, n]
+@dataclass
+class _Exp:
+    u: np.ndarray
+    y: np.ndarray
+    trend: np.ndarray        # N x n_trend basis (normalised time powers)
+    source: str
+
+    @property
+    def n(self) -> int:
+        return self.u.size
 
 
-def _sym_companion(den_tail, num, n: int, n_num: int):
-    a = cs.SX.zeros(n, n)
-    for i in range(n - 1):
-        a[i, i + 1] = 1
-    for j in range(n):
-        a[n - 1, j] = -den_tail[n - 1 - j]
-    b = cs.SX.zeros(n, 1)
-    b[n - 1] = 1
-    c = cs.SX.zeros(1, n)
-    for j in range(n_num):
-        c[0, j] = num[n_num - 1 - j]
-    return a, b, c
+def _trend_basis(n: int, structure: ModelStructure, opts: FitOptions) -> np.ndarray:
+    if opts.trend is None:
+        return np.zeros((n, 0))
+    covered = structure.n_integrators if opts.estimate_x0 else 0
+    if opts.trend < covered:
+        return np.zeros((n, 0))
+    return trend_basis(n, opts.trend)[:, covered:]
 
 
-def _shift(u: np.ndarray, k: int) -> np.ndarray:
-    return np.concatenate([np.zeros(k), u])[: u.size] if k > 0 else u
+def _scaled_pinv(g: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse of a Gram matrix after Jacobi scaling (columns of any magnitude)."""
+    if g.size == 0:
+        return g
+    sc = np.sqrt(np.maximum(np.abs(np.diag(g)), 1e-300))
+    return np.linalg.pinv(g / np.outer(sc, sc), rcond=1e-13, hermitian=True) / np.outer(sc, sc)
 
 
-class _OEProblem:
-    """The CasADi output-error problem for one integer delay ``nd``."""
+def _eliminate(grams: list[np.ndarray], nb: int, n_local: list[int]):
+    """Least squares on Gram matrices with a shared block and per-experiment blocks.
 
-    def __init__(self, structure: ModelStructure, exps: list[tuple[np.ndarray, np.ndarray]], ts: float,
-                 nd: int, estimate_frac: bool, frac0: float, theta0: np.ndarray, opts: FitOptions):
-        self.structure, self.exps, self.ts, self.nd = structure, exps, ts, nd
-        n = structure.n_poles
-        p = structure.n_params
-        self.scale = np.maximum(np.abs(theta0), 1e-3 * max(1.0, float(np.max(np.abs(theta0)))))
-        zs = cs.SX.sym("z", p)
-        theta = zs * self.scale
-        den_tail = cs.vertcat(theta[: structure.n_free_poles], cs.SX.zeros(structure.n_integrators, 1))
-        num = theta[structure.n_free_poles:]
-        a, b, c = _sym_companion(den_tail, num, n, structure.n_zeros + 1)
-        fs = cs.SX.sym("f")
-        frac_expr = fs if estimate_frac else cs.SX(frac0)
-        # squarings from the initial estimate's spectral scale
-        a0 = np.zeros((n, n))
-        a0[:-1, 1:] = np.eye(n - 1)
-        den0, _ = structure.split(theta0)
-        a0[-1, :] = -den0[1:][::-1]
-        norm = max(np.linalg.norm(a0, 1) * ts, 1e-12)
-        sq = max(0, int(math.ceil(math.log2(norm / 0.1))) + 2)
-        phi, g_full = _sym_expm_aug(a, b, ts, sq)
-        if estimate_frac or frac0 > 0:
-            phi_rest, g0 = _sym_expm_aug(a, b, ts - frac_expr, sq)
-            _, gf = _sym_expm_aug(a, b, frac_expr, max(0, sq - 1))
-            g1 = phi_rest @ gf
-        else:
-            g0, g1 = g_full, cs.SX.zeros(n, 1)
-        # parameters -> sampled model, as one small SX function called from the MX graph
-        model_fn = cs.Function("model", [zs, fs], [cs.vertcat(cs.vec(phi), g0, g1), c])
-        x = cs.SX.sym("x", n)
-        uu = cs.SX.sym("uu", 2)
-        pars = cs.SX.sym("P", n * n + 2 * n)
-        phi_p = cs.reshape(pars[: n * n], n, n)
-        step = cs.Function("step", [x, uu, pars], [phi_p @ x + pars[n * n:n * n + n] * uu[0]
-                                                   + pars[n * n + n:] * uu[1]])
-        # the trajectory lives in an MX graph: mapaccum stays one call node (no scalar expansion)
-        z = cs.MX.sym("z", p)
-        frac = cs.MX.sym("f")
-        pvec, c_mx = model_fn(z, frac if estimate_frac else cs.MX(frac0))
-        variables = [z] + ([frac] if estimate_frac else [])
-        x0s, resid, yhats = [], [], []
-        for i, (u, y) in enumerate(exps):
-            ud = _shift(u, nd)
-            ud1 = _shift(ud, 1)
-            nsteps = u.size
-            x0 = cs.MX.sym(f"x0_{i}", n) if opts.estimate_x0 else cs.MX.zeros(n, 1)
-            if opts.estimate_x0:
-                x0s.append(x0)
-            fmap = step.mapaccum(f"sim{i}", nsteps - 1)
-            xs = fmap(x0, cs.DM(np.vstack([ud[:-1], ud1[:-1]])), cs.repmat(pvec, 1, nsteps - 1))
-            xall = cs.horzcat(x0, xs)
-            yhat = (c_mx @ xall).T
-            yhats.append(yhat)
-            resid.append(cs.DM(y) - yhat)
-        self.n_x0 = len(x0s) * n
-        self.y_scale = float(sum(np.sum((y - np.mean(y)) ** 2) for _, y in exps)) or 1.0
-        self.w = cs.vertcat(*variables, *x0s)
-        self.r = cs.vertcat(*resid)
-        self.yhat = cs.vertcat(*yhats)
-        self.n_theta = p
-        self.estimate_frac = estimate_frac
-        self.frac0 = frac0
-        self.z0 = theta0 / self.scale
+    Each ``grams[e]`` is the Gram matrix of the columns ``[X | L_e | W]``: ``X`` (``nb``
+    columns) with coefficients shared by every experiment, ``L_e`` (``n_local[e]``) with
+    coefficients of its own, ``W`` the right-hand sides. The per-experiment blocks are
+    eliminated first (Schur complements), then the shared one. Returns ``(coef_x, coef_l,
+    m)``: coefficients per right-hand side and ``m = W' P W``, with ``P`` the projection
+    onto the complement of all the columns.
+    """
+    s_xx = s_xw = s_ww = 0.0
+    elim = []
+    for g, nl in zip(grams, n_local):
+        x, l, w = slice(0, nb), slice(nb, nb + nl), slice(nb + nl, None)
+        inv = _scaled_pinv(g[l, l])
+        glx, glw = g[l, x], g[l, w]
+        s_xx = s_xx + g[x, x] - glx.T @ inv @ glx
+        s_xw = s_xw + g[x, w] - glx.T @ inv @ glw
+        s_ww = s_ww + g[w, w] - glw.T @ inv @ glw
+        elim.append((inv, glx, glw))
+    coef_x = _scaled_pinv(np.atleast_2d(s_xx)) @ s_xw
+    m = s_ww - s_xw.T @ coef_x
+    coef_l = [inv @ (glw - glx @ coef_x) for inv, glx, glw in elim]
+    return coef_x, coef_l, m
 
-    def solve(self, opts: FitOptions, frac_init: float) -> tuple[np.ndarray, float, np.ndarray, float, dict]:
-        f = 0.5 * cs.sumsqr(self.r) / self.y_scale
-        nlp = {"x": self.w, "f": f}
-        ipopt = {"print_level": 5 if opts.verbose else 0, "max_iter": opts.max_iter, "tol": opts.tol,
-                 "acceptable_tol": 1e-8, "acceptable_iter": 5, "sb": "yes"}
-        # Gauss-Newton Hessian J'J: positive semidefinite, so IPOPT takes full Newton-like steps
-        # instead of crawling with inertia correction through indefinite regions
-        lam_f = cs.MX.sym("lam_f")
-        lam_g = cs.MX.sym("lam_g", 0)
-        p = cs.MX.sym("p", 0)
-        jr = cs.jacobian(self.r, self.w)
-        hess = cs.triu(lam_f * (jr.T @ jr) / self.y_scale)
-        hess_fn = cs.Function("nlp_hess_l", [self.w, p, lam_f, lam_g], [hess],
-                              ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-        solver = cs.nlpsol("oe", "ipopt", nlp, {"ipopt": ipopt, "print_time": opts.verbose,
-                                               "show_eval_warnings": opts.verbose,
-                                               "hess_lag": hess_fn})
-        lbw = -np.inf * np.ones(self.w.shape[0])
-        ubw = np.inf * np.ones(self.w.shape[0])
-        w0 = np.zeros(self.w.shape[0])
-        w0[: self.n_theta] = self.z0
-        k = self.n_theta
-        if self.estimate_frac:
-            lbw[k], ubw[k], w0[k] = 0.0, self.ts, frac_init
-            k += 1
-        sol = solver(x0=w0, lbx=lbw, ubx=ubw)
-        stats = solver.stats()
-        wopt = np.asarray(sol["x"]).ravel()
-        theta = wopt[: self.n_theta] * self.scale
-        frac = float(wopt[self.n_theta]) if self.estimate_frac else self.frac0
-        # Jacobian of the simulated output in the unscaled variables, for the covariance
-        jac = -np.asarray(cs.Function("J", [self.w], [jr])(wopt))
-        jac[:, : self.n_theta] /= self.scale
-        return theta, frac, jac, float(sol["f"]) * 2 * self.y_scale, stats
+
+@dataclass
+class _Point:
+    """The model at one point of its nonlinear parameters, the linear ones solved."""
+
+    alpha: np.ndarray                 # free denominator coefficients (and the delay, when estimated)
+    theta: np.ndarray                 # alpha's denominator + the solved numerator
+    delay: float
+    locals_: list[np.ndarray]         # per experiment: initial condition, trend coefficients
+    sse: float
+    disc: Discretisation | None = None
+    cols: list | None = None          # per experiment: numerator rows, local rows
+
+
+class _Model:
+    """The output-error criterion as a separable least-squares problem (variable projection).
+
+    Nonlinear parameters ``alpha``: the free denominator coefficients and, when estimated,
+    the delay. Linear ones, solved exactly at every ``alpha``: the numerator (shared by every
+    experiment) and, per experiment, the initial condition and the trend. LM runs on
+    ``alpha`` only, with Kaufman's Jacobian of the projected residual (Golub and Pereyra,
+    2003): the linear parameters follow every step exactly, which removes the strong
+    coupling between a denominator change and the initial conditions that stalls a joint
+    Gauss-Newton iteration on integrating plants.
+    """
+
+    def __init__(self, structure: ModelStructure, exps: list[_Exp], ts: float, opts: FitOptions,
+                 estimate_delay: bool):
+        self.s, self.exps, self.ts, self.opts = structure, exps, ts, opts
+        self.estimate_delay = estimate_delay
+        self.n = structure.n_poles
+        self.nf = structure.n_free_poles
+        self.nb = structure.n_zeros + 1
+        self.n_beta = self.n if opts.estimate_x0 else 0
+        self.n_alpha = self.nf + (1 if estimate_delay else 0)
+        self.n_local = [self.n_beta + e.trend.shape[1] for e in exps]
+        self.e1 = np.eye(1, self.n)[0]
+
+    def split(self, alpha: np.ndarray, delay_fixed: float) -> tuple[np.ndarray, float]:
+        return alpha[: self.nf], (float(alpha[self.nf]) if self.estimate_delay else delay_fixed)
+
+    def stable(self, a: np.ndarray) -> bool:
+        if self.nf == 0 or not self.opts.stable:
+            return True
+        return bool(np.all(np.roots(np.concatenate([[1.0], a])).real < 0))
+
+    def inputs(self, d: Discretisation, e: _Exp) -> list[tuple[np.ndarray, np.ndarray]]:
+        ud = delayed_input(e.u, d.nd)
+        return [(d.g0, ud), (d.g1, delayed_input(ud, 1))] if d.f > 0 else [(d.g0, ud)]
+
+    def columns(self, d: Discretisation, e: _Exp) -> tuple[np.ndarray, np.ndarray]:
+        """Linear-parameter signals of one experiment as rows: numerator (theta order), locals."""
+        eye = np.eye(self.n)
+        num_rows = np.atleast_2d(response(d.phi, eye[self.nb - 1::-1], d.sos, d.den, e.n, self.inputs(d, e)))
+        if not self.n_beta:
+            return num_rows, e.trend.T
+        # e_1' Phi^k e_i = e_i' (Phi')^k e_1: every free-response signal in one pass
+        free = response(d.phi.T, eye, d.sos, d.den, e.n, (), self.e1)
+        return num_rows, (np.vstack([free, e.trend.T]) if e.trend.shape[1] else free)
+
+    def evaluate(self, alpha: np.ndarray, delay_fixed: float) -> _Point:
+        """Solve the linear parameters at ``alpha``; ``sse`` is inf for an unusable model."""
+        a, delay = self.split(alpha, delay_fixed)
+        bad = _Point(alpha, np.concatenate([a, np.zeros(self.nb)]), delay, [], math.inf)
+        if not self.stable(a):
+            return bad
+        theta0 = np.concatenate([a, np.zeros(self.nb - 1), [1.0]])
+        with np.errstate(over="ignore", invalid="ignore"):
+            try:
+                d = discretise(self.s, theta0, self.ts, delay, derivatives=False)
+                cols = [self.columns(d, e) for e in self.exps]
+                grams = []
+                for (xr, lr), e in zip(cols, self.exps):
+                    rows = np.vstack([xr, lr, e.y[None, :]])
+                    grams.append(rows @ rows.T)
+                if not all(np.all(np.isfinite(g)) for g in grams):
+                    return bad
+                coef_x, coef_l, _ = _eliminate(grams, self.nb, self.n_local)
+            except (ValueError, np.linalg.LinAlgError):
+                return bad
+            b = coef_x[:, 0]
+            locs = [c[:, 0] for c in coef_l]
+            sse = 0.0
+            for (xr, lr), e, loc in zip(cols, self.exps, locs):
+                r = e.y - b @ xr - loc @ lr
+                sse += float(r @ r)
+        theta = np.concatenate([a, b])
+        if not (np.all(np.isfinite(theta)) and math.isfinite(sse)):
+            return bad
+        return _Point(alpha, theta, delay, locs, sse, d, cols)
+
+    def sensitivities(self, p: _Point, d: Discretisation, e: _Exp, loc: np.ndarray) -> np.ndarray:
+        """Rows ``d yhat / d alpha`` of one experiment, linear parameters held (:mod:`.oe`)."""
+        n = self.n
+        ins = self.inputs(d, e)
+        rows = np.empty((self.n_alpha, e.n))
+        z = np.zeros((n, n))
+        c2 = np.concatenate([np.zeros(n), d.c[0]])
+        cf2 = np.concatenate([np.zeros(n), self.e1])
+        x0 = np.concatenate([loc[: self.n_beta], np.zeros(n)]) if self.n_beta else None
+        for i in range(self.nf):
+            phi2 = np.block([[d.phi, z], [d.dphi[i], d.phi]])
+            ins2 = [(np.vstack([d.g0, d.dg0[i]]), ins[0][1])]
+            if d.f > 0:
+                ins2.append((np.vstack([d.g1, d.dg1[i]]), ins[1][1]))
+            rows[i] = response(phi2, c2, d.sos2, d.den2, e.n, ins2, x0, cf2)
+        if self.estimate_delay:
+            ud, gd = ins[0][1], d.g_delay
+            rows[-1] = response(d.phi, d.c[0], d.sos, d.den, e.n, [(-gd, ud), (gd, delayed_input(ud, 1))])
+        return rows
+
+    def _cols(self, p: _Point, d: Discretisation) -> list:
+        return p.cols if p.cols is not None else [self.columns(d, e) for e in self.exps]
+
+    def reduced_normal(self, p: _Point) -> tuple[np.ndarray, np.ndarray]:
+        """``(J'J, -J'r)`` of the projected residual in ``alpha`` (Kaufman's Jacobian)."""
+        d = discretise(self.s, p.theta, self.ts, p.delay)
+        grams = []
+        for (xr, lr), e, loc in zip(self._cols(p, d), self.exps, p.locals_):
+            rows = np.vstack([xr, lr, e.y[None, :], self.sensitivities(p, d, e, loc)])
+            grams.append(rows @ rows.T)
+        _, _, m = _eliminate(grams, self.nb, self.n_local)
+        return m[1:, 1:], m[1:, 0]
+
+    def full_normal(self, p: _Point) -> np.ndarray:
+        """Normal matrix of the joint problem in ``(theta[, delay], locals)`` (for the covariance)."""
+        d = discretise(self.s, p.theta, self.ts, p.delay)
+        ng = self.s.n_params + (1 if self.estimate_delay else 0)
+        size = ng + sum(self.n_local)
+        h = np.zeros((size, size))
+        k = ng
+        for (xr, lr), e, loc, nl in zip(self._cols(p, d), self.exps, p.locals_, self.n_local):
+            sens = self.sensitivities(p, d, e, loc)
+            jg = np.vstack([sens[: self.nf], xr, sens[self.nf:]])
+            h[:ng, :ng] += jg @ jg.T
+            h[:ng, k:k + nl] = jg @ lr.T
+            h[k:k + nl, :ng] = h[:ng, k:k + nl].T
+            h[k:k + nl, k:k + nl] = lr @ lr.T
+            k += nl
+        return h
+
+
+# ---------------------------------------------------------------- Levenberg-Marquardt
+
+@dataclass
+class _LMResult:
+    point: _Point
+    status: str
+    iterations: int
+
+
+def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts: FitOptions, deadline: float,
+                         say: Callable[[str], None], max_iter: int | None = None) -> _LMResult:
+    """LM (Nielsen's damping update) in the nonlinear parameters on Jacobi-scaled normal
+    equations; the delay, when estimated, is kept in ``[0, max_delay]`` by holding it while it
+    sits on a bound that the step pushes against."""
+    p = start
+    if model.n_alpha == 0:
+        return _LMResult(p, "converged", 0)
+    h, grad = model.reduced_normal(p)
+    mu, nu = None, 2.0
+    lo, hi = 0.0, opts.max_delay
+    k_delay = model.n_alpha - 1 if model.estimate_delay else -1
+    limit = max_iter or opts.max_iter
+    it = 0
+    for it in range(1, limit + 1):
+        if time.perf_counter() > deadline:
+            return _LMResult(p, "time_limit", it - 1)
+        dg = np.sqrt(np.maximum(np.diag(h), 1e-300))
+        hs = h / np.outer(dg, dg)
+        gs = grad / dg
+        if mu is None:
+            mu = 1e-3 * float(np.max(np.diag(hs)))
+        free = np.ones(hs.shape[0], dtype=bool)
+        while True:
+            step = np.zeros_like(gs)
+            try:
+                step[free] = np.linalg.solve(hs[np.ix_(free, free)] + mu * np.eye(int(free.sum())), gs[free])
+            except np.linalg.LinAlgError:
+                mu, nu = mu * nu, nu * 2.0
+                continue
+            step = step / dg
+            if k_delay >= 0 and free[k_delay]:
+                tau, new = p.alpha[k_delay], p.alpha[k_delay] + step[k_delay]
+                if (tau <= lo and new < lo) or (tau >= hi and new > hi):
+                    free[k_delay] = False         # on the bound, pushed outwards: hold it there
+                    continue
+                step[k_delay] = min(max(new, lo), hi) - tau
+            pred = float(step @ grad - 0.5 * step @ h @ step)
+            trial = model.evaluate(p.alpha + step, delay_fixed)
+            rho = 0.5 * (p.sse - trial.sse) / pred if pred > 0 else -1.0
+            small = np.linalg.norm(step * dg) <= opts.tol * (np.linalg.norm(p.alpha * dg) + opts.tol)
+            if rho > 0:
+                converged = (min(pred, 0.5 * (p.sse - trial.sse)) <= opts.tol * 0.5 * p.sse) or small
+                p = trial
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                if opts.verbose:
+                    say(f"  LM {it:3d}: SSE {p.sse:.10g}, mu {mu:.3g}"
+                        + (f", delay {p.delay:.5g} s" if model.estimate_delay else ""))
+                if converged:
+                    return _LMResult(p, "converged", it)
+                h, grad = model.reduced_normal(p)
+                break
+            mu, nu = mu * nu, nu * 2.0
+            if small or mu > 1e16 * max(1.0, float(np.max(np.diag(hs)))):
+                return _LMResult(p, "converged", it)
+            if time.perf_counter() > deadline:
+                return _LMResult(p, "time_limit", it)
+    return _LMResult(p, "max_iter", it)
 
 
 # ---------------------------------------------------------------- initialisation
 
-def _ls_numerator(structure: ModelStructure, free_den: np.ndarray, exps, ts: float, delay: float):
-    """Numerator by linear least squares for a given free denominator; returns (theta, sse)."""
-    cols_all, y_all = [], []
-    n_num = structure.n_zeros + 1
-    for u, y in exps:
-        cols = []
-        for j in range(n_num):
-            unit = np.zeros(n_num)
-            unit[n_num - 1 - j] = 1.0
-            th = np.concatenate([free_den, unit])
-            cols.append(simulate_zoh(structure, th, u, ts, delay))
-        cols_all.append(np.column_stack(cols))
-        y_all.append(y)
-    phi, yy = np.vstack(cols_all), np.concatenate(y_all)
-    b, *_ = np.linalg.lstsq(phi, yy, rcond=None)
-    sse = float(np.sum((yy - phi @ b) ** 2))
-    return np.concatenate([free_den, b[::-1]]), sse
-
-
-def _grid_candidates(structure: ModelStructure, ts: float) -> list[np.ndarray]:
+def _grid_denominators(structure: ModelStructure, ts: float) -> list[np.ndarray]:
     nf = structure.n_free_poles
     if nf == 0:
         return [np.zeros(0)]
     nyq = np.pi / ts
-    poles = np.geomspace(0.3, 0.5 * nyq, 9)
-    out = [np.real(np.poly(np.full(nf, -p)))[1:] for p in poles]
+    out = [np.real(np.poly(np.full(nf, -p)))[1:] for p in np.geomspace(0.3, 0.5 * nyq, 7)]
     if nf >= 2:  # lightly damped pairs
-        for wn in np.geomspace(1.0, 0.3 * nyq, 5):
-            pair = [wn**2 * 0 + 1, 2 * 0.3 * wn, wn**2]
+        for wn in np.geomspace(1.0, 0.3 * nyq, 4):
             rest = np.real(np.poly(np.full(nf - 2, -wn)))
-            out.append(np.polymul(pair, rest)[1:])
+            out.append(np.polymul([1.0, 0.6 * wn, wn**2], rest)[1:])
     return out
 
 
-def _sse(structure, theta, exps, ts, delay) -> float:
-    """Simulation SSE of a candidate; unstable candidates that overflow count as infinite."""
+#: Samples used to rank the initial estimates: longer records are represented by evenly
+#: spaced chunks (each with its own initial condition), which keeps the start-up cost of a
+#: fit on a long log bounded while every part of the record has a say.
+RANKING_SAMPLES = 100_000
+#: Delays visited by the profile sweep of ``delay="auto"`` (evenly spaced over
+#: ``[0, max_delay]``, at most one per sample); the LM refines the delay continuously from
+#: the best of them.
+DELAY_SWEEP_POINTS = 7
+#: A further start runs only when its criterion is within this factor of the best start's.
+SECONDARY_START_RATIO = 4.0
+_CHUNK = 10_000
+
+
+def _ranking_model(model: _Model) -> _Model:
+    total = sum(e.n for e in model.exps)
+    if total <= RANKING_SAMPLES:
+        return model
+    chunks = []
+    for e in model.exps:
+        share = max(1, round(RANKING_SAMPLES * e.n / total / _CHUNK))
+        if e.n <= 2 * _CHUNK or share * _CHUNK >= e.n:
+            chunks.append(e)
+            continue
+        for start in np.linspace(0, e.n - _CHUNK, share).astype(int):
+            sl = slice(start, start + _CHUNK)
+            chunks.append(_Exp(e.u[sl], e.y[sl], _trend_basis(_CHUNK, model.s, model.opts), e.source))
+    return _Model(model.s, chunks, model.ts, model.opts, model.estimate_delay)
+
+
+def _candidates(model: _Model, delay: float, say) -> list[_Point]:
+    """Initial estimates at ``delay``: SRIVC and the pole grid, each with its linear
+    parameters solved, ranked on at most about :data:`RANKING_SAMPLES` samples; the best
+    are re-solved on all the data (best first)."""
+    full = model
+    model = _ranking_model(full)
+    s = model.s
+    dens = []
     try:
-        with np.errstate(over="ignore", invalid="ignore"):
-            sse = float(sum(np.sum((y - simulate_zoh(structure, theta, u, ts, delay)) ** 2) for u, y in exps))
-    except (ValueError, np.linalg.LinAlgError, OverflowError):
-        return np.inf
-    return sse if np.isfinite(sse) else np.inf
+        th = srivc(s, [(e.u, e.y) for e in model.exps], model.ts, delay=delay, iterations=4, tol=1e-4)
+        if np.all(np.isfinite(th)):
+            dens.append(th[: s.n_free_poles])
+    except (np.linalg.LinAlgError, ValueError):
+        say("SRIVC gave no estimate; starting from the pole grid only")
+    dens += _grid_denominators(s, model.ts)
+    extra = [delay] if model.estimate_delay else []
+    out = []
+    for a in dens:
+        p = model.evaluate(np.concatenate([a, extra]), delay)
+        if math.isfinite(p.sse):
+            p.cols = None        # the signals are recomputed for the few starts that are used
+            out.append(p)
+    out.sort(key=lambda p: p.sse)
+    if model is full:
+        return out
+    best = [full.evaluate(p.alpha, delay) for p in _distinct(out, max(full.opts.starts, 1))]
+    return sorted((p for p in best if math.isfinite(p.sse)), key=lambda p: p.sse)
 
 
-def _initialise(structure, exps, ts, delays, progress, keep: int = 1):
-    """Best initial estimate per delay; returns the ``keep`` best ``(sse, theta, delay)`` with
-    distinct integer delays, best first."""
-    per_delay = []
-    for d in delays:
-        cands = []
-        try:
-            cands.append(srivc(structure, exps, ts, delay=d))
-        except (np.linalg.LinAlgError, ValueError):
-            pass
-        for free in _grid_candidates(structure, ts):
-            theta, sse = _ls_numerator(structure, free, exps, ts, d)
-            cands.append(theta)
-        best = (np.inf, None, d)
-        for theta in cands:
-            if not np.all(np.isfinite(theta)):
-                continue
-            sse = _sse(structure, theta, exps, ts, d)
-            if sse < best[0]:
-                best = (sse, theta, d)
-        if best[1] is not None:
-            per_delay.append(best)
-    if not per_delay:
-        raise IlcdobError("no initial estimate could be formed: check that the input excites the system")
-    per_delay.sort(key=lambda c: c[0])
-    chosen, seen = [], set()
-    for cand in per_delay:
-        nd = int(math.floor(cand[2] / ts + 1e-9))
-        if nd not in seen:
-            seen.add(nd)
-            chosen.append(cand)
-        if len(chosen) == keep:
+def _distinct(cands: list[_Point], k: int) -> list[_Point]:
+    """The ``k`` best candidates whose denominators differ by more than 1 %."""
+    chosen: list[_Point] = []
+    for c in cands:
+        if all(np.linalg.norm(c.alpha - o.alpha) > 1e-2 * (np.linalg.norm(o.alpha) + 1e-12) for o in chosen):
+            chosen.append(c)
+        if len(chosen) == k:
             break
-    progress("initial estimate(s): " + ", ".join(f"delay {c[2]:.4g} s (SSE {c[0]:.4g})" for c in chosen))
     return chosen
+
+
+def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: FitOptions, start: _Point,
+                 deadline: float, say) -> list[_Point]:
+    """The criterion minimised over the model at each delay of a grid on ``[0, max_delay]``,
+    each point a short LM warm-started from its neighbour's solution (never a fit from
+    scratch per point). Returns the points at the local minima of this profile, best first,
+    with the delay as their last parameter."""
+    fixed = _Model(structure, exps, ts, opts, estimate_delay=False)
+    count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
+    prof = []
+    a = start.alpha[: structure.n_free_poles]
+    for d in np.linspace(0.0, opts.max_delay, count):
+        p0 = fixed.evaluate(a, float(d))
+        if not math.isfinite(p0.sse):
+            continue
+        p = _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
+        a = p.alpha
+        p.cols = None                # keep the profile light: signals are recomputed for the starts
+        prof.append(p)
+    if not prof:
+        return [start]
+    sse = [p.sse for p in prof]
+    say("delay sweep (s: SSE): " + ", ".join(f"{p.delay:.3g}: {p.sse:.4g}" for p in prof))
+    minima = [prof[i] for i in range(len(prof))
+              if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
+    return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.disc, p.cols)
+            for p in sorted(minima, key=lambda p: p.sse)]
 
 
 # ---------------------------------------------------------------- public entry
 
-def _experiments(data, input: str, output: str, structure: ModelStructure, opts: FitOptions):
+def _experiments(data, input: str, output: str, structure: ModelStructure, opts: FitOptions,
+                 say) -> tuple[list[_Exp], float]:
     if isinstance(data, FlightData):
         data = [data]
+    data = list(data)
     if not data:
         raise SignalError("`data`: no experiments given")
     ts = data[0].ts
+    need = 10 * (structure.n_params + structure.n_poles)
     exps = []
     for fd in data:
         if abs(fd.ts - ts) > 1e-9 * ts:
             raise SignalError(f"{fd.source}: sample time {fd.ts} s differs from {data[0].source} ({ts} s); "
                               "resample to one grid first")
-        u, y = fd[input], fd[output]
-        need = 10 * (structure.n_params + structure.n_poles)
-        if u.size < need:
-            raise SignalError(f"{fd.source}: {u.size} samples are too few for a model with "
-                              f"{structure.n_params} parameters (need at least {need})")
-        if np.std(u) == 0:
-            raise SignalError(f"{fd.source}: input `{input}` is constant: it does not excite the system")
-        exps.append((u, y))
+        pieces = fd.pieces()
+        for piece in pieces:
+            u, y = piece[input], piece[output]
+            if u.size < need:
+                if len(pieces) > 1:
+                    say(f"{piece.source}: piece of {u.size} samples between gaps skipped (fewer than {need})")
+                    continue
+                raise SignalError(f"{fd.source}: {u.size} samples are too few for a model with "
+                                  f"{structure.n_params} parameters (need at least {need})")
+            if np.std(u) == 0:
+                raise SignalError(f"{fd.source}: input `{input}` is constant: it does not excite the system")
+            exps.append(_Exp(u, y, _trend_basis(u.size, structure, opts), piece.source))
+    if not exps:
+        raise SignalError(f"`data`: no piece of at least {need} samples between the gaps of the logs")
+    if opts.delay == "auto" or (isinstance(opts.delay, float) and opts.delay > 0):
+        shortest = min(e.n for e in exps) * ts
+        limit = opts.max_delay if opts.delay == "auto" else float(opts.delay)
+        if limit >= 0.5 * shortest:
+            name = "max_delay" if opts.delay == "auto" else "delay"
+            raise SpecError(f"`{name}`: got {limit:g} s, but the shortest experiment lasts {shortest:g} s; "
+                            f"a delay must stay below half of it ({0.5 * shortest:g} s)")
     return exps, ts
 
 
@@ -341,7 +554,9 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
     Parameters
     ----------
     data : FlightData or list of FlightData
-        Estimation experiments (same sample time); fitted jointly.
+        Estimation experiments (same sample time); fitted jointly. Logs with gaps
+        (``FlightData.metadata["gaps"]``) are split there, each piece with its own initial
+        condition and trend.
     input, output : str
         Signal names of the plant input (e.g. commanded acceleration, m/s^2) and output
         (e.g. position, m).
@@ -349,63 +564,82 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
         Poles (incl. fixed integrators), zeros, integrators.
     options : FitOptions
     validation : FlightData or list, optional
-        Held-out experiments: their fit percent is reported (initial state estimated there
-        too, by linear least squares, as MATLAB's ``compare`` does).
+        Held-out experiments: their fit percent is reported (initial condition and trend
+        estimated there too, by linear least squares, as MATLAB's ``compare`` does).
     progress : callable, optional
         Receives progress lines (default: stderr).
 
     Returns
     -------
     TFEstimate
+        With ``solver`` holding the status (``converged``, ``max_iter``, ``time_limit``),
+        iterations, starts and wall time.
+
+    Warns
+    -----
+    RuntimeWarning
+        When the iteration or time limit stopped the search (the best iterate is returned).
     """
     opts = options or FitOptions()
     say = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
-    exps, ts = _experiments(data, input, output, structure, opts)
+    # every matrix here is tiny or tall-and-thin: BLAS threads only cost wake-ups (milliseconds
+    # per call on a loaded machine), so the fit runs single-threaded
+    with _blas_controller().limit(limits=1, user_api="blas"):
+        return _tfest(data, input, output, structure, opts, validation, say)
+
+
+@functools.lru_cache(maxsize=1)
+def _blas_controller() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     t_start = time.perf_counter()
-    if opts.delay == "auto":
-        delays = np.arange(0.0, opts.max_delay + 1e-12, ts / 2)
-    else:
-        delays = [float(opts.delay)]
+    deadline = t_start + (opts.time_limit if opts.time_limit is not None else math.inf)
+    exps, ts = _experiments(data, input, output, structure, opts, say)
     estimate_delay = opts.delay == "auto"
-    # delay and lag trade off: refine the three best delays of the scan, keep the best fit
-    starts = _initialise(structure, exps, ts, delays, say, keep=3 if estimate_delay else 1)
-    best = None
-    tried: set[int] = set()
-    for _, theta0, d0 in starts:
-        nd = int(math.floor(d0 / ts + 1e-9))
-        frac0 = d0 - nd * ts
-        while nd not in tried and nd >= 0:
-            tried.add(nd)
-            prob = _OEProblem(structure, exps, ts, nd, estimate_delay, frac0, theta0, opts)
-            theta, frac, jac, sse, stats = prob.solve(opts, frac0)
-            say(f"IPOPT (integer delay {nd} samples): {stats['return_status']}, {stats['iter_count']} "
-                f"iterations, SSE {sse:.6g}")
-            ok = stats["success"] or stats["return_status"] == "Solved_To_Acceptable_Level"
-            if ok and (best is None or sse < best[3]):
-                best = (theta, nd * ts + frac, jac, sse, stats, prob)
-            if not estimate_delay:
-                break
-            # fractional part at a bound: the optimum may lie in the neighbouring sample
-            if frac >= ts * (1 - 1e-3):
-                nd, frac0 = nd + 1, 0.0
-            elif frac <= ts * 1e-3 and nd > 0:
-                nd, frac0 = nd - 1, ts
-            else:
-                break
-            theta0 = theta
-    if best is None:
-        raise IlcdobError(f"IPOPT did not converge ({stats['return_status']}); try another model order, "
-                          "more excitation, or options.verbose=True to see the iterations")
-    theta, delay, jac, sse, stats, prob = best
-    n_obs = sum(u.size for u, _ in exps)
-    n_var = jac.shape[1]
-    sigma2 = sse / max(n_obs - n_var, 1)
-    jtj = jac.T @ jac
-    cov_all = sigma2 * np.linalg.pinv(jtj)
-    n_keep = structure.n_params + (1 if estimate_delay else 0)
-    cov = cov_all[:n_keep, :n_keep]
+    model = _Model(structure, exps, ts, opts, estimate_delay)
+    delay0 = 0.0 if estimate_delay else float(opts.delay)
+    cands = _candidates(model, delay0, say)
+    if not cands:
+        raise IlcdobError("no initial estimate could be formed (every candidate model diverged); check that "
+                          "the input excites the system and that the structure suits the data")
+    starts = _distinct(cands, opts.starts)
+    if estimate_delay:
+        starts = _delay_sweep(structure, exps, ts, opts, starts[0], deadline, say)[: opts.starts]
+    say("initial estimate(s): " + ", ".join(f"SSE {p.sse:.6g}" + (f" at delay {p.delay:.4g} s" if estimate_delay
+                                                                   else "") for p in starts))
+    best: _LMResult | None = None
+    runs = []
+    # further starts only where they compete: a start whose criterion is several times the
+    # best start's lies in a region the first run never needed to search
+    starts = [p0 for p0 in starts if p0.sse <= SECONDARY_START_RATIO * starts[0].sse]
+    for p0 in starts:
+        res = _levenberg_marquardt(model, p0, delay0, opts, deadline, say)
+        runs.append({"start_sse": p0.sse, "sse": res.point.sse, "status": res.status, "iterations": res.iterations})
+        say(f"LM: {res.status} after {res.iterations} iterations, SSE {p0.sse:.6g} -> {res.point.sse:.6g}")
+        if best is None or res.point.sse < best.point.sse:
+            best = res
+        if res.status == "time_limit":
+            break
+    assert best is not None
+    if best.status != "converged":
+        warnings.warn(f"tfest stopped at its {'iteration' if best.status == 'max_iter' else 'time'} limit "
+                      f"({best.status}); the best iterate is returned (SSE {best.point.sse:.6g}); raise "
+                      "FitOptions.max_iter/time_limit or check the model structure", RuntimeWarning, stacklevel=3)
+    p = best.point
+    theta, delay = p.theta, p.delay
+    n_obs = sum(e.n for e in exps)
+    h = model.full_normal(p)
+    sigma2 = p.sse / max(n_obs - h.shape[0], 1)
+    n_global = structure.n_params + (1 if estimate_delay else 0)
+    cov = sigma2 * _scaled_pinv(h)[:n_global, :n_global]
+    d = discretise(structure, theta, ts, delay, derivatives=False)
+    fitted = [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p, d), p.locals_)]
     return TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
-                               delay_estimated=estimate_delay, sigma2=sigma2, experiments=exps, ts=ts,
-                               validation=validation, input=input, output=output,
-                               solver={"status": stats["return_status"], "iterations": stats["iter_count"],
+                               delay_estimated=estimate_delay, sigma2=sigma2,
+                               experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
+                               input=input, output=output, trend=opts.trend, fitted=fitted,
+                               solver={"engine": "levenberg-marquardt, filtered sensitivities",
+                                       "status": best.status, "iterations": best.iterations, "starts": runs,
                                        "seconds": time.perf_counter() - t_start})
