@@ -1,39 +1,97 @@
-"""Export of learning filters: coefficient form, C header, application from coefficients.
+"""Export of learning filters: coefficient form and application from coefficients.
 
-A filter is written as ``H(z) = z^advance * N(z^-1) / D(z^-1)`` with ``N``, ``D`` in powers of
-``z^-1``, highest first (``D[0] = 1``): ``output(k)`` uses ``input(k + advance)``, i.e. run
-``N/D`` causally on the input shifted ``advance`` samples ahead. A non-causal zero-pole
-filter (:class:`~ilcdob.design.noncausal.ZPKFilter`) is converted exactly except for its
-anti-causal poles ``1/(z - p)``, ``|p| > 1``, which are expanded into the series
-``-(1/p) sum_m (z/p)^m`` truncated where ``|p|^-m`` falls below ``tol`` (about 22 terms for
-the ZOH sampling zero at -3.6): a finite advance, exact to ``tol``.
+A filter is written as ``H(z) = z^advance * N(z^-1) / D(z^-1)``: ``output(k)`` uses
+``input(k + advance)``, i.e. run ``N/D`` causally on the input shifted ``advance`` samples
+ahead. A non-causal zero-pole filter (:class:`~ilcdob.design.noncausal.ZPKFilter`) is
+converted exactly except for its anti-causal poles ``1/(z - p)``, ``|p| > 1``, which are
+expanded into the series ``-(1/p) sum_m (z/p)^m`` truncated where ``|p|^-m`` falls below
+``tol`` (about 22 terms for the ZOH sampling zero at -3.6): a finite advance, exact to ``tol``.
 
-Precision: the closed-form filters have a dozen poles and zeros clustered between 0.8 and 1
-(the loop's slow modes and the PID integrator). Expanded into one direct-form polynomial
-pair they lose accuracy at low frequency in double precision (about 1 % at 0.3 rad/s for
-the built-in fleet): implement them from ``sos`` (second-order sections of the same filter,
-``[b0, b1, b2, 1, a1, a2]`` rows, ``z^-1`` powers), which the export always includes and
-which :func:`apply_coefficients` prefers. ``num``/``den`` are kept for tools that want them.
+Canonical form: second-order sections. ``sos`` rows are ``[b0, b1, b2, 1, a1, a2]`` in
+powers of ``z^-1``, cascaded; :func:`apply_coefficients` and the C code of
+:mod:`.c_export` run them. The closed-form filters have a dozen poles and zeros clustered
+between 0.8 and 1 (the loops' slow modes and the PID integrator at z = 1); multiplied out
+into one direct-form pair ``num``/``den`` (``z^-1`` powers, highest first, ``den[0] = 1``)
+they lose the low-frequency response in double precision. ``num``/``den`` are therefore
+written only when their frequency response agrees with the sections' to
+:data:`DIRECT_FORM_RTOL` relative on the band of :func:`direct_form_grid` (four decades
+below Nyquist up to Nyquist); otherwise they are left out and ``num_den_omitted`` says by
+how much they disagree and where. A FIR (``den = [1]``, :mod:`.fir`) has no sections: its
+direct form is exact and canonical.
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import signal
 
-from ilcdob.atomic import write_text_atomic
 from ilcdob.errors import SpecError
 
 from .noncausal import ZPKFilter, as_signal, extend_smoothly
 
-__all__ = ["zpk_to_coefficients", "apply_coefficients", "c_header"]
+__all__ = ["zpk_to_coefficients", "apply_coefficients", "direct_form_grid", "direct_form_disagreement",
+           "DIRECT_FORM_RTOL"]
+
+#: Largest relative disagreement of ``num``/``den`` with ``sos`` for ``num``/``den`` to be written.
+DIRECT_FORM_RTOL = 1e-6
+
+_BAND_DECADES = 4     # the check band starts this many decades below Nyquist
+_GRID_POINTS = 2048   # log-spaced points over the band, and as many linearly spaced
 
 
-def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, object]:
-    """``{"num", "den", "advance"}`` of a (non-causal) zero-pole filter, see module docstring."""
+def direct_form_grid(ts: float) -> np.ndarray:
+    """Frequencies (rad/s) on which ``num``/``den`` are checked against the sections.
+
+    The union of 2048 log-spaced points from ``1e-4 * pi / ts`` to Nyquist ``pi / ts`` and
+    2048 linearly spaced points up to Nyquist: dense at low frequency, where clustered poles
+    make the direct form lose accuracy, and over the whole band. ``w = 0`` is excluded (the
+    PID integrator puts a pole of L1 at z = 1).
+    """
+    wn = math.pi / ts
+    return np.unique(np.concatenate([np.geomspace(wn * 10.0 ** -_BAND_DECADES, wn, _GRID_POINTS),
+                                     np.linspace(wn / _GRID_POINTS, wn, _GRID_POINTS)]))
+
+
+def direct_form_disagreement(num: Any, den: Any, sos: Any, ts: float) -> tuple[float, float]:
+    """Largest relative difference of ``num/den`` from ``sos`` on :func:`direct_form_grid`.
+
+    Returns
+    -------
+    rel : float
+        ``max |H_nd - H_sos| / |H_sos|`` (``inf`` if the direct form overflows or divides by 0).
+    w : float
+        Frequency of that maximum, rad/s.
+    """
+    w = direct_form_grid(ts)
+    zinv = np.exp(-1j * w * ts)
+    with np.errstate(all="ignore"):
+        h_nd = np.polyval(np.asarray(num, float)[::-1], zinv) / np.polyval(np.asarray(den, float)[::-1], zinv)
+        _, h_sos = signal.sosfreqz(np.asarray(sos, float), worN=w * ts)
+        rel = np.abs(h_nd - h_sos) / np.abs(h_sos)
+    rel = np.where(np.isfinite(rel), rel, np.inf)
+    i = int(np.argmax(rel))
+    return float(rel[i]), float(w[i])
+
+
+def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, Any]:
+    """Coefficient form of a (non-causal) zero-pole filter, see module docstring.
+
+    Parameters
+    ----------
+    f : ZPKFilter
+    tol : float
+        Truncation of the series of the anti-causal poles (relative size of the last term).
+
+    Returns
+    -------
+    dict
+        ``{"advance": int, "sos": [[b0, b1, b2, 1, a1, a2], ...]}`` plus either
+        ``"num"``, ``"den"`` (when they agree with ``sos`` to :data:`DIRECT_FORM_RTOL`) or
+        ``"num_den_omitted"`` (a sentence giving the disagreement).
+    """
     pc, pu = f.causal_poles, f.anticausal_poles
     num = np.real(np.poly(f.zeros)) if len(f.zeros) else np.array([1.0])   # in z^-1 after shift
     den = np.real(np.poly(pc)) if len(pc) else np.array([1.0])
@@ -60,51 +118,57 @@ def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, object]:
         sos_gain = gain * c[-1]
     n_extra = len(all_zeros) - len(pc)
     sos = signal.zpk2sos(all_zeros, np.concatenate([pc, np.zeros(max(n_extra, 0))]), sos_gain)
-    return {"num": [float(v) for v in gain * num], "den": [float(v) for v in den], "advance": int(advance),
-            "sos": sos.tolist()}
+    out: dict[str, Any] = {"advance": int(advance), "sos": sos.tolist()}
+    num = gain * num
+    rel, w = direct_form_disagreement(num, den, sos, f.ts)
+    if rel <= DIRECT_FORM_RTOL:
+        out["num"], out["den"] = [float(v) for v in num], [float(v) for v in den]
+    else:
+        grid = direct_form_grid(f.ts)
+        out["num_den_omitted"] = (f"direct-form polynomials disagree with the sections by {rel:.3g} relative at "
+                                  f"w = {w:.4g} rad/s (criterion {DIRECT_FORM_RTOL:g} over {grid[0]:.4g} to "
+                                  f"{grid[-1]:.4g} rad/s); use sos")
+    return out
 
 
-def apply_coefficients(coeffs: dict, x: object) -> np.ndarray:
-    """Run ``z^advance N/D`` over a whole trial (input continued smoothly past its end)."""
+def apply_coefficients(coeffs: dict[str, Any], x: object) -> np.ndarray:
+    """Run ``z^advance N/D`` over a whole trial (input continued smoothly past its end).
+
+    Parameters
+    ----------
+    coeffs : dict
+        A filter of ``filters.json``: ``advance`` and ``sos`` (preferred when present) or
+        ``num``/``den``.
+    x : array_like
+        The trial, one sample per sample time, starting at rest.
+
+    Returns
+    -------
+    numpy.ndarray
+        The filtered trial, same length as ``x``. The input is continued past its end by
+        :func:`~ilcdob.design.noncausal.extend_smoothly` (the advance needs it) and taken
+        as zero before its start.
+    """
     x = as_signal(x, "x")
+    if "advance" not in coeffs:
+        raise SpecError(f"filter coefficients: missing key `advance`; got keys {sorted(coeffs)}")
     adv = int(coeffs["advance"])
+    if adv < 0:
+        raise SpecError(f"`advance`: got {adv}, expected a number of samples >= 0")
     padded = extend_smoothly(x, adv + 8)
     if coeffs.get("sos"):
-        y = signal.sosfilt(np.asarray(coeffs["sos"], float), padded)
-    else:
+        sos = np.asarray(coeffs["sos"], float)
+        if sos.ndim != 2 or sos.shape[1] != 6 or not np.all(sos[:, 3] == 1.0):
+            raise SpecError(f"`sos`: expected rows [b0, b1, b2, 1, a1, a2], got an array of shape {sos.shape}")
+        y = signal.sosfilt(sos, padded)
+    elif "num" in coeffs and "den" in coeffs:
         num, den = np.asarray(coeffs["num"], float), np.asarray(coeffs["den"], float)
         if den.size == 0 or den[0] == 0:
             raise SpecError(f"`den`: leading coefficient must be non-zero, got {list(den)}")
         y = signal.lfilter(num, den, padded)
+    else:
+        why = coeffs.get("num_den_omitted", "")
+        raise SpecError("filter coefficients: neither `sos` nor `num`/`den` given"
+                        + (f" ({why})" if why else "") + f"; got keys {sorted(coeffs)}")
     return y[adv:adv + x.size]
 
-
-def _c_array(name: str, values) -> str:
-    body = ", ".join(f"{float(v):.17g}" for v in values)
-    return f"static const double {name}[{len(values)}] = {{{body}}};"
-
-
-def c_header(design: dict, guard: str = "ILCDOB_LEARNING_FILTERS_H") -> str:
-    """A C header with the coefficients of ``filters.json`` (``L1``, ``L2``)."""
-    lines = [f"/* Learning filters {design['from']} -> {design['to']}, method {design['method']}, written by ilcdob.",
-             " * y(k) = sum_i num[i] u(k + advance - i) - sum_{i>=1} den[i] y(k - i), den[0] = 1;",
-             " * L1 filters the previous system's error (m), L2 its learning signal (m/s^2); output in m/s^2. */",
-             f"#ifndef {guard}", f"#define {guard}", "",
-             f"#define ILCDOB_SAMPLE_TIME {float(design['sample_time']):.17g} /* s */"]
-    for key in ("L1", "L2"):
-        f = design[key]
-        lines += [f"#define ILCDOB_{key}_ADVANCE {int(f['advance'])}",
-                  _c_array(f"ilcdob_{key.lower()}_num", f["num"]),
-                  _c_array(f"ilcdob_{key.lower()}_den", f["den"])]
-        if f.get("sos"):
-            rows = ", ".join("{" + ", ".join(f"{float(v):.17g}" for v in row) + "}" for row in f["sos"])
-            lines += [f"/* {key} as second-order sections (preferred): rows b0 b1 b2 a0 a1 a2 */",
-                      f"#define ILCDOB_{key}_N_SOS {len(f['sos'])}",
-                      f"static const double ilcdob_{key.lower()}_sos[{len(f['sos'])}][6] = {{{rows}}};"]
-    lines += ["", f"#endif /* {guard} */", ""]
-    return "\n".join(lines)
-
-
-def write_c_header(path: str | Path, design: dict) -> None:
-    """Write :func:`c_header` atomically."""
-    write_text_atomic(path, c_header(design))

@@ -1,8 +1,9 @@
 """One learning design for a pair of systems (j-1 -> j), by method, and its outputs.
 
 This is the API behind ``ilcdob design``: it builds the design, the ``filters.json``
-content (discrete filters applied to the previous system's error and learning signal,
-``z^-1`` coefficients with a non-causal ``advance``, see :mod:`.export`), the lifted matrices
+content (discrete filters applied to the previous system's error and learning signal:
+second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.export`; the C
+code of :mod:`.c_export` runs them), the lifted matrices
 for the lifted methods, and the learning signal for a given trial of the previous system.
 """
 
@@ -59,7 +60,14 @@ class PairDesign:
             return f"lifted {f['n']}x{f['n']}"
         if self.method == "robust":
             return f"per-trial SOCP, {f['models']} models"
-        return ", ".join(f"{k}: {len(f[k]['num']) - 1}/{len(f[k]['den']) - 1}" for k in ("L1", "L2"))
+        return ", ".join(f"{k}: {_filter_size(f[k])}" for k in ("L1", "L2"))
+
+
+def _filter_size(coeffs: dict[str, Any]) -> str:
+    """``"17 SOS, advance 24"`` for sections, ``"79/0"`` (numerator/denominator degree) otherwise."""
+    if coeffs.get("sos"):
+        return f"{len(coeffs['sos'])} SOS, advance {coeffs['advance']}"
+    return f"{len(coeffs['num']) - 1}/{len(coeffs['den']) - 1}"
 
 
 def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | None = None,

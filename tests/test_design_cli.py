@@ -1,4 +1,4 @@
-"""`ilcdob design`: filters.json, C header, lifted.npz and the learning signal of a trial."""
+"""`ilcdob design`: filters.json, C code, lifted.npz and the learning signal of a trial."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def test_closed_form_coefficients_reproduce_the_filters(fleet, tmp_path, capsys)
                  "--out", str(out)]) == 0
     filters = json.loads((out / "filters.json").read_text())
     assert filters["method"] == "closed-form" and filters["from"] == "UAV1" and filters["sample_time"] == 0.02
-    assert filters["L1"]["den"][0] == 1.0 and filters["L1"]["advance"] > 0
+    assert filters["L1"]["sos"] and filters["L1"]["advance"] > 0
     # applying the exported coefficients gives the closed-form learning signal
     ref = closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2")).apply(fl.e, fl.d_f)
     from_json = apply_coefficients(filters["L1"], fl.e) + apply_coefficients(filters["L2"], fl.d_f)
@@ -47,15 +47,16 @@ def test_closed_form_coefficients_reproduce_the_filters(fleet, tmp_path, capsys)
     learned = simulate_flight(fleet.loop("UAV2"), np.zeros(n), d, d_f=ls["d_f"])
     assert rmse(learned.e) < 1e-4 * rmse(base.e)
     header = (out / "filters.h").read_text()
-    assert "ILCDOB_L1_ADVANCE" in header and "ilcdob_l1_sos" in header
+    assert "ILCDOB_UAV1_UAV2_L1_ADVANCE" in header and "void ilcdob_uav1_uav2_l1_apply(" in header
 
 
 def test_c_header_compiles(tmp_path):
     out = tmp_path / "cf"
     assert main(["design", "--from", "UAV2", "--to", "UAV3", "--out", str(out)]) == 0
     src = tmp_path / "use.c"
-    src.write_text('#include "filters.h"\nint main(void){return (int)(ilcdob_l1_den[0] - 1.0) + ILCDOB_L2_ADVANCE;}\n')
-    res = subprocess.run(["gcc", "-Wall", "-Werror", "-Wno-unused-variable", f"-I{out}", str(src), "-o",
+    src.write_text('#include "filters.h"\nint main(void){double u[3] = {0, 0, 0};\n'
+                   'ilcdob_uav2_uav3_l1_apply(u, u, 3); return (int)u[2] + ILCDOB_UAV2_UAV3_L2_ADVANCE;}\n')
+    res = subprocess.run(["gcc", "-Wall", "-Werror", f"-I{out}", str(src), str(out / "filters.c"), "-o",
                           str(tmp_path / "a.out")], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert subprocess.run([str(tmp_path / "a.out")]).returncode == 0

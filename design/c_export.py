@@ -1,0 +1,616 @@
+"""C99 code running exported learning filters, and the files of a design folder.
+
+:func:`c_code` turns the ``L1``/``L2`` filters of ``filters.json`` (:mod:`.export`) into a
+header and a source file with, for each filter (PREFIX: by default ``ilcdob_<from>_<to>``,
+see :func:`default_c_prefix`), ::
+
+    void PREFIX_l1_apply(const double *u, double *y, size_t n);
+
+filtering one recorded trial exactly as :func:`~ilcdob.design.export.apply_coefficients`
+does: the input is taken as zero before the trial, continued past its end by the
+least-squares cubic through its last 16 samples
+(:func:`~ilcdob.design.noncausal.extend_smoothly`), run through the second-order sections
+(or, for a FIR, the direct form) in the operation order of ``scipy.signal.sosfilt``
+(``lfilter``), and read ``advance`` samples ahead. The C code allocates nothing: the
+sections' state and the cubic's coefficients live in fixed-size local arrays, and the
+``advance`` continuation samples are computed on the fly, so the caller provides only the
+input and output arrays (``y`` may be ``u``: in place). The cubic is fitted with orthogonal
+polynomials on the centred abscissa (Forsythe's three-term recurrence), which solves the
+same least-squares problem as ``numpy.polyfit`` without its conditioning loss; the two
+agree to rounding.
+
+With ``float_variant`` the source also has ``PREFIX_l1_apply_f`` (``float`` data,
+coefficients and arithmetic) for single-precision FPUs. Its error relative to the double
+version is measured when the code is written, by running the same float arithmetic in
+numpy (float32) on :func:`reference_trial`, and stated in the header, ``filters.json`` and
+the folder's README.
+
+:func:`write_design_folder` writes ``filters.json``, ``filters.h``, ``filters.c`` and
+``README.md`` of one design, each atomically.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import signal
+
+from ilcdob.atomic import write_json_atomic, write_text_atomic
+from ilcdob.errors import SpecError
+
+from .export import apply_coefficients
+from .noncausal import as_signal
+
+__all__ = ["CCode", "c_code", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
+           "float_error", "design_readme", "write_design_folder", "FILTER_KEYS"]
+
+#: The filters of ``filters.json`` that get C functions, and their lower-case C names.
+FILTER_KEYS = ("L1", "L2")
+
+_FIT_MAX = 16   # samples the continuation is fitted to (extend_smoothly's n_fit)
+_FIT_DEG = 3    # its degree
+_C_IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+_REFERENCE_N = 2000
+_REFERENCE_TEXT = ("sin(0.5 t) + 0.3 sin(2.3 t + 0.4) + 0.05 sin(11 t + 1.1), t = k Ts, "
+                   f"{_REFERENCE_N} samples")
+
+
+# --------------------------------------------------------------------------- names
+
+
+def default_c_prefix(source: str, target: str) -> str:
+    """``ilcdob_<source>_<target>_`` in lower case, other characters than ``[a-z0-9_]`` -> ``_``."""
+    return re.sub(r"[^a-z0-9_]", "_", f"ilcdob_{source}_{target}_".lower())
+
+
+def check_c_prefix(prefix: str) -> str:
+    """Return ``prefix`` if it can start C identifiers, else raise :class:`SpecError`.
+
+    Valid: an ASCII letter followed by letters, digits and underscores (identifiers starting
+    with an underscore are reserved in C). The functions are named ``<prefix>l1_apply``, so
+    end the prefix with ``_`` for readable names.
+    """
+    if not isinstance(prefix, str) or not _C_IDENTIFIER.fullmatch(prefix):
+        raise SpecError(f"`--c-prefix`: got {prefix!r}, expected the start of a C identifier: an ASCII letter "
+                        "followed by letters, digits or '_' (e.g. 'uav1_uav2_')")
+    return prefix
+
+
+# --------------------------------------------------------------------------- numpy model of the C code
+
+
+def reference_trial(ts: float, n: int = _REFERENCE_N) -> np.ndarray:
+    """The test signal on which the float variant's error is measured.
+
+    ``sin(0.5 t) + 0.3 sin(2.3 t + 0.4) + 0.05 sin(11 t + 1.1)`` at ``t = k ts``, ``n`` samples
+    (default 2000): slow, medium and fast content, ending mid-slope.
+    """
+    t = np.arange(n) * float(ts)
+    return np.sin(0.5 * t) + 0.3 * np.sin(2.3 * t + 0.4) + 0.05 * np.sin(11.0 * t + 1.1)
+
+
+def _tail_samples(x: np.ndarray, count: int, dt: type) -> np.ndarray:
+    """The C continuation (Forsythe fit), operation by operation in the scalar type ``dt``."""
+    n = x.size
+    m = min(_FIT_MAX, n)
+    xs = [dt(v) for v in x[n - m:]]
+    deg = min(_FIT_DEG, m - 1)
+    half = dt(0.5) * dt(m - 1)
+    alpha, beta, coef = [dt(0.0)] * 4, [dt(0.0)] * 4, [dt(0.0)] * 4
+    p = [[dt(0.0)] * m for _ in range(deg + 1)]
+    norm_prev = dt(1.0)
+    for j in range(deg + 1):
+        s_pp = s_tpp = s_xp = dt(0.0)
+        for i in range(m):
+            t = dt(i) - half
+            if j == 0:
+                pj = dt(1.0)
+            elif j == 1:
+                pj = t - alpha[0]
+            else:
+                pj = (t - alpha[j - 1]) * p[j - 1][i] - beta[j - 1] * p[j - 2][i]
+            p[j][i] = pj
+            s_pp = s_pp + pj * pj
+            s_tpp = s_tpp + t * pj * pj
+            s_xp = s_xp + xs[i] * pj
+        alpha[j] = s_tpp / s_pp
+        beta[j] = dt(0.0) if j == 0 else s_pp / norm_prev
+        coef[j] = s_xp / s_pp
+        norm_prev = s_pp
+    t0 = dt(m) - half
+    out = np.empty(count, dtype=dt)
+    for q in range(count):
+        t = t0 + dt(q)
+        p_prev, pj, s = dt(0.0), dt(1.0), coef[0]
+        for j in range(1, deg + 1):
+            p_next = (t - alpha[j - 1]) * pj - beta[j - 1] * p_prev
+            p_prev, pj = pj, p_next
+            s = s + coef[j] * pj
+        out[q] = s
+    return out
+
+
+def _direct_form(coeffs: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """``num``, ``den`` normalised by ``den[0]`` and padded to one length (as ``lfilter`` does)."""
+    num, den = np.asarray(coeffs["num"], float), np.asarray(coeffs["den"], float)
+    if num.size == 0 or den.size == 0 or den[0] == 0:
+        raise SpecError(f"`num`/`den`: expected non-empty polynomials with den[0] != 0, got {num.size} "
+                        f"numerator and {den.size} denominator coefficients, den[0] = {den[:1].tolist()}")
+    size = max(num.size, den.size)
+    num = np.concatenate([num, np.zeros(size - num.size)]) / den[0]
+    den = np.concatenate([den, np.zeros(size - den.size)]) / den[0]
+    return num, den
+
+
+def emulate_c_filter(coeffs: dict[str, Any], x: object, dtype: type = np.float32) -> np.ndarray:
+    """Run the arithmetic of the C function on ``x`` in ``dtype`` (float32: the float variant).
+
+    Parameters
+    ----------
+    coeffs : dict
+        One filter of ``filters.json``.
+    x : array_like
+        A trial (rounded to ``dtype`` first, as the C caller's array would be).
+    dtype : numpy.float32 or numpy.float64
+
+    Returns
+    -------
+    numpy.ndarray
+        The filtered trial in ``dtype``, same length as ``x``.
+    """
+    x = as_signal(x, "x").astype(dtype)
+    if x.size == 0:
+        return x
+    adv = int(coeffs["advance"])
+    padded = np.concatenate([x, _tail_samples(x, adv, dtype)])
+    if coeffs.get("sos"):
+        y = signal.sosfilt(np.asarray(coeffs["sos"], float).astype(dtype), padded)
+    else:
+        num, den = _direct_form(coeffs)
+        if num.size == 1:
+            y = padded * dtype(num[0])
+        else:  # den has >= 2 entries here: lfilter's transposed direct form, as the C code
+            y = signal.lfilter(num.astype(dtype), den.astype(dtype), padded)
+    return np.asarray(y, dtype=dtype)[adv:adv + x.size]
+
+
+def float_error(coeffs: dict[str, Any], ts: float) -> float:
+    """Measured ``max |y_float - y_double| / max |y_double|`` on :func:`reference_trial`."""
+    x = reference_trial(ts)
+    ref = apply_coefficients(coeffs, x)
+    y32 = emulate_c_filter(coeffs, x, np.float32).astype(float)
+    return float(np.max(np.abs(y32 - ref)) / np.max(np.abs(ref)))
+
+
+# --------------------------------------------------------------------------- C text
+
+
+@dataclass(frozen=True)
+class _CType:
+    name: str        # C type
+    suffix: str      # function suffix
+    lit: str         # literal suffix
+    dtype: type      # numpy type of the coefficients
+
+    def num(self, v: float) -> str:
+        """A literal that the compiler rounds to exactly ``dtype(v)``."""
+        if self.dtype is np.float32:
+            text = f"{float(np.float32(v)):.9g}"
+        else:
+            text = f"{float(v):.17g}"
+        if not any(c in text for c in ".eEn"):
+            text += ".0"
+        return text + self.lit
+
+
+_DOUBLE = _CType("double", "", "", np.float64)
+_FLOAT = _CType("float", "_f", "f", np.float32)
+
+
+def _tail_c(prefix: str, ct: _CType) -> str:
+    """The continuation past the trial's end (shared by the filters of one type)."""
+    T, s, L = ct.name, ct.suffix, ct.lit
+    return f"""\
+/* Continuation of a trial past its end: the least-squares polynomial of degree
+   min(3, m - 1) through its last m = min(16, n) samples (numpy.polyfit + polyval in
+   ilcdob.design.noncausal.extend_smoothly), here in orthogonal polynomials on the centred
+   abscissa t_i = i - (m - 1)/2, i = 0..m-1 (Forsythe's three-term recurrence). */
+struct {prefix}tail{s} {{
+    int {'':<{len(T) - 3}}deg;         /* polynomial degree */
+    {T} t0;          /* abscissa of the first sample past the end */
+    {T} alpha[4];    /* recurrence p_j+1(t) = (t - alpha_j) p_j(t) - beta_j p_j-1(t) */
+    {T} beta[4];
+    {T} c[4];        /* the polynomial: sum_j c_j p_j(t) */
+}};
+
+static void {prefix}tail_init{s}(struct {prefix}tail{s} *f, const {T} *u, size_t n)
+{{
+    {T} p[4][{_FIT_MAX}];
+    {T} norm_prev = 1.0{L};
+    const size_t m = n < {_FIT_MAX} ? n : {_FIT_MAX};
+    const {T} *x = u + (n - m);
+    const {T} half = 0.5{L} * ({T})(m - 1);
+    size_t i;
+    int j;
+
+    f->deg = m > {_FIT_DEG} ? {_FIT_DEG} : (int)m - 1;
+    f->t0 = ({T})m - half;
+    for (j = 0; j <= f->deg; ++j) {{
+        {T} s_pp = 0.0{L}, s_tpp = 0.0{L}, s_xp = 0.0{L};
+        for (i = 0; i < m; ++i) {{
+            const {T} t = ({T})i - half;
+            {T} pj;
+            if (j == 0)
+                pj = 1.0{L};
+            else if (j == 1)
+                pj = t - f->alpha[0];
+            else
+                pj = (t - f->alpha[j - 1]) * p[j - 1][i] - f->beta[j - 1] * p[j - 2][i];
+            p[j][i] = pj;
+            s_pp = s_pp + pj * pj;
+            s_tpp = s_tpp + t * pj * pj;
+            s_xp = s_xp + x[i] * pj;
+        }}
+        f->alpha[j] = s_tpp / s_pp;
+        f->beta[j] = j == 0 ? 0.0{L} : s_pp / norm_prev;
+        f->c[j] = s_xp / s_pp;
+        norm_prev = s_pp;
+    }}
+}}
+
+/* Sample q (0, 1, ...) past the end of the trial. */
+static {T} {prefix}tail_eval{s}(const struct {prefix}tail{s} *f, size_t q)
+{{
+    const {T} t = f->t0 + ({T})q;
+    {T} p_prev = 0.0{L}, p = 1.0{L}, sum = f->c[0];
+    int j;
+
+    for (j = 1; j <= f->deg; ++j) {{
+        const {T} p_next = (t - f->alpha[j - 1]) * p - f->beta[j - 1] * p_prev;
+        p_prev = p;
+        p = p_next;
+        sum = sum + f->c[j] * p;
+    }}
+    return sum;
+}}
+"""
+
+
+def _array_c(ct: _CType, name: str, values: np.ndarray) -> str:
+    if values.ndim == 1:
+        body = ",\n    ".join(", ".join(ct.num(v) for v in values[i:i + 4]) for i in range(0, values.size, 4))
+        return f"static const {ct.name} {name}[{values.size}] = {{\n    {body}\n}};\n"
+    rows = ",\n    ".join("{" + ", ".join(ct.num(v) for v in row) + "}" for row in values)
+    return f"static const {ct.name} {name}[{values.shape[0]}][{values.shape[1]}] = {{\n    {rows}\n}};\n"
+
+
+def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
+    """Coefficient table and apply function of one filter."""
+    T, s = ct.name, ct.suffix
+    name = f"{prefix}{key.lower()}"
+    adv = int(coeffs["advance"])
+    if adv < 0:
+        raise SpecError(f"`{key}.advance`: got {adv}, expected a number of samples >= 0")
+    for part in ("sos", "num", "den"):
+        if coeffs.get(part) is not None and not np.all(np.isfinite(np.asarray(coeffs[part], float))):
+            raise SpecError(f"`{key}.{part}`: non-finite coefficient(s); expected finite numbers")
+    lines = []
+    if coeffs.get("sos"):
+        sos = np.asarray(coeffs["sos"], float)
+        if sos.ndim != 2 or sos.shape[1] != 6 or not np.all(sos[:, 3] == 1.0):
+            raise SpecError(f"`{key}.sos`: expected rows [b0, b1, b2, 1, a1, a2], got shape {sos.shape}")
+        plural = "s" if sos.shape[0] > 1 else ""
+        lines.append(f"/* {key}: {sos.shape[0]} second-order section{plural} in cascade, rows "
+                     "b0 b1 b2 a0 a1 a2 (a0 = 1) */\n")
+        lines.append(_array_c(ct, f"{name}_sos{s}", sos))
+        state = f"    {T} z[{sos.shape[0]}][2] = {{{{0.0{ct.lit}}}}};\n    size_t i;\n"
+        step = (f"        for (i = 0; i < {sos.shape[0]}; ++i) {{\n"
+                f"            const {T} x_new = {name}_sos{s}[i][0] * x + z[i][0];\n"
+                f"            z[i][0] = {name}_sos{s}[i][1] * x - {name}_sos{s}[i][4] * x_new + z[i][1];\n"
+                f"            z[i][1] = {name}_sos{s}[i][2] * x - {name}_sos{s}[i][5] * x_new;\n"
+                f"            x = x_new;\n"
+                f"        }}\n")
+    elif "num" in coeffs and "den" in coeffs:
+        num, den = _direct_form(coeffs)
+        size = num.size
+        fir = bool(np.all(den[1:] == 0.0))
+        kind = f"FIR, {size} taps" if fir else f"direct form, order {size - 1}"
+        lines.append(f"/* {key}: {kind} (transposed direct form, as scipy.signal.lfilter) */\n")
+        lines.append(_array_c(ct, f"{name}_num{s}", num))
+        if not fir:
+            lines.append(_array_c(ct, f"{name}_den{s}", den))
+        if size == 1:
+            state = ""
+            step = f"        x = x * {name}_num{s}[0];\n"
+        else:
+            feedback = "" if fir else f" - out * {name}_den{s}[i + 1]"
+            feedback_last = "" if fir else f" - out * {name}_den{s}[{size - 1}]"
+            state = f"    {T} z[{size - 1}] = {{0.0{ct.lit}}};\n    size_t i;\n"
+            step = (f"        {{\n"
+                    f"            const {T} out = z[0] + {name}_num{s}[0] * x;\n"
+                    f"            for (i = 0; i + 1 < {size - 1}; ++i)\n"
+                    f"                z[i] = z[i + 1] + x * {name}_num{s}[i + 1]{feedback};\n"
+                    f"            z[{size - 2}] = x * {name}_num{s}[{size - 1}]{feedback_last};\n"
+                    f"            x = out;\n"
+                    f"        }}\n")
+    else:
+        why = coeffs.get("num_den_omitted", "")
+        raise SpecError(f"`{key}`: neither `sos` nor `num`/`den` given" + (f" ({why})" if why else "")
+                        + f"; got keys {sorted(coeffs)}")
+    if adv:
+        body = (f"{state}    struct {prefix}tail{s} tail;\n    size_t k;\n\n"
+                f"    if (n == 0)\n        return;\n"
+                f"    {prefix}tail_init{s}(&tail, u, n);   /* before any output: y may be u */\n"
+                f"    for (k = 0; k < n + {adv}; ++k) {{\n"
+                f"        {T} x = k < n ? u[k] : {prefix}tail_eval{s}(&tail, k - n);\n"
+                f"{step}"
+                f"        if (k >= {adv})\n            y[k - {adv}] = x;\n"
+                f"    }}\n")
+    else:
+        body = (f"{state}    size_t k;\n\n"
+                f"    for (k = 0; k < n; ++k) {{\n"
+                f"        {T} x = u[k];\n"
+                f"{step}"
+                f"        y[k] = x;\n"
+                f"    }}\n")
+    lines.append(f"\nvoid {name}_apply{s}(const {T} *u, {T} *y, size_t n)\n{{\n{body}}}\n")
+    return "".join(lines)
+
+
+def _stack_values(coeffs: dict[str, Any]) -> int:
+    """Numbers held in local arrays by one apply function: filter state + continuation fit."""
+    if coeffs.get("sos"):
+        state = 2 * len(coeffs["sos"])
+    else:
+        state = max(len(coeffs["num"]), len(coeffs["den"])) - 1
+    fit = 4 * _FIT_MAX + 3 * 4 + 1 if int(coeffs["advance"]) else 0   # tail_init's p, the tail struct
+    return state + fit
+
+
+def _comment(text: str) -> str:
+    """``text`` safe inside a C block comment."""
+    return str(text).replace("*/", "* /")
+
+
+@dataclass(frozen=True)
+class CCode:
+    """The C files of one design.
+
+    Attributes
+    ----------
+    prefix : str
+        Prefix of every external symbol and macro (upper case for macros).
+    header, source : str
+        Text of ``filters.h`` and ``filters.c``.
+    float_errors : dict of str -> float
+        Per filter, the measured ``max |y_float - y_double| / max |y_double|`` of the float
+        variant on :func:`reference_trial` (empty without the float variant).
+    """
+
+    prefix: str
+    header: str
+    source: str
+    float_errors: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def info(self) -> dict[str, Any]:
+        """What ``filters.json`` records about the C code (key ``c``)."""
+        out: dict[str, Any] = {"header": "filters.h", "source": "filters.c", "prefix": self.prefix,
+                               "functions": [f"{self.prefix}{k.lower()}_apply" for k in FILTER_KEYS]}
+        if self.float_errors:
+            out["float"] = {"functions": [f"{self.prefix}{k.lower()}_apply_f" for k in FILTER_KEYS],
+                            "max_relative_error": self.float_errors,
+                            "measured_on": _REFERENCE_TEXT + " (float32 emulation of the C arithmetic)"}
+        return out
+
+
+def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bool = False) -> CCode:
+    """``filters.h`` and ``filters.c`` for the ``L1``/``L2`` filters of a design.
+
+    Parameters
+    ----------
+    filters : dict
+        ``filters.json`` content with ``from``, ``to``, ``method``, ``sample_time``, ``L1``, ``L2``.
+    prefix : str, optional
+        Symbol prefix (default :func:`default_c_prefix` of the pair), checked by :func:`check_c_prefix`.
+    float_variant : bool
+        Also emit ``<prefix>l1_apply_f``/``l2_apply_f`` in ``float``.
+
+    Returns
+    -------
+    CCode
+    """
+    missing = [k for k in ("from", "to", "method", "sample_time", *FILTER_KEYS) if k not in filters]
+    if missing:
+        raise SpecError(f"filters: missing key(s) {missing} for the C code; method "
+                        f"{filters.get('method')!r} has no L1/L2 filters (only closed-form and fir do)")
+    prefix = check_c_prefix(default_c_prefix(str(filters["from"]), str(filters["to"])) if prefix is None
+                            else prefix)
+    macro = prefix.upper()
+    guard = f"{macro}FILTERS_H"
+    pair = _comment(f"{filters['from']} -> {filters['to']}")
+    ts = float(filters["sample_time"])
+    types = [_DOUBLE, _FLOAT] if float_variant else [_DOUBLE]
+    errors = {k: float_error(filters[k], ts) for k in FILTER_KEYS} if float_variant else {}
+
+    decls = []
+    for ct in types:
+        for k in FILTER_KEYS:
+            decls.append(f"void {prefix}{k.lower()}_apply{ct.suffix}(const {ct.name} *u, {ct.name} *y, size_t n);")
+    adv = {k: int(filters[k]["advance"]) for k in FILTER_KEYS}
+    stack = max(_stack_values(filters[k]) for k in FILTER_KEYS)
+    float_note = ""
+    if float_variant:
+        float_note = (
+            " *\n * float variant (*_apply_f: float data, coefficients and arithmetic): measured\n"
+            " *   max |y_float - y_double| / max |y_double| = "
+            + ", ".join(f"{errors[k]:.2e} ({k})" for k in FILTER_KEYS)
+            + f"\n *   on {_REFERENCE_TEXT}\n *   (float32 emulation of this arithmetic when the file was written).\n")
+    header = f"""\
+/* Learning filters {pair} (method {_comment(filters['method'])}), written by `ilcdob design`.
+ *
+ * Between two flights, the learning signal of the next vehicle j is
+ *     d_f,j = L1{{e_j-1}} + L2{{d_f,j-1}}
+ * from the previous vehicle's recorded trial: its tracking error e (m) and the learning
+ * signal it flew, d_f (m/s^2), both sampled every {macro}SAMPLE_TIME seconds from the
+ * start of the trial. Call {prefix}l1_apply on e, {prefix}l2_apply on d_f, add the two
+ * outputs sample by sample (m/s^2) and feed the sum forward on the next flight.
+ *
+ * Each function filters one whole recorded trial of n samples (n >= 1; n = 0 does nothing)
+ * exactly as ilcdob.design.export.apply_coefficients does: the filter looks
+ * {macro}L1_ADVANCE (L2: {macro}L2_ADVANCE) samples ahead, the input is taken as zero
+ * before the trial and continued past its end by the least-squares cubic through its last
+ * 16 samples. y must hold n values and may be u (in place). No allocation: the filter
+ * state and the cubic live in local arrays of at most {stack} numbers ({8 * stack} bytes in
+ * double, {4 * stack} in float) plus a few scalars. Compile with -ffp-contract=off (no fused multiply-add)
+ * to reproduce the Python arithmetic operation by operation; contraction changes the
+ * results only at the level of rounding.
+{float_note} */
+#ifndef {guard}
+#define {guard}
+
+#include <stddef.h>
+
+#define {macro}SAMPLE_TIME {ts!r} /* s */
+#define {macro}L1_ADVANCE {adv['L1']} /* samples of look-ahead of L1 */
+#define {macro}L2_ADVANCE {adv['L2']} /* samples of look-ahead of L2 */
+
+#ifdef __cplusplus
+extern "C" {{
+#endif
+
+/* L1: previous vehicle's tracking error (m) -> learning signal (m/s^2). */
+{decls[0]}
+/* L2: previous vehicle's learning signal (m/s^2) -> learning signal (m/s^2). */
+{decls[1]}
+"""
+    if float_variant:
+        header += f"/* The same in float, see the error stated above. */\n{decls[2]}\n{decls[3]}\n"
+    header += f"""
+#ifdef __cplusplus
+}}
+#endif
+
+#endif /* {guard} */
+"""
+    parts = [f"/* Learning filters {pair}: see filters.h. Written by `ilcdob design`. */\n"
+             '#include "filters.h"\n']
+    for ct in types:
+        if any(adv.values()):
+            parts.append("\n" + _tail_c(prefix, ct))
+        for k in FILTER_KEYS:
+            parts.append("\n" + _filter_c(prefix, k, filters[k], ct))
+    return CCode(prefix=prefix, header=header, source="".join(parts), float_errors=errors)
+
+
+# --------------------------------------------------------------------------- design folder
+
+
+_FILE_TEXT = {
+    "filters.json": "the design: method, pair, sample time and, for closed-form and fir, the filters L1 and L2 "
+                    "(`advance` samples of look-ahead and second-order sections `sos`, rows "
+                    "[b0, b1, b2, 1, a1, a2] in powers of z^-1, or FIR taps `num`; direct-form `num`/`den` only "
+                    "where they reproduce the sections, else `num_den_omitted` says why)",
+    "filters.h": "C99 declarations of the functions running L1 and L2 on a recorded trial, with the sample time "
+                 "and the look-ahead of each filter",
+    "filters.c": "their implementation (no allocation; compile it with your firmware or ground tool)",
+    "lifted.npz": "numpy arrays: for norm-optimal the lifted matrices L1, L2 (N x N, d_f,j = L1 e_j-1 + "
+                  "L2 d_f,j-1); for robust the learning signal d_f, the predicted improvement ratios and errors",
+    "learning_signal.csv": "the learning signal d_f,j (m/s^2) computed from the given trial of the previous "
+                           "vehicle, to feed forward on the next flight",
+    "README.md": "this file",
+}
+
+
+def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | None = None) -> str:
+    """The ``README.md`` of a design folder holding ``files``.
+
+    Parameters
+    ----------
+    filters : dict
+        ``filters.json`` content.
+    files : sequence of str
+        Names of the files in the folder (described in this order).
+    code : CCode, optional
+        The C code written, for its function names and float figures.
+    """
+    src, tgt, ts = filters["from"], filters["to"], float(filters["sample_time"])
+    lines = [f"# Learning design {src} -> {tgt} ({filters['method']})", "",
+             f"Written by `ilcdob design`. Sample time Ts = {ts:g} s. Vehicle {tgt} learns from the previous "
+             f"vehicle {src}: d_f,j = L1{{e_j-1}} + L2{{d_f,j-1}}.", "", "## Files", ""]
+    lines += [f"- `{name}`: {_FILE_TEXT.get(name, '')}" for name in files]
+    lines += ["", "## Between two flights", ""]
+    if code is not None:
+        p = code.prefix
+        lines += [f"After a flight of {src}, take its recorded tracking error e (m) and the learning signal it "
+                  f"flew, d_f (m/s^2; zeros if none), sampled every {ts:g} s from the start of the trial. Then",
+                  "",
+                  "```c",
+                  '#include "filters.h"',
+                  "/* e, d_f: the recorded trial; a, b, d_next: arrays of n doubles */",
+                  f"{p}l1_apply(e, a, n);      /* L1{{e}}, m/s^2 */",
+                  f"{p}l2_apply(d_f, b, n);    /* L2{{d_f}}, m/s^2 */",
+                  "for (k = 0; k < n; ++k) d_next[k] = a[k] + b[k];",
+                  "```",
+                  "",
+                  f"and feed `d_next` forward (m/s^2) on the next flight of {tgt}, sample k at time k Ts. Each "
+                  "function filters the whole trial at once (the filters look ahead "
+                  f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
+                  "continued past its end by a cubic), exactly as "
+                  "`ilcdob.design.export.apply_coefficients` does in Python."]
+        if code.float_errors:
+            lines += ["", "The float variant (`*_apply_f`) differs from the double one by at most "
+                      + ", ".join(f"{v:.2e} ({k})" for k, v in code.float_errors.items())
+                      + f" of the output's maximum, measured on {_REFERENCE_TEXT}."]
+    elif "learning_signal.csv" in files:
+        lines += [f"`learning_signal.csv` is the learning signal of {tgt} for the trial given with `--trial`: "
+                  f"feed it forward on the next flight of {tgt}. For another trial of {src}, run "
+                  "`ilcdob design` again with that trial (columns time (s), error (m), learning (m/s^2))."]
+    else:
+        lines += [f"Method {filters['method']} has no filters to run on board: give a trial of {src} with "
+                  "`--trial` to get the learning signal."]
+    return "\n".join(lines) + "\n"
+
+
+def write_design_folder(out: str | Path, filters: dict[str, Any], others: Sequence[str] = (),
+                        prefix: str | None = None, float_variant: bool = False) -> dict[str, Any]:
+    """Write ``filters.h``, ``filters.c`` (when the design has L1/L2), ``README.md`` and ``filters.json``.
+
+    Each file is written atomically; ``filters.json`` last.
+
+    Parameters
+    ----------
+    out : path
+        The design folder (created if needed).
+    filters : dict
+        ``filters.json`` content; not modified.
+    others : sequence of str
+        Files the caller wrote in the folder (``lifted.npz``, ``learning_signal.csv``), for the README.
+    prefix : str, optional
+        C symbol prefix (default :func:`default_c_prefix`).
+    float_variant : bool
+        Also emit the float functions.
+
+    Returns
+    -------
+    dict
+        The ``filters.json`` content written: ``filters`` plus, with C code, key ``c``
+        (:attr:`CCode.info`).
+    """
+    out = Path(out)
+    data = dict(filters)
+    code = None
+    if all(k in filters for k in FILTER_KEYS):
+        code = c_code(filters, prefix, float_variant)
+        data["c"] = code.info
+        write_text_atomic(out / "filters.h", code.header)
+        write_text_atomic(out / "filters.c", code.source)
+    files = ["filters.json", *(["filters.h", "filters.c"] if code else []), *others, "README.md"]
+    write_text_atomic(out / "README.md", design_readme(data, files, code))
+    write_json_atomic(out / "filters.json", data)
+    return data
