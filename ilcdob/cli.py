@@ -66,7 +66,14 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--zeros", type=int, default=0, help="number of zeros (default 0)")
     idf.add_argument("--integrators", type=int, default=0, help="poles fixed at s = 0 (default 0)")
     idf.add_argument("--delay", default="0", help="input delay in s, or 'auto' to estimate it (default 0)")
-    idf.add_argument("--max-delay", type=float, default=0.3, help="upper bound of the delay search, s")
+    idf.add_argument("--max-delay", type=float, default=0.3,
+                     help="upper bound of the delay search, s (default 0.3; below half the shortest file)")
+    idf.add_argument("--trend", default="0",
+                     help="per-file output trend estimated with the model: 'none', or a polynomial degree 0-5 "
+                          "(0 = offset, the default; 1 = offset + slope; higher for slow drift)")
+    idf.add_argument("--time-limit", type=float, default=None,
+                     help="wall-time limit of the fit, s: the best model so far is written, with its status "
+                          "(default: none)")
     idf.add_argument("--validate", nargs="*", default=[], help="held-out data files")
     idf.add_argument("--start", type=float, default=None, help="segment start, s (log clock)")
     idf.add_argument("--stop", type=float, default=None, help="segment end, s (log clock)")
@@ -89,6 +96,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="trial length in samples for lifted matrices (default: the trial's, else 500)")
     des.add_argument("--trial", default=None,
                      help="CSV of the previous system's trial: columns time (s), error (m), learning (m/s^2)")
+    des.add_argument("--c-prefix", default=None,
+                     help="prefix of the C functions and macros in filters.h/filters.c (default "
+                          "ilcdob_<from>_<to>_, lower case); a C identifier, e.g. uav1_uav2_")
+    des.add_argument("--c-float", action="store_true",
+                     help="also emit float versions (*_apply_f) of the C functions, with their measured error")
     des.add_argument("--out", required=True, help="output folder")
 
     cmp = sub.add_parser("compare", help="fly every learning design through a scenario, nominal and over the "
@@ -154,6 +166,24 @@ def build_parser() -> argparse.ArgumentParser:
     ifl.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
     ifl.add_argument("--out", required=True, help="folder for flights (CSV, Parquet), models, figures and "
                                                   "identified_fleet.toml")
+
+    flt = sub.add_parser("fleet", help="edit fleet files: add a system flying an identified model.json")
+    flt_sub = flt.add_subparsers(dest="fleet_command", required=True)
+    fad = flt_sub.add_parser("add", help="add a system whose plant is a model.json of `ilcdob identify` (creates "
+                                         "the fleet file if needed); the fleet is validated before it is written")
+    fad.add_argument("fleet_file", metavar="FLEET.toml", help="fleet file to create or append to")
+    fad.add_argument("--name", required=True, help="name of the new system (unique in the fleet)")
+    fad.add_argument("--model", required=True, help="model.json of `ilcdob identify`; stored relative to the fleet file")
+    fad.add_argument("--kp", type=float, required=True, help="PID proportional gain, 1/s^2")
+    fad.add_argument("--ki", type=float, required=True, help="PID integral gain, 1/s^3")
+    fad.add_argument("--kd", type=float, required=True, help="PID derivative gain, 1/s")
+    fad.add_argument("--derivative-filter", type=float, default=0.05,
+                     help="time constant of the derivative low-pass, s (default 0.05)")
+    fad.add_argument("--q-order", type=_positive_int, required=True, help="order of the DOB low-pass Q")
+    fad.add_argument("--q-time-constant", type=float, required=True, help="time constant of Q, s")
+    fad.add_argument("--sample-time", type=float, default=None,
+                     help="new fleet file: sample time in s (default: the model.json's sample_time); an existing "
+                          "file keeps its own")
     return parser
 
 
@@ -199,6 +229,13 @@ def _identify(args: argparse.Namespace) -> int:
             delay = float(args.delay)
         except ValueError:
             raise SpecError(f"`--delay`: got {args.delay!r}, expected 'auto' or a number of seconds >= 0") from None
+    if args.trend == "none":
+        trend: int | None = None
+    else:
+        try:
+            trend = int(args.trend)
+        except ValueError:
+            raise SpecError(f"`--trend`: got {args.trend!r}, expected 'none' or a polynomial degree 0-5") from None
     structure = ModelStructure(args.poles, args.zeros, args.integrators)
     fields = {"u": args.input, "y": args.output}
     kw = {"start": args.start, "stop": args.stop}
@@ -209,13 +246,17 @@ def _identify(args: argparse.Namespace) -> int:
     say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     say(f"fitting {structure.n_params} parameters to {sum(len(d) for d in est_data)} samples "
         f"from {len(est_data)} file(s)")
-    est = tfest(est_data, "u", "y", structure, FitOptions(delay=delay, max_delay=args.max_delay),
+    est = tfest(est_data, "u", "y", structure, FitOptions(delay=delay, max_delay=args.max_delay, trend=trend,
+                                                         time_limit=args.time_limit),
                 validation=val_data or None, progress=say)
     data = est.to_dict()
     data["signals"] = {"input": args.input, "output": args.output}
     data["files"] = {"estimation": list(args.files), "validation": list(args.validate)}
     write_json_atomic(args.out, data)
     print(est.summary())
+    if est.solver.get("status") != "converged":
+        say(f"note: the fit stopped at its {est.solver.get('status')}; model.json holds the best model found "
+            "(solver.status)")
     if args.plot:
         from .identification.plots import plot_fit
 
@@ -230,14 +271,16 @@ def _design(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from .atomic import atomic_path, write_json_atomic, write_text_atomic
-    from .design.export import c_header
+    from .atomic import atomic_path
+    from .design.c_export import check_c_prefix, write_design_folder
     from .design.pair import design_pair, fleet_delta_sets
     from .design.robust import RobustOptions
     from .errors import SpecError
     from .identification.data import FlightData
     from .identification.loaders import load_csv
 
+    if args.c_prefix is not None:
+        check_c_prefix(args.c_prefix)
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     trial = load_csv(args.trial, {"e": "error", "d_f": "learning"}) if args.trial else None
     if trial is not None and abs(trial.ts - fleet.sample_time) > 1e-9:
@@ -257,8 +300,9 @@ def _design(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if "L1" in design.filters:
-        write_text_atomic(out / "filters.h", c_header(design.filters))
+    if "L1" not in design.filters and (args.c_prefix is not None or args.c_float):
+        print(f"ilcdob: note: method {args.method} has no L1/L2 filters; no C code written "
+              "(--c-prefix/--c-float ignored)", file=sys.stderr)
     arrays = design.lifted
     if trial is not None and design.robust is not None:
         res = design.robust.design(trial["e"], trial["d_f"])
@@ -268,17 +312,21 @@ def _design(args: argparse.Namespace) -> int:
         arrays = {"d_f": res.d_f, "ratios": res.ratios, "predicted_errors": res.errors}
     elif trial is not None:
         df = design.learn(trial["e"], trial["d_f"])
+    others = []
     if arrays is not None:
         with atomic_path(out / "lifted.npz") as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
+        others.append("lifted.npz")
     if trial is not None:
         FlightData(trial.t, {"learning": df}, {"learning": "m/s^2"},
                    source=f"learning signal of {args.target} from {args.trial}").to_csv(out / "learning_signal.csv")
+        others.append("learning_signal.csv")
         print(f"wrote {out / 'learning_signal.csv'}", file=sys.stderr)
-    write_json_atomic(out / "filters.json", design.filters)
-    print(json.dumps({k: v for k, v in design.filters.items() if k not in ("L1", "L2")}))
-    print(f"wrote {out / 'filters.json'}", file=sys.stderr)
+    written = write_design_folder(out, design.filters, others, prefix=args.c_prefix, float_variant=args.c_float)
+    print(json.dumps({k: v for k, v in written.items() if k not in ("L1", "L2")}))
+    names = ["filters.h", "filters.c"] if "c" in written else []
+    print(f"wrote {', '.join(str(out / n) for n in [*names, 'README.md', 'filters.json'])}", file=sys.stderr)
     return 0
 
 
@@ -363,6 +411,32 @@ def _identify_fleet(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fleet(args: argparse.Namespace) -> int:
+    from .errors import SpecError
+    from .fleet_io import add_system
+    from .identified import load_model
+    from .specs import DOBSpec, PIDSpec
+
+    path = Path(args.fleet_file)
+    created = not path.exists()
+    model_ts = load_model(args.model).sample_time
+    try:
+        controller = PIDSpec(args.kp, args.ki, args.kd, args.derivative_filter)
+        dob = DOBSpec(args.q_order, args.q_time_constant)
+    except SpecError as exc:
+        raise SpecError(f"{path}: system {args.name!r} (--kp/--ki/--kd/--derivative-filter, --q-order/"
+                        f"--q-time-constant): {exc}; nothing written") from exc
+    fleet = add_system(path, args.name, args.model, controller, dob, sample_time=args.sample_time)
+    if created:
+        origin = "--sample-time" if args.sample_time is not None else f"the sample_time of {args.model}"
+        print(f"created {path} with sample time {fleet.sample_time:g} s (from {origin})", file=sys.stderr)
+    if model_ts != fleet.sample_time:
+        print(f"note: {args.model} was identified from data sampled at {model_ts:g} s; the fleet runs at "
+              f"{fleet.sample_time:g} s (the continuous-time model is discretised at the fleet's)", file=sys.stderr)
+    print(f"added {args.name} to {path}: systems {fleet.names}", file=sys.stderr)
+    return 0
+
+
 def _report(args: argparse.Namespace) -> int:
     from .html_report import ReportOptions, write_report
 
@@ -394,6 +468,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _extensions(args)
         if args.command == "report":
             return _report(args)
+        if args.command == "fleet":
+            return _fleet(args)
     except IlcdobError as exc:
         print(f"ilcdob: error: {exc}", file=sys.stderr)
         return 2

@@ -8,7 +8,7 @@ what is valid and, where there is one, the next step.
 
 from __future__ import annotations
 
-__all__ = ["IlcdobError", "SpecError", "FleetError", "UnstableLoopError", "SignalError"]
+__all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError"]
 
 
 class IlcdobError(Exception):
@@ -21,6 +21,11 @@ class SpecError(IlcdobError, ValueError):
 
 class FleetError(IlcdobError, ValueError):
     """A fleet file is malformed; the message names the file, the system and the key."""
+
+
+class ModelFileError(IlcdobError, ValueError):
+    """A model file (the ``model.json`` of ``ilcdob identify``) is unreadable or malformed;
+    the message names the file, the key and the value."""
 
 
 class UnstableLoopError(IlcdobError, ValueError):

@@ -18,23 +18,43 @@ Schema (one ``[[system]]`` table per vehicle; units in comments)::
                        source = "..." }   # written by `ilcdob identify-fleet`
     uncertainty = { bound = 0.2 }   # |Delta(jw)| <= 0.2: the Delta set, ahead of the identification
 
+An identified plant can instead come straight from the ``model.json`` of ``ilcdob identify``
+(path relative to the fleet file's folder, or absolute; see :mod:`ilcdob.identified`)::
+
+    [[system]]
+    name = "UAV4"
+    plant = { model = "uav4.json" }         # num, den and delay from the file
+    controller = { kp = 3.0, ki = 0.3, kd = 2.4, derivative_filter = 0.05 }
+    dob = { q_order = 3, q_time_constant = 0.15 }
+
+The file's structure, parameters, covariance, fits and ``delay_estimated`` become the
+system's ``identification``, so its Delta set is the one of the covariance, as for fleets
+written by ``ilcdob identify-fleet``. ``model = { model = "x.json" }`` takes the nominal model
+``P_hat`` from a file likewise; the identification is always that of the nominal model's file
+(``model`` when given, else ``plant``), and a system with a model file for its nominal model
+may not also state ``identification``; a plant from a file may not also state ``delay``.
+``ilcdob fleet add`` (:func:`ilcdob.fleet_io.add_system`) appends such systems to a fleet file.
+
 Every system's loops are built (and checked for stability) when the fleet is loaded. Any
 problem raises :class:`~ilcdob.errors.FleetError` naming the file, the system and the key.
 """
 
 from __future__ import annotations
 
+import os
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
-from .errors import FleetError, SpecError, UnstableLoopError
+from .errors import FleetError, ModelFileError, SpecError, UnstableLoopError
+from .identified import IdentifiedModel, load_model
 from .loop import LoopSystem, build_loop
 from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
 
-__all__ = ["Fleet", "load_fleet", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict"]
+__all__ = ["Fleet", "load_fleet", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict", "fleet_from_systems",
+           "MODEL_FILE_KEY"]
 
 DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_fleet.toml"))
 
@@ -53,6 +73,8 @@ _TABLE_KEYS = {
                        "fit_validation": False, "source": False},
     "uncertainty": {"bound": True},
 }
+#: Key of a ``plant``/``model`` table naming a model file instead of giving num/den.
+MODEL_FILE_KEY = "model"
 _SPEC_CLASS = {"plant": PlantSpec, "model": PlantSpec, "controller": PIDSpec, "dob": DOBSpec,
                "noise": NoiseSpec, "identification": IdentificationSpec, "uncertainty": UncertaintySpec}
 
@@ -89,27 +111,62 @@ class Fleet:
         raise FleetError(f"{self.source}: no system named {name!r}; the fleet has {self.names}")
 
 
-def _check_keys(where: str, table: Any, spec: dict[str, bool]) -> None:
+def _check_keys(where: str, table: Any, spec: dict[str, bool], alternative: str = "") -> None:
     if not isinstance(table, dict):
-        raise FleetError(f"{where}: expected a table, got {table!r}")
+        raise FleetError(f"{where}: expected a table, got {table!r}{alternative}")
     unknown = sorted(set(table) - set(spec))
     if unknown:
-        raise FleetError(f"{where}: unknown key(s) {unknown}; valid keys are {sorted(spec)}")
+        raise FleetError(f"{where}: unknown key(s) {unknown}; valid keys are {sorted(spec)}{alternative}")
     missing = sorted(k for k, req in spec.items() if req and k not in table)
     if missing:
-        raise FleetError(f"{where}: missing key(s) {missing}")
+        raise FleetError(f"{where}: missing key(s) {missing}{alternative}")
 
 
-def _system_from_table(src: str, idx: int, table: Any) -> SystemSpec:
+def _model_file(label: str, key: str, sub: dict[str, Any], base_dir: Path | None) -> IdentifiedModel:
+    """The model file named by ``sub[MODEL_FILE_KEY]`` of table ``key``, loaded and checked."""
+    value = sub[MODEL_FILE_KEY]
+    others = [k for k in sub if k != MODEL_FILE_KEY]
+    if others:
+        listed = ", ".join(f"`{k}` = {sub[k]!r}" for k in others)
+        raise FleetError(f"{label}, key `{key}`: `{MODEL_FILE_KEY}` = {value!r} cannot be combined with {listed}; "
+                         f"give either a model file ({key} = {{ {MODEL_FILE_KEY} = \"uav4.json\" }}) or the "
+                         "polynomials")
+    if not isinstance(value, str) or not value.strip():
+        raise FleetError(f"{label}, key `{key}.{MODEL_FILE_KEY}`: got {value!r}, expected the path of a model.json "
+                         "(relative to the fleet file's folder, or absolute)")
+    path = Path(value)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(os.path.normpath(base_dir / path))  # lexical, like the relative path add_system stores
+    try:
+        return load_model(path)
+    except ModelFileError as exc:
+        raise FleetError(f"{label}, key `{key}.{MODEL_FILE_KEY}` = {value!r}: {exc}") from exc
+
+
+def _system_from_table(src: str, idx: int, table: Any, base_dir: Path | None = None) -> SystemSpec:
     label = f"{src}: system #{idx + 1}"
     if isinstance(table, dict) and isinstance(table.get("name"), str):
         label = f"{src}: system {table['name']!r}"
     _check_keys(label, table, _SYSTEM_KEYS)
+    files = {key: _model_file(label, key, table[key], base_dir) for key in ("plant", "model")
+             if isinstance(table.get(key), dict) and MODEL_FILE_KEY in table[key]}
+    if "plant" in files and "delay" in table:
+        raise FleetError(f"{label}, key `delay`: got {table['delay']!r}, but the plant's delay comes from "
+                         f"{table['plant'][MODEL_FILE_KEY]!r} (delay = {files['plant'].delay:g} s); remove `delay`")
+    nominal_key = "model" if "model" in table else "plant"
+    if nominal_key in files and "identification" in table:
+        raise FleetError(f"{label}, key `identification`: the identification comes from the model file "
+                         f"{table[nominal_key][MODEL_FILE_KEY]!r} of `{nominal_key}`; remove the "
+                         "`identification` table")
     parts: dict[str, Any] = {}
     for key, keys in _TABLE_KEYS.items():
         if key not in table:
             continue
-        _check_keys(f"{label}, key `{key}`", table[key], keys)
+        if key in files:
+            parts[key] = files[key].plant_spec()
+            continue
+        alternative = f", or only `{MODEL_FILE_KEY}` (a model.json)" if key in ("plant", "model") else ""
+        _check_keys(f"{label}, key `{key}`", table[key], keys, alternative)
         kwargs = dict(table[key])
         if key == "plant":
             kwargs["delay"] = table.get("delay", 0.0)
@@ -119,22 +176,77 @@ def _system_from_table(src: str, idx: int, table: Any) -> SystemSpec:
             raise FleetError(f"{label}, key `{key}`: {exc}") from exc
         except TypeError as exc:
             raise FleetError(f"{label}, key `{key}`: {exc}") from exc
+    if nominal_key in files:
+        parts["identification"] = files[nominal_key].identification_spec(source=table[nominal_key][MODEL_FILE_KEY])
     try:
         return SystemSpec(name=table["name"], **parts)
     except SpecError as exc:
         raise FleetError(f"{label}: {exc}") from exc
 
 
-def fleet_from_dict(data: dict[str, Any], source: str = "<memory>") -> Fleet:
-    """Validate a parsed fleet table and build its loops (see module docstring)."""
+def _check_sample_time(source: str, ts: Any) -> None:
+    if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not ts > 0 or ts == float("inf"):
+        raise FleetError(f"{source}: key `sample_time`: got {ts!r}, expected a number > 0 (s)")
+
+
+def fleet_from_dict(data: dict[str, Any], source: str = "<memory>", base_dir: str | Path | None = None) -> Fleet:
+    """Validate a parsed fleet table and build its loops (see module docstring).
+
+    Parameters
+    ----------
+    data : dict
+        The parsed TOML.
+    source : str
+        Where it came from, for messages.
+    base_dir : str or pathlib.Path, optional
+        Folder that relative model-file paths (``plant = { model = "..." }``) are relative to
+        (:func:`load_fleet`: the fleet file's folder; default: the working directory).
+
+    Raises
+    ------
+    FleetError
+        See :func:`load_fleet`.
+    """
     _check_keys(source, data, _TOP_KEYS)
     ts = data["sample_time"]
-    if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not ts > 0:
-        raise FleetError(f"{source}: key `sample_time`: got {ts!r}, expected a number > 0 (s)")
+    _check_sample_time(source, ts)
     tables = data["system"]
     if not isinstance(tables, list) or not tables:
         raise FleetError(f"{source}: key `system`: expected one or more [[system]] tables")
-    systems = [_system_from_table(source, i, t) for i, t in enumerate(tables)]
+    base = Path(base_dir) if base_dir is not None else None
+    systems = [_system_from_table(source, i, t, base) for i, t in enumerate(tables)]
+    return fleet_from_systems(systems, float(ts), source)
+
+
+def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source: str = "<memory>") -> Fleet:
+    """A fleet from system specs built in Python: names checked, loops built and stability-checked.
+
+    Plants may be python-control systems (``SystemSpec(plant=ct.tf(...), ...)``), or come
+    from identified models (:meth:`ilcdob.identified.IdentifiedModel.system_spec`).
+
+    Parameters
+    ----------
+    systems : sequence of SystemSpec
+        In learning order (file order).
+    sample_time : float
+        s (> 0).
+    source : str
+        Name used in messages.
+
+    Raises
+    ------
+    FleetError
+        No systems, a value that is not a ``SystemSpec``, a duplicated name, an invalid sample
+        time or an unstable loop; the message names the system and the key.
+    """
+    _check_sample_time(source, sample_time)
+    systems = list(systems)
+    if not systems:
+        raise FleetError(f"{source}: key `system`: expected one or more systems, got none")
+    for i, spec in enumerate(systems):
+        if not isinstance(spec, SystemSpec):
+            raise FleetError(f"{source}: system #{i + 1}: got {type(spec).__name__} {spec!r}, expected a SystemSpec")
+    ts = float(sample_time)
     names = [s.name for s in systems]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -149,17 +261,21 @@ def fleet_from_dict(data: dict[str, Any], source: str = "<memory>") -> Fleet:
         except SpecError as exc:
             raise FleetError(f"{source}: system {spec.name!r}: {exc}") from exc
         loops.append(lp)
-    return Fleet(sample_time=float(ts), systems=tuple(systems), loops=tuple(loops), source=source)
+    return Fleet(sample_time=ts, systems=tuple(systems), loops=tuple(loops), source=source)
 
 
 def load_fleet(path: str | Path) -> Fleet:
     """Load and validate a fleet TOML file.
 
+    Relative model-file paths (``plant = { model = "uav4.json" }``) are relative to the fleet
+    file's folder.
+
     Raises
     ------
     FleetError
-        Unreadable file, TOML syntax error, missing or unknown keys, invalid values,
-        improper ``M``, or an unstable loop; the message names the file, system and key.
+        Unreadable file, TOML syntax error, missing or unknown keys, invalid values, an
+        unreadable or malformed model file, improper ``M``, or an unstable loop; the message
+        names the file, system and key.
     """
     path = Path(path)
     try:
@@ -170,7 +286,7 @@ def load_fleet(path: str | Path) -> Fleet:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FleetError(f"{path}: not valid TOML: {exc}") from exc
-    return fleet_from_dict(data, str(path))
+    return fleet_from_dict(data, str(path), base_dir=path.parent)
 
 
 def default_fleet() -> Fleet:

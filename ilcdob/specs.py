@@ -1,7 +1,9 @@
 """Configuration dataclasses of one system: plant, PID, DOB and its own noise.
 
 Units: time in s, position in m, acceleration in m/s^2, frequency in Hz unless a field
-says rad/s. Transfer functions are continuous-time polynomials in s, highest power first.
+says rad/s. Transfer functions are continuous-time polynomials in s, highest power first;
+a plant may also be given as a python-control ``TransferFunction`` or ``StateSpace``
+(continuous-time, SISO, strictly proper; see :meth:`PlantSpec.from_lti`).
 All dataclasses are frozen and validated in ``__post_init__``; a bad value raises
 :class:`~ilcdob.errors.SpecError` naming the field, the value and what is valid.
 """
@@ -10,12 +12,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
+import control as ct
 import numpy as np
 
 from .errors import SpecError
 
-__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "SystemSpec"]
+__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "SystemSpec",
+           "LTI_NUMERATOR_RTOL"]
 
 
 def _poly(name: str, values: object) -> tuple[float, ...]:
@@ -30,7 +35,50 @@ def _poly(name: str, values: object) -> tuple[float, ...]:
     nz = np.flatnonzero(arr)
     if nz.size == 0:
         raise SpecError(f"`{name}`: polynomial is identically zero ({values!r})")
-    return tuple(float(v) for v in arr[nz[0]:])
+    return tuple(float(v) + 0.0 for v in arr[nz[0]:])  # + 0.0: no -0.0 in files and messages
+
+
+#: Leading numerator coefficients of a StateSpace converted to a transfer function that are
+#: below this fraction of the largest numerator coefficient are conversion roundoff (the
+#: Markov parameters ``C A^k B`` that are zero), and are dropped.
+LTI_NUMERATOR_RTOL = 1e-10
+
+
+def _lti_description(sys: Any) -> str:
+    kind = type(sys).__name__
+    try:
+        return f"{kind} with {sys.ninputs} input(s), {sys.noutputs} output(s), dt = {sys.dt!r}"
+    except AttributeError:
+        return kind
+
+
+def _lti_polys(sys: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(num, den) of a continuous-time SISO strictly proper python-control system."""
+    if not isinstance(sys, (ct.TransferFunction, ct.StateSpace)):
+        raise SpecError(f"`plant`: got a {_lti_description(sys)}; expected a python-control TransferFunction or "
+                        "StateSpace, or num and den polynomials")
+    if sys.ninputs != 1 or sys.noutputs != 1:
+        raise SpecError(f"`plant`: got a {_lti_description(sys)}; expected a SISO system (input: commanded "
+                        "acceleration, m/s^2; output: position, m)")
+    if not sys.isctime():
+        raise SpecError(f"`plant`: got a discrete-time {_lti_description(sys)}; expected a continuous-time "
+                        "system (dt = 0): ilcdob discretises the plant itself at the fleet's sample time")
+    if isinstance(sys, ct.StateSpace):
+        d = float(np.asarray(sys.D, dtype=float).ravel()[0])
+        if d != 0.0:
+            raise SpecError(f"`plant`: got a {_lti_description(sys)} and D = {d!r}; the plant must be "
+                            "strictly proper (D = 0)")
+        if sys.nstates == 0:
+            raise SpecError(f"`plant`: got a {_lti_description(sys)} without states and D = 0: the transfer "
+                            "function is identically zero")
+        tf = ct.tf(sys)
+        num = np.asarray(tf.num[0][0], dtype=float)
+        den = np.asarray(tf.den[0][0], dtype=float)
+        big = np.abs(num) > LTI_NUMERATOR_RTOL * np.max(np.abs(num), initial=0.0)
+        if np.any(big):
+            num = num[np.flatnonzero(big)[0]:]
+        return num, den
+    return np.asarray(sys.num[0][0], dtype=float), np.asarray(sys.den[0][0], dtype=float)
 
 
 def _positive(name: str, value: float, *, allow_zero: bool = False) -> None:
@@ -44,6 +92,11 @@ def _positive(name: str, value: float, *, allow_zero: bool = False) -> None:
 class PlantSpec:
     """Continuous-time plant ``P(s) = num(s)/den(s) * exp(-delay*s)``.
 
+    ``PlantSpec(num, den, delay)`` takes the polynomials; ``PlantSpec(sys, delay=...)`` or
+    :meth:`from_lti` takes a python-control ``TransferFunction`` or ``StateSpace``
+    (continuous-time, SISO, strictly proper; python-control has no delay, so it is given
+    separately). Either way the fields hold the polynomials.
+
     Attributes
     ----------
     num, den : tuple of float
@@ -51,13 +104,30 @@ class PlantSpec:
         (m/s^2); output: position (m).
     delay : float
         Input delay in s (>= 0).
+
+    Raises
+    ------
+    SpecError
+        Non-finite or empty polynomials, a negative delay, an improper plant, or a
+        python-control system that is discrete-time, MIMO or improper (the message names it).
     """
 
     num: tuple[float, ...]
-    den: tuple[float, ...]
+    den: tuple[float, ...] = ()
     delay: float = 0.0
 
     def __post_init__(self) -> None:
+        if isinstance(self.num, ct.LTI):
+            den_given = not (isinstance(self.den, tuple) and len(self.den) == 0)
+            if den_given:
+                raise SpecError(f"`plant.den`: got {self.den!r} together with a python-control system as `num`; "
+                                "give either the system alone or the num and den polynomials")
+            num, den = _lti_polys(self.num)
+            object.__setattr__(self, "num", num)
+            object.__setattr__(self, "den", den)
+        elif isinstance(self.den, tuple) and len(self.den) == 0:
+            raise SpecError(f"`plant.den`: missing (num = {self.num!r}); give num and den polynomials, or a "
+                            "python-control TransferFunction or StateSpace alone")
         object.__setattr__(self, "num", _poly("plant.num", self.num))
         object.__setattr__(self, "den", _poly("plant.den", self.den))
         object.__setattr__(self, "delay", float(self.delay))
@@ -67,6 +137,35 @@ class PlantSpec:
                 f"`plant`: must be strictly proper (deg num < deg den), got num={list(self.num)}, "
                 f"den={list(self.den)}"
             )
+
+    @classmethod
+    def from_lti(cls, sys: ct.TransferFunction | ct.StateSpace, delay: float = 0.0) -> "PlantSpec":
+        """The plant ``sys(s) * exp(-delay*s)`` from a python-control system.
+
+        Parameters
+        ----------
+        sys : control.TransferFunction or control.StateSpace
+            Continuous-time (``dt = 0``), SISO, strictly proper. A ``StateSpace`` must have
+            ``D = 0``; it is converted with ``control.tf`` and leading numerator coefficients
+            below ``LTI_NUMERATOR_RTOL`` times the largest one (conversion roundoff) are dropped.
+        delay : float
+            Input delay, s (>= 0).
+
+        Raises
+        ------
+        SpecError
+            ``sys`` is not a TransferFunction/StateSpace, is discrete-time, MIMO or not
+            strictly proper, or ``delay`` is negative.
+        """
+        if not isinstance(sys, ct.LTI):
+            raise SpecError(f"`plant`: got {type(sys).__name__} {sys!r}; expected a python-control "
+                            "TransferFunction or StateSpace")
+        return cls(sys, delay=delay)
+
+    @property
+    def transfer_function(self) -> ct.TransferFunction:
+        """``num(s)/den(s)`` as a python-control transfer function (without the delay)."""
+        return ct.tf(list(self.num), list(self.den))
 
     @property
     def relative_degree(self) -> int:
@@ -236,12 +335,15 @@ class SystemSpec:
     name : str
         Unique name in the fleet.
     plant : PlantSpec
-        The true plant (what the simulation flies).
+        The true plant (what the simulation flies). A python-control ``TransferFunction`` or
+        ``StateSpace`` is accepted and converted with :meth:`PlantSpec.from_lti` (no delay;
+        pass a ``PlantSpec.from_lti(sys, delay=...)`` for one).
     controller : PIDSpec
     dob : DOBSpec
     model : PlantSpec or None
         The nominal model ``P_hat`` used by ``M = Q/P_hat`` and by the learning filters;
         ``None`` means the model is exact (``P_hat = P``), as in the paper's simulations.
+        Python-control systems are accepted as for ``plant``.
     noise : NoiseSpec
         The system's own process noise.
     identification : IdentificationSpec or None
@@ -262,6 +364,18 @@ class SystemSpec:
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise SpecError(f"`name`: got {self.name!r}, expected a non-empty string")
+        for key in ("plant", "model"):
+            value = getattr(self, key)
+            if value is None and key == "model":
+                continue
+            if isinstance(value, ct.LTI):
+                try:
+                    object.__setattr__(self, key, PlantSpec.from_lti(value))
+                except SpecError as exc:
+                    raise SpecError(f"system {self.name!r}, `{key}`: {exc}") from exc
+            elif not isinstance(value, PlantSpec):
+                raise SpecError(f"system {self.name!r}, `{key}`: got {type(value).__name__} {value!r}; expected a "
+                                "PlantSpec or a python-control TransferFunction or StateSpace")
         rel = self.nominal_plant.relative_degree
         if self.dob.q_order < rel:
             raise SpecError(

@@ -1,0 +1,276 @@
+"""Writing fleet files: specs to TOML text, and adding an identified system to a fleet file.
+
+:func:`fleet_to_toml` writes a whole fleet in the schema of :mod:`ilcdob.fleet` (numbers with
+``repr``, so that the file loads back to equal specs); a system may refer to its identified
+``model.json`` instead of stating num/den/delay/identification. :func:`add_system` (behind
+``ilcdob fleet add``) creates a fleet file or appends one ``[[system]]`` table to it, keeping
+the rest of the file (comments included) byte for byte, after validating the whole resulting
+fleet (keys, values, model file, stable loops); the file is written atomically, so a refused
+system leaves it unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .atomic import write_text_atomic
+from .errors import FleetError
+from .fleet import MODEL_FILE_KEY, Fleet, fleet_from_dict
+from .identified import load_model
+from .specs import DOBSpec, NoiseSpec, PIDSpec, SystemSpec, UncertaintySpec
+
+__all__ = ["fleet_to_toml", "system_table", "system_to_toml", "toml_value", "add_system", "model_reference"]
+
+
+def _toml_string(text: str) -> str:
+    out = []
+    for ch in text:
+        code = ord(ch)
+        if ch == '"':
+            out.append('\\"')
+        elif ch == "\\":
+            out.append("\\\\")
+        elif ch == "\t":
+            out.append(ch)
+        elif code < 0x20 or code == 0x7F:
+            out.append(f"\\u{code:04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+def toml_value(value: Any) -> str:
+    """``value`` as a TOML value: bool, int, float (``repr``; ``nan``/``inf``), str, list, inline table.
+
+    Raises
+    ------
+    FleetError
+        A value of another type (the message names it).
+    """
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        value = float(value)  # repr of a NumPy float is "np.float64(...)"
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return _toml_string(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{ " + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + " }"
+    raise FleetError(f"cannot write {type(value).__name__} {value!r} to TOML; expected bool, int, float, str, "
+                     "list or table")
+
+
+def _plant_table(plant: Any, with_delay: bool) -> dict[str, Any]:
+    table: dict[str, Any] = {"num": list(plant.num), "den": list(plant.den)}
+    if with_delay:
+        table["delay"] = plant.delay
+    return table
+
+
+def system_table(spec: SystemSpec, model_file: str | None = None) -> dict[str, Any]:
+    """One ``[[system]]`` table of ``spec`` in the fleet schema (see :mod:`ilcdob.fleet`).
+
+    Parameters
+    ----------
+    spec : SystemSpec
+    model_file : str, optional
+        Path (as it should appear in the file) of the ``model.json`` the nominal model was
+        identified in: it then stands for the plant (``plant = { model = ... }``) or, when the
+        system has a separate ``model``, for that (``model = { model = ... }``), replacing the
+        polynomials, delay and ``identification`` it defines.
+
+    Returns
+    -------
+    dict
+        Keys in file order; optional tables only when they differ from their defaults.
+    """
+    table: dict[str, Any] = {"name": spec.name}
+    file_is_model = model_file is not None and spec.model is not None
+    if model_file is not None and not file_is_model:
+        table["plant"] = {MODEL_FILE_KEY: model_file}
+    else:
+        table["plant"] = _plant_table(spec.plant, with_delay=False)
+        table["delay"] = spec.plant.delay
+    if spec.model is not None:
+        table["model"] = {MODEL_FILE_KEY: model_file} if file_is_model else _plant_table(spec.model, with_delay=True)
+    c, q = spec.controller, spec.dob
+    table["controller"] = {"kp": c.kp, "ki": c.ki, "kd": c.kd, "derivative_filter": c.derivative_filter}
+    if not c.acceleration_feedforward:
+        table["controller"]["acceleration_feedforward"] = False
+    table["dob"] = {"q_order": q.q_order, "q_time_constant": q.q_time_constant}
+    if spec.noise != NoiseSpec():
+        n = spec.noise
+        table["noise"] = {"amplitude": n.amplitude, "frequency": n.frequency, "phase": n.phase}
+    if spec.identification is not None and model_file is None:
+        i = spec.identification
+        table["identification"] = {
+            "poles": i.poles, "zeros": i.zeros, "integrators": i.integrators, "parameters": list(i.parameters),
+            "covariance": [list(row) for row in i.covariance], "delay_estimated": i.delay_estimated,
+            "fit_estimation": i.fit_estimation, "fit_validation": i.fit_validation, "source": i.source}
+    if spec.uncertainty is not None:
+        table["uncertainty"] = {"bound": spec.uncertainty.bound}
+    return table
+
+
+def _table_to_toml(table: Mapping[str, Any]) -> str:
+    return "[[system]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in table.items())
+
+
+def system_to_toml(spec: SystemSpec, model_file: str | None = None) -> str:
+    """The ``[[system]]`` block of ``spec`` (see :func:`system_table`), ending in a newline."""
+    return _table_to_toml(system_table(spec, model_file))
+
+
+def fleet_to_toml(sample_time: float, systems: Sequence[SystemSpec], *,
+                  model_files: Mapping[str, str] | None = None, description: str | None = None,
+                  header: str = "") -> str:
+    """A fleet file: ``sample_time``, optional ``description``, one ``[[system]]`` per system.
+
+    Parameters
+    ----------
+    sample_time : float
+        s.
+    systems : sequence of SystemSpec
+    model_files : mapping of str to str, optional
+        System name -> path of its ``model.json`` as it should appear in the file (see
+        :func:`system_table`); relative paths are relative to the fleet file's folder.
+    description : str, optional
+    header : str
+        Comment lines put first (each is prefixed with ``# `` unless it already starts with ``#``).
+
+    Returns
+    -------
+    str
+        TOML that :func:`ilcdob.fleet.load_fleet` loads back to equal specs.
+    """
+    model_files = dict(model_files or {})
+    unknown = sorted(set(model_files) - {s.name for s in systems})
+    if unknown:
+        raise FleetError(f"`model_files`: no system named {unknown}; the systems are {[s.name for s in systems]}")
+    lines = [ln if ln.startswith("#") else f"# {ln}" for ln in header.splitlines()]
+    if description is not None:
+        lines.append(f"description = {toml_value(description)}")
+    lines.append(f"sample_time = {toml_value(float(sample_time))}   # s")
+    blocks = [system_to_toml(s, model_files.get(s.name)) for s in systems]
+    return "\n".join(lines) + "\n\n" + "\n".join(blocks)
+
+
+def model_reference(model: str | Path, fleet_path: str | Path) -> str:
+    """How a fleet file at ``fleet_path`` refers to ``model``: relative to its folder, with ``/``.
+
+    Both paths are taken relative to the working directory when relative. Falls back to the
+    absolute path when no relative one exists (another drive on Windows).
+    """
+    target = os.path.abspath(model)
+    folder = os.path.dirname(os.path.abspath(fleet_path))
+    try:
+        return Path(os.path.relpath(target, folder)).as_posix()
+    except ValueError:
+        return Path(target).as_posix()
+
+
+def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSpec, dob: DOBSpec, *,
+               sample_time: float | None = None, noise: NoiseSpec | None = None,
+               uncertainty: UncertaintySpec | None = None) -> Fleet:
+    """Add a system flying an identified model to a fleet file, creating the file if needed.
+
+    The system's plant is ``plant = { model = "<model, relative to the fleet file>" }``: its
+    num/den/delay and its identification (the Delta set's covariance) come from the model
+    file. The whole resulting fleet is validated (keys, values, model file, stable loops)
+    before anything is written; the file is then written atomically. An existing file keeps
+    its text: the new ``[[system]]`` table is appended.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The fleet TOML file (created when it does not exist).
+    name : str
+        Name of the new system; must not be in the fleet yet.
+    model : str or pathlib.Path
+        The ``model.json`` of ``ilcdob identify`` (relative to the working directory).
+    controller : PIDSpec
+    dob : DOBSpec
+    sample_time : float, optional
+        s. A new file gets this sample time, or, when None, the model's (``sample_time`` of
+        the model file, rounded to 12 significant digits: one measured from time stamps
+        carries float roundoff). For an existing file it must equal the file's, if given.
+    noise : NoiseSpec, optional
+        The system's own process noise (default: none).
+    uncertainty : UncertaintySpec, optional
+        A stated model-error bound, used ahead of the covariance for the Delta set.
+
+    Returns
+    -------
+    Fleet
+        The validated fleet as written.
+
+    Raises
+    ------
+    FleetError
+        The name exists already, the sample time conflicts, the fleet file or the model file
+        is invalid, or a loop of the resulting fleet is unstable; nothing is written then.
+    ModelFileError
+        The model file cannot be read or is malformed.
+    """
+    path = Path(path)
+    if not isinstance(name, str) or not name.strip():
+        raise FleetError(f"{path}: `name`: got {name!r}, expected a non-empty string")
+    identified = load_model(model)
+    table: dict[str, Any] = {"name": name, "plant": {MODEL_FILE_KEY: model_reference(model, path)},
+                             "controller": {"kp": controller.kp, "ki": controller.ki, "kd": controller.kd,
+                                            "derivative_filter": controller.derivative_filter},
+                             "dob": {"q_order": dob.q_order, "q_time_constant": dob.q_time_constant}}
+    if not controller.acceleration_feedforward:
+        table["controller"]["acceleration_feedforward"] = False
+    if noise is not None and noise != NoiseSpec():
+        table["noise"] = {"amplitude": noise.amplitude, "frequency": noise.frequency, "phase": noise.phase}
+    if uncertainty is not None:
+        table["uncertainty"] = {"bound": uncertainty.bound}
+    block = _table_to_toml(table)
+    if path.exists():
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise FleetError(f"{path}: cannot read fleet file ({exc.strerror})") from exc
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise FleetError(f"{path}: not valid TOML: {exc}") from exc
+        existing = data.get("system", [])
+        names = [t.get("name") for t in existing if isinstance(t, dict)] if isinstance(existing, list) else []
+        if name in names:
+            raise FleetError(f"{path}: system {name!r} exists already (systems: {names}); choose another name or "
+                             "remove its [[system]] table first")
+        file_ts = data.get("sample_time")
+        if sample_time is not None and file_ts != sample_time:
+            raise FleetError(f"{path}: `sample_time`: got {sample_time!r}, but the fleet's sample_time is "
+                             f"{file_ts!r} s; a system is added at the fleet's sample time (omit it)")
+        new_text = text + ("" if text.endswith("\n") or not text else "\n") + "\n" + block
+    else:
+        # a sample time measured from time stamps carries float roundoff (0.019999999999999997)
+        ts = float(f"{identified.sample_time:.12g}") if sample_time is None else sample_time
+        new_text = (f"# Fleet file (schema: ilcdob.fleet); systems added with `ilcdob fleet add`\n"
+                    f"sample_time = {toml_value(float(ts))}   # s\n\n" + block)
+    try:
+        data = tomllib.loads(new_text)
+    except tomllib.TOMLDecodeError as exc:  # only if the existing file ends inside a multi-line construct
+        raise FleetError(f"{path}: appending system {name!r} gives invalid TOML ({exc}); fix the end of the file") \
+            from exc
+    fleet = fleet_from_dict(data, str(path), base_dir=path.parent)
+    write_text_atomic(path, new_text)
+    return fleet
