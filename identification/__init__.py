@@ -4,7 +4,8 @@
 * :mod:`.loaders` - CSV, Parquet, PX4 ULog (pyulog), ArduPilot DataFlash (pymavlink);
 * :mod:`.excitation` - step sequences, chirps, suggested band, setpoint CSV export;
 * :mod:`.model`, :mod:`.srivc`, :mod:`.tfest`, :mod:`.results` - continuous-time
-  transfer-function fits (output error, CasADi/IPOPT) with covariance, residual tests and a
+  transfer-function fits (output error, variable projection with exact sensitivities by
+  filtering, :mod:`.oe`) with covariance, residual tests and a
   multiplicative uncertainty bound;
 * :mod:`.quadrotor` - a nonlinear 6-DOF quadrotor for synthetic flights;
 * :mod:`.fleet_id` - identify a whole fleet from synthetic flights;

@@ -11,7 +11,7 @@ The first pass uses ``L(s) = (s + lam)^N``; every further pass uses the current 
 ``A(s)`` (stabilised, integrators replaced by ``(s + lam)``) and, as instruments, the
 filtered noise-free output simulated from the current model: the estimate converges to the
 output-error optimum in a few passes, which makes it a good starting point for the
-CasADi/IPOPT refinement in :mod:`ilcdob.identification.tfest`.
+output-error refinement in :mod:`ilcdob.identification.tfest`.
 """
 
 from __future__ import annotations

@@ -12,23 +12,25 @@ pole) and a polynomial output trend (offset by default; slope for slow drift). T
 degrees that the free response already spans (a constant with one integrator, a ramp with
 two) are left out.
 
-Engine (chosen by measurement against the CasADi/IPOPT formulation it replaces, see
-``benchmarks/bench_tfest.py``):
+Engine (chosen by measurement against the CasADi/IPOPT formulation it replaced: 1.28 s ->
+0.03 s on ``benchmarks/bench_tfest.py``, 3,900 -> 200 bytes per sample; the design and its
+reasons are in ``docs/identification.md``):
 
-* exact sensitivities computed by filtering (:mod:`.oe`): O(N) per parameter in C;
-* a Levenberg-Marquardt loop on the scaled normal equations, assembled experiment by
-  experiment (memory: the Jacobian columns of one experiment at a time, about
-  ``8 (p + 6)`` bytes per sample for ``p`` parameters, plus the data); unstable trial
+* variable projection: numerator, initial conditions and trends are solved exactly at every
+  step (Gram matrices, per-experiment Schur elimination); Levenberg-Marquardt runs on the
+  free denominator coefficients and the delay only, with Kaufman's Jacobian;
+* exact sensitivities computed by filtering (:mod:`.oe`): O(N) per parameter, in C;
+* starts from SRIVC (:mod:`.srivc`) and a grid of pole locations; LM runs from the best and
+  from the next distinct start within :data:`SECONDARY_START_RATIO` of it; unstable trial
   models (a free pole with Re >= 0) are rejected when ``stable``;
-* starts from SRIVC (:mod:`.srivc`) and from a grid of pole locations, each with its
-  numerator, initial conditions and trend solved by linear least squares; LM runs from the
-  best ``starts`` of them and the best result is kept;
-* ``delay="auto"``: the delay is a continuous parameter of the same LM (the fractional-
-  delay ZOH is smooth in it). Its start comes from a profile over a delay grid in which only
-  the linear parameters are re-solved (no fit from scratch per grid point); the LM then
-  runs from the best profile minima;
+* ``delay="auto"``: the delay is a continuous parameter of the same LM (the fractional-delay
+  ZOH is smooth in it), started from a profile over :data:`DELAY_SWEEP_POINTS` delays, each a
+  single LM step warm-started from its neighbour (no fit from scratch per point);
 * an iteration or time limit returns the best iterate with a ``RuntimeWarning`` and its
-  status in ``solver`` (never an error for a fit that made progress).
+  status in ``solver``;
+* memory: a few signal-length arrays per parameter (about 200 bytes per sample for a
+  2-pole model); logs beyond :data:`RANKING_SAMPLES` samples are ranked on evenly spaced
+  chunks while the starts are chosen.
 
 Closed-loop data: the direct output-error fit is consistent when the output disturbance
 is white measurement noise and the plant is strictly proper (Ljung, System Identification,
@@ -90,6 +92,11 @@ class FitOptions:
         Wall-time limit of the whole fit, s; the best iterate so far is returned.
     tol : float
         Relative tolerance on the predicted decrease of the criterion and on the step.
+    initial : array or None
+        An initial model ``theta`` (the parameter order of :class:`ModelStructure`), e.g. the
+        vehicle's previous identification: the LM starts from its denominator (numerator,
+        initial conditions and trends are solved anyway) and the SRIVC/pole-grid search is
+        skipped.
     verbose : bool
         Print every LM iteration through ``progress``.
     """
@@ -103,6 +110,7 @@ class FitOptions:
     max_iter: int = 100
     time_limit: float | None = None
     tol: float = 1e-8
+    initial: tuple[float, ...] | None = None
     verbose: bool = False
 
     def __post_init__(self) -> None:
@@ -124,6 +132,14 @@ class FitOptions:
             raise SpecError(f"`time_limit`: got {self.time_limit!r}, expected None or a number of seconds > 0")
         if not (math.isfinite(self.tol) and 0 < self.tol < 1):
             raise SpecError(f"`tol`: got {self.tol!r}, expected a number in (0, 1)")
+        if self.initial is not None:
+            try:
+                init = tuple(float(v) for v in np.asarray(self.initial, dtype=float).ravel())
+            except (TypeError, ValueError):
+                raise SpecError(f"`initial`: got {self.initial!r}, expected a sequence of numbers (theta)") from None
+            if not all(math.isfinite(v) for v in init):
+                raise SpecError(f"`initial`: got {self.initial!r}, expected finite numbers")
+            object.__setattr__(self, "initial", init)
 
 
 # ---------------------------------------------------------------- experiments and model evaluation
@@ -238,8 +254,12 @@ class _Model:
         num_rows = np.atleast_2d(response(d.phi, eye[self.nb - 1::-1], d.sos, d.den, e.n, self.inputs(d, e)))
         if not self.n_beta:
             return num_rows, e.trend.T
-        # e_1' Phi^k e_i = e_i' (Phi')^k e_1: every free-response signal in one pass
-        free = response(d.phi.T, eye, d.sos, d.den, e.n, (), self.e1)
+        # e_1' Phi^k e_i = e_i' (Phi')^k e_1: every free-response signal in one pass, computed
+        # only while it lasts (stable modes below 1e-14 of their start are zero)
+        radius = float(np.max(np.abs(d.poles)))
+        span = e.n if radius >= 1.0 else min(e.n, int(math.ceil(math.log(1e-14) / math.log(radius))) + self.n)
+        free = np.zeros((self.n, e.n))
+        free[:, :span] = response(d.phi.T, eye, d.sos, d.den, span, (), self.e1)
         return num_rows, (np.vstack([free, e.trend.T]) if e.trend.shape[1] else free)
 
     def evaluate(self, alpha: np.ndarray, delay_fixed: float) -> _Point:
@@ -536,7 +556,7 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
             exps.append(_Exp(u, y, _trend_basis(u.size, structure, opts), piece.source))
     if not exps:
         raise SignalError(f"`data`: no piece of at least {need} samples between the gaps of the logs")
-    if opts.delay == "auto" or (isinstance(opts.delay, float) and opts.delay > 0):
+    if opts.delay == "auto" or opts.delay > 0:
         shortest = min(e.n for e in exps) * ts
         limit = opts.max_delay if opts.delay == "auto" else float(opts.delay)
         if limit >= 0.5 * shortest:
@@ -584,6 +604,7 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
     say = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
     # every matrix here is tiny or tall-and-thin: BLAS threads only cost wake-ups (milliseconds
     # per call on a loaded machine), so the fit runs single-threaded
+    _keep_freed_memory()
     with _blas_controller().limit(limits=1, user_api="blas"):
         return _tfest(data, input, output, structure, opts, validation, say)
 
@@ -593,6 +614,21 @@ def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+@functools.lru_cache(maxsize=1)
+def _keep_freed_memory() -> None:
+    """Free one 16 MiB block, once per process.
+
+    glibc's malloc serves blocks above its mmap threshold (128 kiB at start) with fresh
+    mappings and trims the heap after each free, so every signal-sized temporary of the fit
+    costs page faults again (measured: a 30,000-sample fit 58 ms in a fresh process, 31 ms once
+    a large block had been freed). Freeing a large block raises both thresholds to its size
+    (mallopt(3), dynamic mmap threshold), after which temporaries reuse heap memory. Elsewhere
+    this is one allocation and nothing more.
+    """
+    block = np.ones(2 * 1024 * 1024)         # below glibc's 32 MiB cap of the dynamic threshold
+    del block
+
+
 def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     t_start = time.perf_counter()
     deadline = t_start + (opts.time_limit if opts.time_limit is not None else math.inf)
@@ -600,7 +636,18 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     estimate_delay = opts.delay == "auto"
     model = _Model(structure, exps, ts, opts, estimate_delay)
     delay0 = 0.0 if estimate_delay else float(opts.delay)
-    cands = _candidates(model, delay0, say)
+    if opts.initial is not None:
+        if len(opts.initial) != structure.n_params:
+            raise SpecError(f"`initial`: got {len(opts.initial)} values, the structure has {structure.n_params} "
+                            f"parameters (free denominator, then numerator)")
+        a0 = np.asarray(opts.initial[: structure.n_free_poles])
+        start = model.evaluate(np.concatenate([a0, [delay0] if estimate_delay else []]), delay0)
+        if not math.isfinite(start.sse):
+            raise SpecError(f"`initial`: the model {list(opts.initial)} cannot start the fit (unstable or "
+                            "diverging on these data)")
+        cands = [start]
+    else:
+        cands = _candidates(model, delay0, say)
     if not cands:
         raise IlcdobError("no initial estimate could be formed (every candidate model diverged); check that "
                           "the input excites the system and that the structure suits the data")

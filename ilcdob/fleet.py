@@ -53,7 +53,7 @@ from .identified import IdentifiedModel, load_model
 from .loop import LoopSystem, build_loop
 from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
 
-__all__ = ["Fleet", "load_fleet", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict", "fleet_from_systems",
+__all__ = ["Fleet", "load_fleet", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict", "fleet_from_systems",
            "MODEL_FILE_KEY"]
 
 DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_fleet.toml"))
@@ -278,15 +278,27 @@ def load_fleet(path: str | Path) -> Fleet:
         names the file, system and key.
     """
     path = Path(path)
+    _, data = read_fleet_file(path)
+    return fleet_from_dict(data, str(path), base_dir=path.parent)
+
+
+def read_fleet_file(path: str | Path) -> tuple[str, dict[str, Any]]:
+    """The text of a fleet file and its parsed TOML table (not yet validated).
+
+    Raises
+    ------
+    FleetError
+        Unreadable file or TOML syntax error, naming the file.
+    """
+    path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise FleetError(f"{path}: cannot read fleet file ({exc.strerror})") from exc
     try:
-        data = tomllib.loads(text)
+        return text, tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FleetError(f"{path}: not valid TOML: {exc}") from exc
-    return fleet_from_dict(data, str(path), base_dir=path.parent)
 
 
 def default_fleet() -> Fleet:

@@ -22,7 +22,7 @@ import numpy as np
 
 from .atomic import write_text_atomic
 from .errors import FleetError
-from .fleet import MODEL_FILE_KEY, Fleet, fleet_from_dict
+from .fleet import MODEL_FILE_KEY, Fleet, fleet_from_dict, read_fleet_file
 from .identified import load_model
 from .specs import DOBSpec, NoiseSpec, PIDSpec, SystemSpec, UncertaintySpec
 
@@ -243,14 +243,7 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         table["uncertainty"] = {"bound": uncertainty.bound}
     block = _table_to_toml(table)
     if path.exists():
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise FleetError(f"{path}: cannot read fleet file ({exc.strerror})") from exc
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise FleetError(f"{path}: not valid TOML: {exc}") from exc
+        text, data = read_fleet_file(path)
         existing = data.get("system", [])
         names = [t.get("name") for t in existing if isinstance(t, dict)] if isinstance(existing, list) else []
         if name in names:

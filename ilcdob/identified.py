@@ -29,7 +29,7 @@ from .errors import ModelFileError, SpecError
 from .specs import (DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec,
                     _poly)
 
-if TYPE_CHECKING:  # the identification package imports CasADi; load it only when asked for
+if TYPE_CHECKING:  # the identification package is heavy to import; load it only when asked for
     from .identification.model import ModelStructure
 
 __all__ = ["IdentifiedModel", "load_model", "model_from_dict", "REQUIRED_KEYS"]

@@ -9,7 +9,6 @@ noise the attainable ceiling would be 90 %.
 
 from __future__ import annotations
 
-import control as ct
 import numpy as np
 import pytest
 
@@ -17,9 +16,13 @@ from ilcdob.errors import SignalError, SpecError
 from ilcdob.identification.data import FlightData
 from ilcdob.identification.model import ModelStructure, simulate_zoh
 from ilcdob.identification.results import fit_percent
+from ilcdob.identification.synthetic import closed_loop_flight
 from ilcdob.identification.tfest import FitOptions, tfest
+from ilcdob.specs import PIDSpec, PlantSpec
 
 TS = 0.02
+#: C(s) = 3 + 0.3/s + 0.12 s/(0.05 s + 1)
+PID = PIDSpec(kp=3.0, ki=0.3, kd=0.12, derivative_filter=0.05)
 QUIET = {"progress": lambda msg: None}
 
 
@@ -43,20 +46,7 @@ def _excitation(n: int, seed: int, integrators: int = 0) -> np.ndarray:
 def _closed_loop(structure, theta, r, noise, delay=0.0):
     """PID (Tustin) around the ZOH plant; measured output y + noise is fed back."""
     den, num = structure.split(theta)
-    plant = ct.ss(ct.sample_system(ct.tf(num, den), TS, "zoh"))
-    pid = ct.ss(ct.sample_system(ct.tf([2.4 * 0.05 + 3 * 0.05, 3 + 0.3 * 0.05, 0.3], [0.05, 1, 0]), TS, "tustin"))
-    nd = int(round(delay / TS))
-    xp, xc = np.zeros(plant.nstates), np.zeros(pid.nstates)
-    y, u = np.zeros(r.size), np.zeros(r.size)
-    buf = [0.0] * (nd + 1)
-    for k in range(r.size):
-        y[k] = (plant.C @ xp).item()
-        e = r[k] - (y[k] + noise[k])
-        u[k] = (pid.C @ xc).item() + pid.D.item() * e
-        buf.append(u[k])
-        xp = plant.A @ xp + plant.B[:, 0] * buf[-1 - nd]
-        xc = pid.A @ xc + pid.B[:, 0] * e
-    return u, y
+    return closed_loop_flight(PlantSpec(num, den, delay), PID, r, TS, noise)
 
 
 CASES = {
