@@ -364,6 +364,7 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
     h, grad = model.reduced_normal(p)
     mu, nu = None, 2.0
     lo, hi = 0.0, opts.max_delay
+    n_obs = sum(e.n for e in model.exps)
     k_delay = model.n_alpha - 1 if model.estimate_delay else -1
     limit = max_iter or opts.max_iter
     it = 0
@@ -395,7 +396,8 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
             rho = 0.5 * (p.sse - trial.sse) / pred if pred > 0 else -1.0
             small = np.linalg.norm(step * dg) <= opts.tol * (np.linalg.norm(p.alpha * dg) + opts.tol)
             if rho > 0:
-                converged = (min(pred, 0.5 * (p.sse - trial.sse)) <= opts.tol * 0.5 * p.sse) or small
+                decrease = min(pred, 0.5 * (p.sse - trial.sse))
+                converged = decrease <= max(opts.tol, STATISTICAL_TOL / n_obs) * 0.5 * p.sse or small
                 p = trial
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
                 nu = 2.0
@@ -437,6 +439,10 @@ RANKING_SAMPLES = 100_000
 #: ``[0, max_delay]``, at most one per sample); the LM refines the delay continuously from
 #: the best of them.
 DELAY_SWEEP_POINTS = 7
+#: LM stops when a step lowers the criterion by less than this fraction of one sample's
+#: residual variance (the parameters then move by about sqrt(1e-3) = 3 % of their standard
+#: deviation), or by less than ``FitOptions.tol`` relative.
+STATISTICAL_TOL = 1e-3
 #: A further start runs only when its criterion is within this factor of the best start's.
 SECONDARY_START_RATIO = 4.0
 _CHUNK = 10_000

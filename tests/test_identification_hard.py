@@ -304,3 +304,18 @@ def test_real_ardupilot_log_too_short_is_a_clear_error():
     with pytest.raises(SignalError, match=r"ardupilot_pymavlink_test\.BIN: 25 samples are too few for a model with "
                                           r"2 parameters \(need at least 30\)"):
         tfest(data, "u", "y", ModelStructure(1, 0, 0), **QUIET)
+
+
+def test_an_initial_model_skips_the_start_search_and_reaches_the_same_fit():
+    structure, theta = _truth(STABLE)
+    rng = np.random.default_rng(10)
+    u = _excite(3000, 0)
+    data = _flight(u, simulate_zoh(structure, theta, u, TS) + 0.05 * rng.standard_normal(3000))
+    full = tfest(data, "u", "y", structure, **QUIET)
+    again = tfest(data, "u", "y", structure, FitOptions(initial=tuple(full.theta * 1.05)), **QUIET)
+    np.testing.assert_allclose(again.theta, full.theta, rtol=1e-4)
+    assert len(again.solver["starts"]) == 1
+    with pytest.raises(SpecError, match=r"`initial`: got 3 values, the structure has 4 parameters"):
+        tfest(data, "u", "y", structure, FitOptions(initial=(1.0, 2.0, 3.0)), **QUIET)
+    with pytest.raises(SpecError, match=r"`initial`: the model .* cannot start the fit"):
+        tfest(data, "u", "y", structure, FitOptions(initial=(-1.0, 4.0, 2.0, 3.0)), **QUIET)  # unstable
