@@ -1,6 +1,6 @@
 """Benchmark: the full ``ilcdob reproduce`` run on the built-in fleet, figures included.
 
-Target (foundation issue): under 30 s on a 2-core machine. Reported against a baseline
+Target: under 30 s on a 2-core machine. Reported against a baseline
 measured in the same process: one block-diagram trial of 60 s (3000 samples), so the ratio
 says how many trials' worth of time the whole run costs (it flies 4 scenarios x 3 systems x
 (no DOB + DOB + 3 learning) = 60 trials, plus filter design and 12 figures).

@@ -1,4 +1,4 @@
-"""The Delta set: plausible true plants around a system's model (design notes section 3).
+"""The Delta set: plausible true plants around a system's model (docs/theory.md section 3).
 
 Two sources:
 

@@ -1,6 +1,6 @@
 """Implementable learning filters: fixed-order non-causal FIRs fitted with CasADi/IPOPT.
 
-The closed-form filters of the Theorem (design notes section 2, :mod:`ilcdob.design.closed_form`)
+The closed-form filters of the Theorem (docs/theory.md section 2, :mod:`ilcdob.design.closed_form`)
 are rational, improper and partly anti-causal. Here each of them is replaced by a FIR with a
 fixed non-causal advance ``a`` (samples)::
 
@@ -356,7 +356,7 @@ def design_fir(prev_loop: LoopSystem, next_loop: LoopSystem, delta_prev: DeltaSe
     L1 is fitted to ``closed_form_filters(prev_loop, next_loop).l1_response`` subject to
     robust monotone convergence ``|Te1_k| <= 1 - margin`` for every pair ``k`` of sampled
     true loops (``delta_prev.loops[k]``, ``delta_next.loops[k]``) on the grid; L2 is fitted to
-    ``l2_response`` without constraint (module docstring; design notes sections 2-3).
+    ``l2_response`` without constraint (module docstring; docs/theory.md sections 2-3).
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """FIR learning filters with the learning system's Q-filter bandwidth chosen jointly.
 
 System j's DOB low-pass ``Q_j(s) = 1/(tau s + 1)^n`` shapes both its own disturbance
-rejection and what learning can still do (``Te1 = Gd_j/Gd_{j-1} - Gf_j L1``, design notes
+rejection and what learning can still do (``Te1 = Gd_j/Gd_{j-1} - Gf_j L1``, docs/theory.md
 sections 2-3). Where asked, ``tau`` is chosen together with the FIR coefficients: an outer
 bounded scalar search over ``log10 tau`` (scipy ``minimize_scalar``, method ``"bounded"``)
 around the CasADi/IPOPT FIR design of :func:`~ilcdob.design.fir.design_fir`, minimising the

@@ -2,7 +2,7 @@
 
 ``L1 = -T(1 - Q_j) Gd_{j-1}^+`` and ``L2 = L1 T(Gf_{j-1})`` over an N-sample trial, where
 ``Gd^+`` is the Tikhonov-regularised inverse of the lifted ``Gd_{j-1}`` after shifting out
-its relative degree ``m`` (design notes section 3)::
+its relative degree ``m`` (docs/theory.md section 3)::
 
     Gd^+ = Z (H_s^T H_s + alpha I)^{-1} H_s^T S,   alpha = regularisation * sigma_max(H_s)^2
 

@@ -3,7 +3,7 @@
 ILC runs between flights, so a learning filter may look ahead. A discrete filter
 ``F(z) = k * prod(z - z_i) / prod(z - p_i)`` with poles outside the unit circle and more
 zeros than poles (the inverse of a ZOH plant with relative degree and sampling zeros) is
-applied as the exact stable inversion of design notes section 2:
+applied as the exact stable inversion of docs/theory.md section 2:
 
 * poles with ``|p| <= 1`` (stable, plus the integrator at z = 1) form a causal part run
   forwards from rest, in second-order sections (robust for clustered poles);

@@ -1,4 +1,4 @@
-"""Nominal norm-optimal learning design (design notes section 3), solved in O(N).
+"""Nominal norm-optimal learning design (docs/theory.md section 3), solved in O(N).
 
 For system j learning from system j-1 with the predicted error without learning ``e0``
 (from j-1's flight: ``e0 = -Gd_j {d_rec}``, ``d_rec`` the disturbance reconstructed from

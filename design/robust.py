@@ -1,4 +1,4 @@
-"""Robust norm-optimal learning over the Delta set, as an SOCP (design notes sections 3 and 5).
+"""Robust norm-optimal learning over the Delta set, as an SOCP (docs/theory.md sections 3 and 5).
 
 For system j with K plausible true plants (samples of the Delta set, :func:`~ilcdob.design.delta_set`),
 ``e0_k`` is the error system j would fly under sample k without learning and
@@ -13,7 +13,7 @@ second-order cone), so for K = 1 with an inactive improvement constraint the pro
 exactly the regularised least-squares (norm-optimal ILC) problem
 ``(G^T W^2 G + lam I + mu Diff^T Diff) d_f = G^T W^2 e0``.
 
-Scale (design notes section 5): the predicted errors are not formed with dense N x N lifted
+Scale (docs/theory.md section 5): the predicted errors are not formed with dense N x N lifted
 matrices. Each ``Gf_k`` enters through its state-space equations as sparse equality
 constraints ``x_{t+1} = A x_t + B d_t``, ``x_0 = 0``, ``y_t = C x_t + D d_t``, in a balanced
 truncation (:func:`reduced_realisation`, SLICOT AB09AD in discrete time), so the states are
@@ -60,7 +60,7 @@ __all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustPairDesigne
            "RobustSolverError", "predicted_errors", "design_ratios", "reduced_realisation"]
 
 _OK = ("optimal", "optimal_inaccurate")
-_DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl here (design notes section 5)
+_DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl on these KKT systems
 _INFEASIBLE = ("infeasible", "infeasible_inaccurate")
 _CLARABEL_STATUS = {"Solved": "optimal", "AlmostSolved": "optimal_inaccurate",
                     "PrimalInfeasible": "infeasible", "AlmostPrimalInfeasible": "infeasible_inaccurate",
@@ -93,7 +93,7 @@ class RobustSolverError(IlcdobError, RuntimeError):
 
 @dataclass(frozen=True)
 class RobustOptions:
-    """Options of the robust design (design notes section 3).
+    """Options of the robust design (docs/theory.md section 3).
 
     Attributes
     ----------
@@ -117,7 +117,7 @@ class RobustOptions:
         assembled once with scipy.sparse and handed to Clarabel, only ``b`` changing per trial;
         ``"cvxpy"``: solve the DPP cvxpy problem (any cvxpy solver). cvxpy's one-time DPP
         compilation grows about quadratically with size (3.7 s at K=5, N=300; 16 s at N=600),
-        so use it for small problems or other solvers only (design notes section 5).
+        so use it for small problems or other solvers only.
     reduction_tol : float
         Balanced truncation of each ``Gf_k``: states with Hankel singular value below
         ``reduction_tol`` times the largest are dropped (:func:`reduced_realisation`). The
@@ -571,7 +571,7 @@ class RobustPairDesigner:
     ``(e_{j-1}, d_f,{j-1})`` the disturbance is reconstructed under each hypothesis
     (:func:`~ilcdob.design.reconstruct_disturbance` with ``model=False``, the inverse of
     Theorem's ``Gd_{j-1}``), giving ``e0_k = -Gd_{j,k}{d_rec,k}``, and
-    :class:`RobustDesigner` chooses ``d_f,j`` (design notes section 3). Designers are built
+    :class:`RobustDesigner` chooses ``d_f,j`` (docs/theory.md section 3). Designers are built
     once per trial length and re-solved per trial.
 
     Parameters

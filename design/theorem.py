@@ -1,4 +1,4 @@
-"""The Theorem's condition, checked per learning pair and frequency (design notes section 2).
+"""The Theorem's condition, checked per learning pair and frequency (docs/theory.md section 2).
 
 With true plant ``P = (1 + Delta) P_hat``, learning from system j-1 leaves system j with
 ``e_j ~ -2 Delta_{j-1} / (1 + P_{j-1} C_{j-1}) {e'_j}``, so learning helps at the

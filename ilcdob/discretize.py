@@ -16,7 +16,7 @@ How each block is discretised (documented once, used everywhere):
   ``|M_d P_d - Q_d|`` near 0.6 at 0.5 rad/s, which ruins the DOB at low frequency.
 
 ZOH of a plant of relative degree >= 2 has sampling zeros; for relative degree 3 one lies
-near z = -3.7, so the discrete plant is non-minimum phase (design notes section 1).
+near z = -3.7, so the discrete plant is non-minimum phase (docs/theory.md section 1).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Lifted (matrix) operators of discrete LTI maps over a finite trial (design notes section 3).
+"""Lifted (matrix) operators of discrete LTI maps over a finite trial (docs/theory.md section 3).
 
 Over ``N`` samples a causal SISO map is the lower-triangular Toeplitz matrix of its Markov
 parameters ``h[0] = D``, ``h[k] = C A^{k-1} B``. A relative degree (delay) of ``m`` samples

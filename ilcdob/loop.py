@@ -1,4 +1,4 @@
-"""The loop of one system: plant, PID, DOB, and its closed-loop maps (design notes section 1).
+"""The loop of one system: plant, PID, DOB, and its closed-loop maps (docs/theory.md section 1).
 
 Block diagram (discrete time, sample time ``Ts``)::
 

@@ -245,7 +245,7 @@ class NoiseSpec:
     """The system's own small sinusoidal process noise, added to the disturbance.
 
     ``n(t) = amplitude * sin(2*pi*frequency*t + phase)`` in m/s^2 at the plant input
-    (design notes section 4: every system gets its own noise of higher frequency).
+    (docs/theory.md section 4: every system gets its own noise of higher frequency).
     """
 
     amplitude: float = 0.0

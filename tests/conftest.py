@@ -33,7 +33,7 @@ dob = { q_order = 3, q_time_constant = 0.15 }
 
 @pytest.fixture
 def good_fleet_text() -> str:
-    """A valid two-system fleet file in the schema of the foundation issue."""
+    """A valid two-system fleet file (schema of ilcdob/fleet.py)."""
     return GOOD_FLEET
 
 
@@ -47,3 +47,44 @@ def fleet_file(tmp_path: Path):
         return path
 
     return write
+
+
+#: Unequal plants 1/(s^2 (tau s + 1)), tau 0.05 / 0.2 / 0.12 s, the last with a 0.03 s input delay and a
+#: fourth-order Q; Ts = 0.01 s; unequal Q time constants (so L2 != 1); exact models, no noise.
+UNEQUAL_FLEET = {"sample_time": 0.01, "description": "unequal plants, input delay, q_order 4", "system": [
+    {"name": "A1", "plant": {"num": [1.0], "den": [0.05, 1.0, 0.0, 0.0]},
+     "controller": {"kp": 3.0, "ki": 0.3, "kd": 2.4, "derivative_filter": 0.05},
+     "dob": {"q_order": 3, "q_time_constant": 0.15}},
+    {"name": "A2", "plant": {"num": [1.0], "den": [0.2, 1.0, 0.0, 0.0]},
+     "controller": {"kp": 1.2, "ki": 0.12, "kd": 1.53, "derivative_filter": 0.05},
+     "dob": {"q_order": 3, "q_time_constant": 0.2}},
+    {"name": "A3", "plant": {"num": [1.0], "den": [0.12, 1.0, 0.0, 0.0]}, "delay": 0.03,
+     "controller": {"kp": 1.9, "ki": 0.19, "kd": 1.93, "derivative_filter": 0.05},
+     "dob": {"q_order": 4, "q_time_constant": 0.15}},
+]}
+
+#: Unequal gains and poles (one plant without a second integrator), a fractional-sample delay (0.01 s at
+#: Ts = 0.02 s), acceleration feed-forward on only B1 and B3, unequal Q time constants; exact models, no noise.
+FEEDFORWARD_FLEET = {"sample_time": 0.02, "description": "unequal plants, mixed acceleration feed-forward", "system": [
+    {"name": "B1", "plant": {"num": [2.0], "den": [0.08, 1.0, 0.0, 0.0]},
+     "controller": {"kp": 2.0, "ki": 0.2, "kd": 2.0, "derivative_filter": 0.05, "acceleration_feedforward": True},
+     "dob": {"q_order": 3, "q_time_constant": 0.1}},
+    {"name": "B2", "plant": {"num": [0.8], "den": [0.15, 1.0, 0.0, 0.0]},
+     "controller": {"kp": 2.5, "ki": 0.25, "kd": 2.2, "derivative_filter": 0.05, "acceleration_feedforward": False},
+     "dob": {"q_order": 3, "q_time_constant": 0.2}},
+    {"name": "B3", "plant": {"num": [1.5], "den": [0.1, 1.03, 0.3, 0.0]}, "delay": 0.01,
+     "controller": {"kp": 1.5, "ki": 0.15, "kd": 1.6, "derivative_filter": 0.05},
+     "dob": {"q_order": 3, "q_time_constant": 0.15}},
+]}
+
+
+@pytest.fixture(scope="session")
+def unequal_fleet() -> ilcdob.Fleet:
+    """Three unequal plants at Ts = 0.01 s, one with an input delay and q_order 4 (:data:`UNEQUAL_FLEET`)."""
+    return ilcdob.fleet.fleet_from_dict(UNEQUAL_FLEET, source="unequal_fleet")
+
+
+@pytest.fixture(scope="session")
+def feedforward_fleet() -> ilcdob.Fleet:
+    """Three unequal plants at Ts = 0.02 s with mixed acceleration feed-forward (:data:`FEEDFORWARD_FLEET`)."""
+    return ilcdob.fleet.fleet_from_dict(FEEDFORWARD_FLEET, source="feedforward_fleet")

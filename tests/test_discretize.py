@@ -21,7 +21,7 @@ def test_zoh_matches_python_control_without_delay():
 
 
 def test_zoh_sampling_zero_makes_the_plant_non_minimum_phase():
-    # design notes section 1: relative degree 3 + ZOH -> a sampling zero near z = -3.6
+    # docs/theory.md section 1: relative degree 3 + ZOH -> a sampling zero near z = -3.6
     zeros = discretize_plant(PLANT, TS).zeros()
     outside = zeros[np.abs(zeros) > 1]
     assert outside.size == 1

@@ -1,4 +1,4 @@
-"""Fleet files: the schema of the foundation issue, and clear errors for bad files."""
+"""Fleet files: the schema of ilcdob/fleet.py, and clear errors for bad files."""
 
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ W = np.logspace(-2, np.log10(150), 60)
 def test_maps_match_block_formulas(fleet, i):
     lp = fleet.loops[i]
     p, c, q, m = (freqresp(s, W) for s in (lp.P, lp.C, lp.Q, lp.M))
-    d = 1 - q + p * (m + c)  # design notes section 1
+    d = 1 - q + p * (m + c)  # docs/theory.md section 1
     for got, want in [(lp.G_r, p * c / d), (lp.G_d, p * (1 - q) / d), (lp.G_f, -p / d),
                       (lp.Omega, (m + q * c) * p / d), (lp.G_d_no_dob, p / (1 + p * c)),
                       (lp.G_r_no_dob, p * c / (1 + p * c))]:

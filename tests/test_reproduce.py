@@ -1,4 +1,4 @@
-"""Acceptance of the foundation issue on the built-in fleet (exact models, Case I)."""
+"""The paper's validation on the built-in fleet (exact models, Case I): DOB, learning and speed figures."""
 
 from __future__ import annotations
 

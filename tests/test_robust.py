@@ -1,4 +1,4 @@
-"""Robust norm-optimal learning design over the Delta set (design notes sections 3 and 5)."""
+"""Robust norm-optimal learning design over the Delta set (docs/theory.md sections 3 and 5)."""
 
 from __future__ import annotations
 

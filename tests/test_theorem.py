@@ -1,7 +1,7 @@
 """Case II of the Theorem: learning from a system whose model is wrong.
 
 With P_{j-1} = (1 + Delta) P_hat_{j-1} and the frequency-wise bound
-|Delta(e^{jw})| < |1 + P_{j-1} C_{j-1}| / 2 (design notes section 2), learning must still
+|Delta(e^{jw})| < |1 + P_{j-1} C_{j-1}| / 2 (docs/theory.md section 2), learning must still
 lower the error: ||e_j|| < ||e'_j||, e'_j being system j's error without learning.
 """
 

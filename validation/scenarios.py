@@ -1,4 +1,4 @@
-"""The paper's four validation scenarios (Sec. IV; design notes section 4), x axis only.
+"""The paper's four validation scenarios (Sec. IV; docs/theory.md section 4), x axis only.
 
 =====  =====================  ===========================================  ======  ============
 id     trajectory             disturbance d(t) in x, m/s^2                 length  learning order

@@ -1,4 +1,4 @@
-"""Time-domain simulation of the block diagram of one system (design notes section 1).
+"""Time-domain simulation of the block diagram of one system (docs/theory.md section 1).
 
 Unlike the closed-loop maps of :mod:`ilcdob.loop`, this steps each discrete block (P, C, Q,
 M) sample by sample exactly as a flight computer would, so it is an independent check of
