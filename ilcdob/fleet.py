@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import os
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
@@ -301,6 +301,14 @@ def read_fleet_file(path: str | Path) -> tuple[str, dict[str, Any]]:
         raise FleetError(f"{path}: not valid TOML: {exc}") from exc
 
 
+#: How results name the built-in fleet (package-relative: no machine path in any output).
+DEFAULT_FLEET_SOURCE = "ilcdob/data/default_fleet.toml"
+
+
 def default_fleet() -> Fleet:
-    """The built-in fleet: the paper's three UAVs (Table I), see ``data/default_fleet.md``."""
-    return load_fleet(DEFAULT_FLEET_PATH)
+    """The built-in fleet: the paper's three UAVs (Table I), see ``data/default_fleet.md``.
+
+    Its ``source`` is :data:`DEFAULT_FLEET_SOURCE`, a package-relative name, so results and
+    reports written from it carry no path of the machine they ran on.
+    """
+    return replace(load_fleet(DEFAULT_FLEET_PATH), source=DEFAULT_FLEET_SOURCE)
