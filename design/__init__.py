@@ -5,7 +5,8 @@ from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filte
 from .delta import DeltaSet, delta_set
 from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
-from .pair import METHODS, PairDesign, design_pair
+from .laws import LAWS, ReferenceTerms, check_law, reference_terms
+from .pair import METHODS, PairDesign, design_pair, with_law
 from .robust import RobustDesigner, RobustOptions, RobustPairDesigner
 from .theorem import PairCheck, format_theorem_table, theorem_check
 from .lifted_filters import LiftedLearningFilters, lifted_filters
@@ -15,5 +16,6 @@ __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter"
            "reconstruct_disturbance", "DeltaSet", "delta_set",
            "FIRDesign", "FIRDesignError", "FIRFilter", "FIROptions", "design_fir",
            "NormOptimalDesigner", "NormOptimalOptions", "norm_optimal_learning",
-           "METHODS", "PairDesign", "design_pair", "PairCheck", "format_theorem_table", "theorem_check",
+           "METHODS", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
+           "reference_terms", "PairCheck", "format_theorem_table", "theorem_check",
            "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner"]

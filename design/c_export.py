@@ -523,6 +523,9 @@ _FILE_TEXT = {
                   "L2 d_f,j-1); for robust the learning signal d_f, the predicted improvement ratios and errors",
     "learning_signal.csv": "the learning signal d_f,j (m/s^2) computed from the given trial of the previous "
                            "vehicle, to feed forward on the next flight",
+    "reference_terms.csv": "exact-reference law: the previous vehicle's model reference error e_ref_source (m), "
+                           "removed from its error before L1, and the correction (m/s^2) added to the learning "
+                           "signal, for the given trial's reference",
     "README.md": "this file",
 }
 
@@ -563,6 +566,11 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
                   f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
                   "continued past its end by a cubic), exactly as "
                   "`ilcdob.design.export.apply_coefficients` does in Python."]
+        if filters.get("law") == "exact-reference":
+            lines += ["", f"Learning law exact-reference (`ilcdob.design.laws`): pass `e - e_ref_source` instead "
+                      f"of `e` to `{p}l1_apply` and add `correction` to `d_next`, both from `reference_terms.csv` "
+                      "(they depend on the reference trajectory: run `ilcdob design --law exact-reference` again "
+                      "for another trajectory). `learning_signal.csv` already includes both."]
         if code.float_errors:
             lines += ["", "The float variant (`*_apply_f`) differs from the double one by at most "
                       + ", ".join(f"{v:.2e} ({k})" for k, v in code.float_errors.items())

@@ -1,4 +1,4 @@
-"""Closed-form learning filters of the Theorem (paper Sec. III; design notes section 2).
+"""Closed-form learning filters of the Theorem (paper Sec. III): the `paper` learning law.
 
 System j learns from system j-1::
 

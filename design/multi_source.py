@@ -16,8 +16,9 @@ each system's own noise)::
     d_hat(w) = sum_i (1/v_i) d_hat_i(w) / sum_i (1/v_i)
 
 and system j's learning signal is the Theorem's ``L1`` acting on it: since
-``L1_j = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``d_f,j = (1 - Q_j){d_hat}`` (design notes section 2).
-With one source this is exactly the closed form. The weighting is applied on the FFT grid of
+``L1_j = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``d_f,j = (1 - Q_j){d_hat}`` (the Theorem's L1, paper
+Sec. III, factored). With one source this is exactly the closed form. This is the
+``multi-source`` learning law of :mod:`ilcdob.design.laws` (``reproduce(law="multi-source")``). The weighting is applied on the FFT grid of
 the zero-padded trial (the weights are smooth in w, so wrap-around is negligible).
 """
 
@@ -73,7 +74,7 @@ def reconstruction_error_power(trial: SourceTrial, w: np.ndarray, floor: float =
 
 
 def joint_disturbance(trials: Sequence[SourceTrial], weighting: str = "confidence",
-                      floor: float = FLOOR) -> np.ndarray:
+                      floor: float = FLOOR, power_cache: dict | None = None) -> np.ndarray:
     """Confidence-weighted joint reconstruction of the common disturbance (m/s^2).
 
     Parameters
@@ -84,6 +85,10 @@ def joint_disturbance(trials: Sequence[SourceTrial], weighting: str = "confidenc
         Inverse error power per frequency, or a plain average.
     floor : float
         Error-power floor (> 0).
+    power_cache : dict, optional
+        Reused across calls for the error powers ``v_i(w)`` (keyed by system name, grid and
+        floor; a learning chain evaluates the same systems' Delta sets on the same grid at every
+        step). Only valid while each name keeps its Delta set.
     """
     if not trials:
         raise SpecError("`trials`: got none, expected at least one earlier system's trial")
@@ -106,13 +111,24 @@ def joint_disturbance(trials: Sequence[SourceTrial], weighting: str = "confidenc
     if weighting == "equal":
         weights = np.full((len(trials), w.size), 1.0 / len(trials))
     else:
-        inv = 1.0 / np.array([reconstruction_error_power(tr, w, floor) for tr in trials])
+        def power(tr: SourceTrial) -> np.ndarray:
+            if power_cache is None:
+                return reconstruction_error_power(tr, w, floor)
+            key = (tr.loop.name, id(tr.delta), m, ts, floor)
+            if key not in power_cache:
+                power_cache[key] = reconstruction_error_power(tr, w, floor)
+            return power_cache[key]
+
+        inv = 1.0 / np.array([power(tr) for tr in trials])
         weights = inv / inv.sum(axis=0)
     spec = np.fft.rfft(recs, m, axis=1)
     return np.fft.irfft(np.sum(weights * spec, axis=0), m)[:n]
 
 
 def multi_source_learning(target: LoopSystem, trials: Sequence[SourceTrial], weighting: str = "confidence",
-                          floor: float = FLOOR) -> np.ndarray:
-    """Learning signal of ``target`` from every earlier trial: ``(1 - Q_j){d_hat}`` (m/s^2)."""
-    return simulate_map(_one_minus(target.Q), joint_disturbance(trials, weighting, floor))
+                          floor: float = FLOOR, power_cache: dict | None = None) -> np.ndarray:
+    """Learning signal of ``target`` from every earlier trial: ``(1 - Q_j){d_hat}`` (m/s^2).
+
+    Parameters as :func:`joint_disturbance`.
+    """
+    return simulate_map(_one_minus(target.Q), joint_disturbance(trials, weighting, floor, power_cache))

@@ -8,9 +8,12 @@ reconstructed disturbance and is missing from what system j must cancel. Kept ex
     e_ref,i = r - G_r,i{r} + G_f,i{a_ref}          (model maps; a_ref only with feed-forward)
     d_f,j   = L1{e_{j-1} - e_ref,{j-1}} + L2{d_f,{j-1}}  +  G_f,j^{-1}{e_ref,j}
 
-(design notes section 2; ``G_f,j^{-1} = -D_j / P_hat_j = -(1 - Q_j)/P_hat_j - (M_j + C_j)``
-applied non-causally with the same stable inversion as ``L1``). With exact models and no
-noise the learning flight of system j has zero error, on any trajectory.
+(the Theorem's derivation, paper Sec. III, with the reference term kept;
+``G_f,j^{-1} = -D_j / P_hat_j = -(1 - Q_j)/P_hat_j - (M_j + C_j)`` applied non-causally with
+the same stable inversion as ``L1``). With exact models and no noise the learning flight of
+system j has zero error, on any trajectory. This is the ``exact-reference`` learning law of
+:mod:`ilcdob.design.laws` (``law="exact-reference"`` in ``reproduce``, ``design_pair``,
+``compare_designs`` and campaigns).
 """
 
 from __future__ import annotations

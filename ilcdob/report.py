@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import write_json_atomic, write_text_atomic
+from .design.laws import LAW_DESCRIPTIONS
 from .validation.figures import write_figures
 from .validation.reproduce import ReproductionResult
 
@@ -38,7 +39,11 @@ def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
             f"Fleet: `{Path(res.fleet.source).name}` ({', '.join(res.fleet.names)}), sample time "
             f"{res.fleet.sample_time} s, exact models (Case I of the Theorem: each simulated plant is its "
             f"model), {res.iterations} learning "
-            "iterations. Regenerate with `ilcdob reproduce --out <dir>`; numbers are in `results.json`."]),
+            "iterations. Regenerate with `ilcdob reproduce"
+            + ("" if res.law == "paper" else f" --law {res.law}")
+            + " --out <dir>`; numbers are in `results.json`."]),
+        "",
+        f"Learning law: **{res.law}**, {LAW_DESCRIPTIONS[res.law]} (`ilcdob.design.laws`; choose with `--law`).",
         "",
         "Tracking RMSE in mm (no DOB / only DOB / learning 1..n) and RMSE of the total disturbance "
         "estimate d_hat + d_f against the true disturbance in m/s^2 (only DOB / learning 1):",

@@ -21,9 +21,10 @@ def identified(fleet):
 
 def test_norm_optimal_equals_closed_form_in_its_limit(identified):
     cf, no = identified.row("closed-form"), identified.row("norm-optimal")
-    # default lam = 1e-8, mu = 1e-6 (near the limit lam, mu -> 0): the same flights; measured |diff| < 1e-5
-    np.testing.assert_allclose(no.ratios, cf.ratios, atol=1e-3)
-    assert no.ratio_nominal < 1e-2  # exact models: learning removes > 99 % of the error (measured 5e-4)
+    # default lam = 1e-8, mu = 1e-6 (near the limit lam, mu -> 0): the same flights; measured max |diff| 2.2e-7
+    # over the nominal case and the 4 samples, bound ~10x
+    np.testing.assert_allclose(no.ratios, cf.ratios, rtol=0, atol=2e-6)
+    assert no.ratio_nominal < 5e-3  # exact models: learning removes > 99 % of the error (measured 5.4e-4)
 
 
 def test_fir_within_tolerance_of_closed_form_on_nominal(identified):

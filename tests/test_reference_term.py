@@ -40,4 +40,6 @@ def test_exact_reference_term_removes_the_residual_on_moving_scenarios(fleet, si
     paper = simulate_flight(tgt, r, d, d_f=cf.apply(prev.e, prev.d_f), a_ref=a).e
     exact = simulate_flight(tgt, r, d, d_f=ExactReferenceLearning(cf, r, a).apply(prev.e, prev.d_f), a_ref=a).e
     assert rmse(paper) > paper_min
-    assert rmse(exact) < 1e-6 + 0.01 * rmse(paper)
+    # measured rmse(exact) / rmse(paper): 2.2e-4 on the circle (0.085 um; trial-boundary effects), 4.2e-8 on the
+    # diamond (which starts and ends at rest); bound ~10x the larger
+    assert rmse(exact) < 2e-3 * rmse(paper)
