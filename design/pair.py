@@ -21,12 +21,17 @@ from .closed_form import closed_form_filters
 from .delta import DeltaSet, delta_set
 from .export import zpk_to_coefficients
 from .fir import FIROptions, design_fir
+from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
+from .robust_set import RobustSetOptions, design_robust_set
 
-__all__ = ["PairDesign", "design_pair", "fleet_delta_sets", "METHODS"]
+__all__ = ["PairDesign", "design_pair", "with_law", "fleet_delta_sets", "METHODS", "DEFAULT_METHODS"]
 
-METHODS = ("closed-form", "fir", "norm-optimal", "robust")
+METHODS = ("closed-form", "fir", "norm-optimal", "robust", "robust-set")
+#: The designs that comparisons and campaigns run unless told otherwise (robust-set takes a
+#: minute or more per source vehicle: on request).
+DEFAULT_METHODS = ("closed-form", "fir", "norm-optimal", "robust")
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,11 @@ class PairDesign:
         Learning signal of the target from a trial of the source (m, m/s^2 -> m/s^2).
     robust : RobustPairDesigner or None
         For the robust method: the per-trial SOCP (its ``design`` gives ratios per model).
+    law : str
+        Learning law (:mod:`ilcdob.design.laws`): ``"paper"`` or ``"exact-reference"``.
+    reference : ReferenceTerms or None
+        ``exact-reference``: the pair's reference terms, already applied by ``learn`` (callers of
+        ``robust.design`` apply ``reference.error_in`` / ``reference.signal_out`` themselves).
     """
 
     method: str
@@ -51,6 +61,8 @@ class PairDesign:
     learn: Callable[[np.ndarray, np.ndarray], np.ndarray]
     lifted: dict[str, np.ndarray] | None = field(default=None)
     robust: RobustPairDesigner | None = field(default=None, repr=False)
+    law: str = DEFAULT_LAW
+    reference: ReferenceTerms | None = field(default=None, repr=False)
 
     @property
     def order(self) -> str:
@@ -58,6 +70,8 @@ class PairDesign:
         f = self.filters
         if self.method == "norm-optimal":
             return f"lifted {f['n']}x{f['n']}"
+        if self.method == "robust-set":
+            return f"closed form + {len(f['F']['num'])}-tap FIR"
         if self.method == "robust":
             return f"per-trial SOCP, {f['models']} models"
         return ", ".join(f"{k}: {_filter_size(f[k])}" for k in ("L1", "L2"))
@@ -81,7 +95,9 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
                 norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
                 deltas: dict[str, DeltaSet] | None = None, robust: RobustOptions | None = None,
-                relax: bool = False, lifted: bool = True) -> PairDesign:
+                relax: bool = False, lifted: bool = True, law: str = DEFAULT_LAW,
+                reference: np.ndarray | None = None, acceleration: np.ndarray | None = None,
+                robust_set: RobustSetOptions | None = None) -> PairDesign:
     """Design the learning filters of ``target`` from ``source`` with ``method``.
 
     Parameters
@@ -89,7 +105,9 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     fleet : Fleet
     source, target : str
         System names (j-1 and j).
-    method : {"closed-form", "fir", "norm-optimal", "robust"}
+    method : {"closed-form", "fir", "norm-optimal", "robust", "robust-set"}
+        ``robust-set``: closed form followed by a FIR whose improvement is guaranteed for every
+        multiplicative error of the source within its Delta set's bound (:mod:`.robust_set`).
     n : int, optional
         Trial length in samples for the lifted matrices of the lifted methods (default 500).
     norm_optimal : NormOptimalOptions, optional
@@ -105,18 +123,51 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         infeasible for a trial, instead of raising.
     lifted : bool
         Norm-optimal: build the N x N matrices L1, L2 (O(N^2) memory; not needed to learn).
+    law : {"paper", "exact-reference"}
+        Learning law (:mod:`ilcdob.design.laws`). ``exact-reference`` wraps the method's learning
+        (its filters act on the disturbance part of the source's error) with the reference terms
+        of ``reference``; ``multi-source`` learns from several trials and is refused here.
+    reference : array, m, optional
+        ``exact-reference``: reference position of the trial (required).
+    acceleration : array, m/s^2, optional
+        ``exact-reference``: reference acceleration, for controllers that feed it forward.
+    robust_set : RobustSetOptions, optional
+        Options of the robust-set design (default: ``rho`` of ``robust``, capped at 1, else 0.95);
+        its bound is ``deltas[source].bound``.
+
+    Raises
+    ------
+    SpecError
+        Unknown method or law, ``multi-source``, ``exact-reference`` without ``reference``.
     """
+    if check_law(law) != DEFAULT_LAW:  # every other argument forwarded as given (locals() holds only them here)
+        given = {k: v for k, v in locals().items() if k not in ("law", "reference", "acceleration")}
+        return with_law(design_pair(**given), fleet, source, target, law, reference, acceleration)
+    if reference is not None or acceleration is not None:
+        raise SpecError("`reference`/`acceleration`: only the exact-reference law uses the reference trajectory; "
+                        "got one with law 'paper' (pass law='exact-reference')")
     if method not in METHODS:
         raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
     src, tgt = fleet.loop(source), fleet.loop(target)
-    head = {"method": method, "from": source, "to": target, "sample_time": fleet.sample_time}
+    head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
     if method == "closed-form":
         lf = closed_form_filters(src, tgt)
         filters = {**head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
                    "units": {"L1": "(m/s^2)/m", "L2": "1"}}
         return PairDesign(method, filters, lf.apply)
-    if method in ("fir", "robust"):
+    if method in ("fir", "robust", "robust-set"):
         deltas = deltas or fleet_delta_sets(fleet, [source, target])
+    if method == "robust-set":
+        rs_opts = robust_set or RobustSetOptions(rho=min(1.0, robust.rho) if robust is not None else 0.95)
+        rs = design_robust_set(src, tgt, deltas[source].w, deltas[source].bound, rs_opts)
+        filters = {**head, "closed_form": {"L1": zpk_to_coefficients(rs.filters.L1),
+                                           "L2": zpk_to_coefficients(rs.filters.L2)},
+                   "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},
+                   "learning": "d_f,j = F{L1{e_{j-1}} + L2{d_f,{j-1}}}, computed on a trial as (1 - Q_j){F{d_hat}} "
+                               "with d_hat the disturbance reconstructed by the model (F: FIR, output(k) = "
+                               "sum_i num[i] input(k + advance - i)); no C code",
+                   "delta_set": {source: deltas[source].source}, **rs.to_dict()}
+        return PairDesign(method, filters, rs.apply)
     if method == "robust":
         opts = robust or RobustOptions()
         designer = RobustPairDesigner([src, *deltas[source].loops], [tgt, *deltas[target].loops], opts, relax)
@@ -144,3 +195,46 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
                "lifted": "lifted.npz (L1, L2: d_f,j = L1 e_{j-1} + L2 d_f,{j-1})"}
     return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts),
                       matrices)
+
+
+def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: str,
+             reference: np.ndarray | None = None, acceleration: np.ndarray | None = None) -> PairDesign:
+    """``design`` (made for the paper's law) learning with ``law`` instead (see :func:`design_pair`).
+
+    Parameters
+    ----------
+    design : PairDesign
+        A design of ``source`` -> ``target`` with the paper's law.
+    fleet : Fleet
+    source, target : str
+        Systems j-1 and j.
+    law : {"exact-reference"}
+        ``multi-source`` is refused (it needs every earlier trial); ``paper`` returns ``design``.
+    reference, acceleration : array, optional
+        Reference position (m) and acceleration (m/s^2) of the trial.
+
+    Raises
+    ------
+    SpecError
+        Unknown law, ``multi-source``, a design that already has a law other than the paper's,
+        no ``reference``, or no ``acceleration`` for a pair with acceleration feed-forward.
+    """
+    if check_law(law) == DEFAULT_LAW:
+        return design
+    if design.law != DEFAULT_LAW:
+        raise SpecError(f"`design`: already learns with law {design.law!r}; give a design made with the paper's law")
+    if law == "multi-source":
+        raise SpecError("`law`: 'multi-source' learns from the trials of every earlier system at once, and a pair "
+                        f"design ({source} -> {target}) learns from one trial of {source}; use "
+                        "ilcdob.design.multi_source.multi_source_learning with every trial, or "
+                        "reproduce(..., law='multi-source') for a learning chain")
+    if reference is None:
+        raise SpecError(f"`reference`: the exact-reference law needs the reference trajectory of the trial "
+                        f"(m, sampled every {fleet.sample_time} s); got none")
+    terms = reference_terms(fleet.loop(source), fleet.loop(target), reference, acceleration)
+    filters = {**design.filters, "law": law,
+               "reference_terms": {**terms.to_dict(),
+                                   "rule": "d_f,j = learning{e_{j-1} - e_ref,{j-1}, d_f,{j-1}} + correction "
+                                           "(reference_terms.csv: e_ref_source in m, correction in m/s^2)",
+                                   "law": LAW_DESCRIPTIONS[law]}}
+    return PairDesign(design.method, filters, terms.wrap(design.learn), design.lifted, design.robust, law, terms)

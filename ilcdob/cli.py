@@ -1,9 +1,12 @@
 """Command-line interface: a thin layer over the public API.
 
 ``ilcdob reproduce [--fleet FILE] [--scenarios 1,2,3,4] [--iterations 3] [--plant linear|nonlinear]
---out DIR`` runs the paper's validation on a fleet (default: the built-in three UAVs) and writes
-``DIR/results.json``, the figures and ``DIR/README.md``; ``--plant nonlinear`` flies it on the
-nonlinear quadrotors with identified models (``ilcdob.validation.nonlinear``).
+[--law paper|exact-reference|multi-source] --out DIR`` runs the paper's validation on a fleet
+(default: the built-in three UAVs) and writes ``DIR/results.json``, the figures and
+``DIR/README.md``; ``--plant nonlinear`` flies it on the nonlinear quadrotors with identified
+models (``ilcdob.validation.nonlinear``). ``--law`` (also on ``design``, ``compare`` and
+``campaign``) chooses the learning law (``ilcdob.design.laws``); a command a law cannot apply
+to refuses it and says why.
 
 ``ilcdob identify FILE [FILE ...] --input COL --output COL [--time COL] --poles N [--zeros M]
 [--integrators K] [--delay auto|SECONDS] [--validate FILE ...] --out model.json [--plot DIR]``
@@ -32,6 +35,10 @@ from .fleet import default_fleet, load_fleet
 __all__ = ["main", "build_parser"]
 
 
+_LAW_HELP = ("learning law: paper (the Theorem's filters, default), exact-reference (the same with the reference "
+             "term (1 - G_r) r kept), multi-source (every earlier system's trial at once); see ilcdob.design.laws")
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -56,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="linear: the fleet's models (default); nonlinear: identify and fly the nonlinear "
                           "6-DOF quadrotors (Table I vehicles)")
     rep.add_argument("--seed", type=int, default=0, help="--plant nonlinear: seed of the sensor noise (default 0)")
+    rep.add_argument("--law", default="paper", help=_LAW_HELP)
 
     idf = sub.add_parser("identify", help="fit a continuous-time transfer function to flight data")
     idf.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
@@ -85,15 +93,21 @@ def build_parser() -> argparse.ArgumentParser:
     des.add_argument("--from", dest="source", required=True, help="system learned from (j-1)")
     des.add_argument("--to", dest="target", required=True, help="system that learns (j)")
     des.add_argument("--method", default="closed-form",
-                     help="closed-form, fir, norm-optimal or robust (default closed-form; robust needs --trial)")
+                     help="closed-form, fir, norm-optimal, robust or robust-set (default closed-form; robust "
+                          "needs --trial; robust-set: closed form + FIR guaranteed over the whole Delta set)")
     des.add_argument("--rho", type=float, default=0.95,
-                     help="robust: guaranteed improvement ||e_k|| <= rho ||e'_k|| on every model (default 0.95)")
+                     help="robust: guaranteed improvement ||e_k|| <= rho ||e'_k|| on every model; robust-set: "
+                          "on every plant of the Delta set, capped at 1 (default 0.95)")
     des.add_argument("--samples", type=_positive_int, default=8,
                      help="fir/robust: Delta-set samples per system (default 8)")
     des.add_argument("--bound", type=float, default=None,
                      help="fir/robust: multiplicative uncertainty bound instead of the identified covariance")
     des.add_argument("--n", type=_positive_int, default=None,
                      help="trial length in samples for lifted matrices (default: the trial's, else 500)")
+    des.add_argument("--law", default="paper",
+                     help=_LAW_HELP + "; exact-reference needs --trial with a reference column (m) and, for "
+                          "controllers with acceleration feed-forward, an acceleration column (m/s^2); "
+                          "multi-source is refused (one pair, one trial)")
     des.add_argument("--trial", default=None,
                      help="CSV of the previous system's trial: columns time (s), error (m), learning (m/s^2)")
     des.add_argument("--c-prefix", default=None,
@@ -108,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("--fleet", help="fleet TOML file (default: built-in paper fleet)")
     cmp.add_argument("--scenario", type=_positive_int, required=True, help="scenario id 1-4")
     cmp.add_argument("--methods", default="closed-form,fir,norm-optimal,robust",
-                     help="comma-separated designs (default: all four)")
+                     help="comma-separated designs (default: these four; robust-set too on request)")
     cmp.add_argument("--samples", type=_positive_int, default=8, help="Delta-set samples per system (default 8)")
     cmp.add_argument("--bound", type=float, default=None,
                      help="multiplicative uncertainty bound instead of the identified covariance")
@@ -116,6 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("--rho", type=float, default=0.95, help="robust: guaranteed improvement factor (default 0.95)")
     cmp.add_argument("--duration", type=float, default=None, help="fly only the first SECONDS of the scenario")
     cmp.add_argument("--seed", type=int, default=0, help="seed of the Delta-set draw (default 0)")
+    cmp.add_argument("--law", default="paper", help=_LAW_HELP + " (multi-source refused: one pair, one trial)")
     cmp.add_argument("--out", default=None, help="folder for compare.json, compare.txt and compare_ratios.png")
 
     ext = sub.add_parser("extensions", help="beyond the paper: exact reference term and learning from every "
@@ -132,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     cpg.add_argument("--workers", type=_positive_int, default=None,
                      help="local cluster: worker processes (default: the cores)")
     cpg.add_argument("--methods", default="closed-form,fir,norm-optimal,robust",
-                     help="comma-separated designs (default: all four)")
+                     help="comma-separated designs (default: these four; robust-set too on request)")
     cpg.add_argument("--scenarios", default="1,2,3,4", help="comma-separated scenario ids (default 1,2,3,4)")
     cpg.add_argument("--scale", type=float, default=1.0,
                      help="scale of the identified standard deviations for the true plants (> 1: beyond them)")
@@ -144,6 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     cpg.add_argument("--rho", type=float, default=0.95, help="robust: guaranteed improvement factor (default 0.95)")
     cpg.add_argument("--duration", type=float, default=None, help="fly only the first SECONDS of each scenario")
     cpg.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    cpg.add_argument("--law", default="paper", help=_LAW_HELP + " (multi-source refused: one pair, one trial)")
     cpg.add_argument("--out", required=True, help="folder for samples.jsonl, campaign.json, campaign.txt and "
                                                   "campaign_ratios.png; run again to resume")
 
@@ -188,11 +204,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
+    from .design.laws import check_law
+    from .errors import SpecError
     from .report import write_reproduction
     from .validation.reproduce import reproduce
     from .validation.scenarios import parse_scenarios
 
     ids = parse_scenarios(args.scenarios)
+    law = check_law(args.law, "--law")
+    if args.plant == "nonlinear" and law != "paper":
+        raise SpecError(f"`--law {law}` with `--plant nonlinear`: the nonlinear reproduction flies the paper's law "
+                        "with its flight-implementation additions (robustness filter, learning gain, airframe "
+                        "correction; ilcdob.validation.nonlinear) and has no other law; use --plant linear, or "
+                        "--law paper")
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     start = time.perf_counter()
     if args.plant == "nonlinear":
@@ -203,9 +227,9 @@ def _reproduce(args: argparse.Namespace) -> int:
                                   NonlinearSettings(seed=args.seed))
         write_text_atomic(Path(args.out) / "identified_fleet.toml", res.identified_toml)
     else:
-        res = reproduce(fleet, ids, args.iterations)
+        res = reproduce(fleet, ids, args.iterations, law=law)
     path = write_reproduction(res, args.out, figures=not args.no_figures)
-    print(f"wrote {path} ({time.perf_counter() - start:.1f} s)", file=sys.stderr)
+    print(f"wrote {path} ({time.perf_counter() - start:.1f} s, law {res.law})", file=sys.stderr)
     for sr in res.scenarios:
         for name in sr.order:
             m = sr.systems[name].metrics()
@@ -266,6 +290,18 @@ def _identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _csv_header(path: str) -> list[str]:
+    """Column names of a CSV file (first line that is neither blank nor a ``#`` comment); [] if unreadable."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for line in fh:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    return [c.strip().strip('"') for c in line.split(",")]
+    except OSError:
+        return []  # load_csv reports the missing file
+    return []
+
+
 def _design(args: argparse.Namespace) -> int:
     import json
 
@@ -273,6 +309,7 @@ def _design(args: argparse.Namespace) -> int:
 
     from .atomic import atomic_path
     from .design.c_export import check_c_prefix, write_design_folder
+    from .design.laws import check_law
     from .design.pair import design_pair, fleet_delta_sets
     from .design.robust import RobustOptions
     from .errors import SpecError
@@ -281,8 +318,23 @@ def _design(args: argparse.Namespace) -> int:
 
     if args.c_prefix is not None:
         check_c_prefix(args.c_prefix)
+    law = check_law(args.law, "--law")
+    if law == "multi-source":
+        raise SpecError("`--law multi-source`: it learns from the trials of every earlier system at once, and "
+                        "`ilcdob design` makes one pair's filters from one trial of --from; use `ilcdob reproduce "
+                        "--law multi-source` for a learning chain, or ilcdob.design.multi_source.multi_source_learning "
+                        "with every trial")
+    if law == "exact-reference" and not args.trial:
+        raise SpecError("`--law exact-reference`: the law needs the reference trajectory of the trial; give --trial "
+                        "CSV with columns time (s), error (m), learning (m/s^2), reference (m) and, for controllers "
+                        "with acceleration feed-forward, acceleration (m/s^2)")
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
-    trial = load_csv(args.trial, {"e": "error", "d_f": "learning"}) if args.trial else None
+    columns = {"e": "error", "d_f": "learning"}
+    if law == "exact-reference":
+        columns["r"] = "reference"
+        if "acceleration" in _csv_header(args.trial):
+            columns["a"] = "acceleration"
+    trial = load_csv(args.trial, columns) if args.trial else None
     if trial is not None and abs(trial.ts - fleet.sample_time) > 1e-9:
         from .errors import SignalError
 
@@ -292,10 +344,15 @@ def _design(args: argparse.Namespace) -> int:
                         "previous system's trial with --trial CSV (columns time, error, learning)")
     n = args.n or (len(trial) if trial is not None else None)
     deltas = None
-    if args.method in ("fir", "robust"):
+    if args.method in ("fir", "robust", "robust-set"):
         deltas = fleet_delta_sets(fleet, [args.source, args.target], k=args.samples, bound=args.bound)
+    reference = {}
+    if law == "exact-reference":
+        reference = {"reference": trial["r"], "acceleration": trial["a"] if "a" in trial.signals else None}
     design = design_pair(fleet, args.source, args.target, args.method, n=n, deltas=deltas,
-                         robust=RobustOptions(rho=args.rho) if args.method == "robust" else None)
+                         robust=RobustOptions(rho=args.rho) if args.method in ("robust", "robust-set") else None,
+                         law=law,
+                         **reference)
     from pathlib import Path
 
     out = Path(args.out)
@@ -305,8 +362,9 @@ def _design(args: argparse.Namespace) -> int:
               "(--c-prefix/--c-float ignored)", file=sys.stderr)
     arrays = design.lifted
     if trial is not None and design.robust is not None:
-        res = design.robust.design(trial["e"], trial["d_f"])
-        df = res.d_f
+        terms = design.reference
+        res = design.robust.design(terms.error_in(trial["e"]) if terms else trial["e"], trial["d_f"])
+        df = terms.signal_out(res.d_f) if terms else res.d_f
         design.filters["trial"] = {"worst_ratio": res.worst_ratio, "ratios": res.ratios.tolist(), "rho": res.rho,
                                    "status": res.status, "solve_time_s": res.solve_time}
         arrays = {"d_f": res.d_f, "ratios": res.ratios, "predicted_errors": res.errors}
@@ -322,6 +380,12 @@ def _design(args: argparse.Namespace) -> int:
         FlightData(trial.t, {"learning": df}, {"learning": "m/s^2"},
                    source=f"learning signal of {args.target} from {args.trial}").to_csv(out / "learning_signal.csv")
         others.append("learning_signal.csv")
+    if design.reference is not None:
+        FlightData(trial.t, {"e_ref_source": design.reference.source_error, "correction": design.reference.correction},
+                   {"e_ref_source": "m", "correction": "m/s^2"},
+                   source=f"reference terms of {args.source} -> {args.target} for {args.trial}"
+                   ).to_csv(out / "reference_terms.csv")
+        others.append("reference_terms.csv")
         print(f"wrote {out / 'learning_signal.csv'}", file=sys.stderr)
     written = write_design_folder(out, design.filters, others, prefix=args.c_prefix, float_variant=args.c_float)
     print(json.dumps({k: v for k, v in written.items() if k not in ("L1", "L2")}))
@@ -338,7 +402,7 @@ def _compare(args: argparse.Namespace) -> int:
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     (sid,) = parse_scenarios(str(args.scenario))
     opts = CompareOptions(samples=args.samples, bound=args.bound, scale=args.scale, seed=args.seed,
-                          duration=args.duration, robust=RobustOptions(rho=args.rho))
+                          duration=args.duration, robust=RobustOptions(rho=args.rho), law=args.law)
     cmp = compare_designs(fleet, sid, [m.strip() for m in args.methods.split(",")], opts)
     print(cmp.table(), end="")
     if args.out:
@@ -375,7 +439,7 @@ def _campaign(args: argparse.Namespace) -> int:
     opts = CampaignOptions(samples=args.samples, seed=args.seed, scale=args.scale, bound=args.bound,
                            scenarios=tuple(parse_scenarios(args.scenarios)),
                            methods=tuple(m.strip() for m in args.methods.split(",")), duration=args.duration,
-                           robust_models=args.robust_models, rho=args.rho)
+                           robust_models=args.robust_models, rho=args.rho, law=args.law)
     result = run_campaign(fleet, opts, args.out, scheduler=args.scheduler, workers=args.workers)
     print(result.table(), end="")
     print(f"wrote {args.out}/campaign.json ({result.wall_time_s:.0f} s)", file=sys.stderr)

@@ -10,10 +10,11 @@ files name.
 Inputs, detected by file name in each folder
 --------------------------------------------
 ``results.json`` (``ilcdob reproduce``, see :meth:`ReproductionResult.to_dict`)
-    ``{"plant": "linear" | "nonlinear", "fleet": PATH, "sample_time": s, "iterations": n,
+    ``{"plant": "linear" | "nonlinear", "law": LAW, "fleet": PATH, "sample_time": s, "iterations": n,
     "scenarios": [{"id", "title", "order": [names], "systems": {name: {"rmse_no_dob",
     "rmse_dob", "rmse_learning": [n], "rmse_dhat_dob", "rmse_dhat_learning": [n]}}}]}``,
-    RMSE in m and m/s^2, with the figures written beside it (``rmse_bars.png``,
+    RMSE in m and m/s^2 (``law``: the learning law of :mod:`ilcdob.design.laws`, shown with
+    the results; absent in files written before laws existed), with the figures written beside it (``rmse_bars.png``,
     ``error_s<N>.png``, ``disturbance_s<N>.png``, ``bode_loops.png``, ``bode_learning.png``,
     ``bode_te.png``, ``identified_models.png``). Sections: the fleet and its identified
     models, the Bode figures, RMSE table and bars, error and disturbance-estimate time series
@@ -60,7 +61,7 @@ import numpy as np
 
 from .atomic import write_text_atomic
 from .errors import IlcdobError
-from .fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
+from .fleet import DEFAULT_FLEET_PATH, DEFAULT_FLEET_SOURCE, Fleet, default_fleet, load_fleet
 
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "write_report"]
@@ -266,8 +267,7 @@ def _resolve_fleet(res: JsonInput, fallback: str | Path | None) -> tuple[Fleet |
             tried.append(str(p))
     if isinstance(src, str) and Path(src).name == DEFAULT_FLEET_PATH.name \
             and Path(src).parent.parts[-2:] == ("ilcdob", "data"):
-        return default_fleet(), (f"the installed built-in fleet {DEFAULT_FLEET_PATH} ({res.path} names the "
-                                 f"built-in fleet of another checkout, {src})")
+        return default_fleet(), f"the built-in fleet ({DEFAULT_FLEET_SOURCE})"
     if fallback is not None:
         return load_fleet(fallback), f"fleet file {fallback} (given as fallback; {res.path} names {src!r})"
     return None, (f"{res.path} names fleet {src!r}, which was not found (tried {', '.join(tried)}); "
@@ -533,7 +533,14 @@ def _rmse_table(data: dict) -> str:
 def _plant_section(res: JsonInput) -> str:
     data = res.data
     folder = res.folder
-    parts = [f"<p>From {escape(str(res.path))}: {len(data['scenarios'])} scenario(s), "
+    from .design.laws import LAW_DESCRIPTIONS
+
+    law = data.get("law")
+    law_html = (f"learning law <strong>{escape(str(law))}</strong>"
+                + (f" ({escape(LAW_DESCRIPTIONS[law])})" if law in LAW_DESCRIPTIONS else "")
+                if law is not None else "learning law not recorded (files written before the law choice existed "
+                                        "come from the paper's law)")
+    parts = [f"<p>From {escape(str(res.path))}: {law_html}; {len(data['scenarios'])} scenario(s), "
              f"{escape(_fmt(data.get('iterations')))} learning iteration(s), sample time "
              f"{escape(_fmt(data.get('sample_time')))} s. Tracking RMSE in mm (no DOB, only DOB, learning "
              "iterations) and RMSE of the total disturbance estimate (d_hat + d_f) against the true disturbance "
@@ -567,7 +574,7 @@ def _theorem_html(fleet: Fleet, origin: str, orders: list[list[str]], options: R
                         "and no Theorem check.",
                         "a fleet identified with `ilcdob identify-fleet` (or run `ilcdob check --bound B`)")
     parts = [f"<p>Fleet from {escape(origin)}. Learning helps at frequencies where |Delta_(j-1)| &lt; "
-             "|1 + P_(j-1) C_(j-1)| / 2 (design notes section 2); |Delta| is the 3-sigma bound of the "
+             "|1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III; docs/theory.md section 2); |Delta| is the 3-sigma bound of the "
              f"identification ({options.theorem_samples} sampled plants per Delta set, seed {options.seed}); margin "
              "= rhs / |Delta| (&gt; 1: holds).</p>"]
     first = None

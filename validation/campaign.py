@@ -15,10 +15,12 @@ paper's improvement ratio ``||e_j|| / ||e'_j||`` (Theorem: < 1 means learning he
 The designs only know the models: closed-form and norm-optimal are built from the nominal
 models, FIR from the nominal models and 8 samples of the identified uncertainty (its robust
 ``|Te1|`` constraint), robust from the nominal pair plus ``robust_models`` paired samples
-(its SOCP is solved per trial). These design samples are drawn once from ``(seed, design)``
-at scale 1 (the identified uncertainty, which is what a designer knows) and are never the
-true plants of a sample. Every design is built once per worker and pair and reused for all
-its samples and scenarios; only the robust SOCP is re-solved per trial.
+(its SOCP is solved per trial), robust-set from the nominal models and the Delta set's bound
+(:mod:`ilcdob.design.robust_set`; its rho is ``rho`` capped at 1). These design samples are
+drawn once from ``(seed, design)`` at scale 1 (the identified uncertainty, which is what a
+designer knows) and are never the true plants of a sample. Every design is built once per
+worker and pair and reused for all its samples and scenarios; only the robust SOCP is
+re-solved per trial.
 
 Results are written incrementally: one JSON line per finished sample, appended, flushed and
 fsynced to ``DIR/samples.jsonl`` by the one client process (a lock on that file keeps a
@@ -56,7 +58,8 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.design.pair import METHODS, PairDesign, design_pair
+from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.design.pair import DEFAULT_METHODS, METHODS, PairDesign, design_pair, with_law
 from ilcdob.design.robust import RobustOptions
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
@@ -99,7 +102,8 @@ class CampaignOptions:
     scenarios : tuple of int
         Scenario ids, each 1-4.
     methods : tuple of str
-        Designs, a subset of :data:`ilcdob.design.pair.METHODS`.
+        Designs, a subset of :data:`ilcdob.design.pair.METHODS` (default
+        :data:`~ilcdob.design.pair.DEFAULT_METHODS`).
     duration : float, optional
         Fly only the first ``duration`` seconds of each scenario (s, > 0; default: all).
     robust_models : int
@@ -107,6 +111,11 @@ class CampaignOptions:
         per trial grows about linearly with ``1 + robust_models``.
     rho : float
         Robust design's guaranteed improvement factor on its models (> 0).
+    law : {"paper", "exact-reference"}
+        Learning law applied around every design (:mod:`ilcdob.design.laws`); ``multi-source``
+        is refused (one pair from one DOB-only trial per scenario, where it is the paper's law).
+        The default is left out of the settings hash, so campaigns started before the law
+        existed resume.
     """
 
     samples: int = 200
@@ -114,10 +123,11 @@ class CampaignOptions:
     scale: float = 1.0
     bound: float | None = None
     scenarios: tuple[int, ...] = (1, 2, 3, 4)
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = DEFAULT_METHODS
     duration: float | None = None
     robust_models: int = 1
     rho: float = 0.95
+    law: str = DEFAULT_LAW
 
     def __post_init__(self) -> None:
         def integer(v: object) -> bool:
@@ -147,6 +157,14 @@ class CampaignOptions:
                                 "(Delta samples besides the nominal pair)")
         if not (np.isfinite(self.rho) and self.rho > 0):
             raise CampaignError(f"`rho`: got {self.rho!r}, expected an improvement factor > 0 (e.g. 0.95)")
+        try:
+            law = check_law(self.law)
+        except IlcdobError as exc:
+            raise CampaignError(str(exc)) from None
+        if law == "multi-source":
+            raise CampaignError("`law`: 'multi-source' learns from every earlier system's trial, but a campaign flies "
+                                "one pair (j-1 -> j) per scenario from a single DOB-only trial of j-1, where it is the "
+                                "paper's law; use 'paper' or 'exact-reference'")
         object.__setattr__(self, "scenarios", tuple(int(s) for s in dict.fromkeys(scenarios)))
         object.__setattr__(self, "methods", tuple(dict.fromkeys(methods)))
         object.__setattr__(self, "samples", int(self.samples))
@@ -167,6 +185,8 @@ def campaign_settings(fleet: Fleet, options: CampaignOptions) -> dict[str, Any]:
     """
     opts = asdict(options)
     opts.pop("samples")
+    if opts.get("law") == DEFAULT_LAW:  # the default law keeps the ids of campaigns started before laws existed
+        opts.pop("law")
     opts["scenarios"], opts["methods"] = list(options.scenarios), list(options.methods)
     sources = {s.name: ("identification" if s.uncertainty is None and s.identification is not None
                         else f"bound {s.uncertainty.bound:g}" if s.uncertainty is not None else "none")
@@ -212,6 +232,7 @@ class _WorkerState:
         self.pairs: dict[int, PairScenario] = {}
         self.designs: dict[tuple[str, str, str], PairDesign | str] = {}
         self._deltas: dict[str, DeltaSet] | None = None
+        self.lawful: dict[tuple[int, str], PairDesign] = {}
 
     def pair(self, sid: int) -> PairScenario:
         if sid not in self.pairs:
@@ -233,6 +254,16 @@ class _WorkerState:
             except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
                 self.designs[key] = f"design failed: {exc}"
         return self.designs[key]
+
+    def with_law(self, sid: int, method: str, design: PairDesign) -> PairDesign:
+        """``design`` learning with the campaign's law on scenario ``sid`` (its reference terms, built once)."""
+        if self.options.law == DEFAULT_LAW:
+            return design
+        if (sid, method) not in self.lawful:
+            pair = self.pair(sid)
+            self.lawful[(sid, method)] = with_law(design, self.fleet, pair.source, pair.target, self.options.law,
+                                                   pair.r, pair.a_ref)
+        return self.lawful[(sid, method)]
 
 
 _local = threading.local()
@@ -272,7 +303,7 @@ def run_sample(fleet: Fleet, options: CampaignOptions, settings_id: str, index: 
             if isinstance(d, str):
                 errors[method] = d
             else:
-                designs[method] = d
+                designs[method] = state.with_law(sid, method, d)
         case = evaluate_case(pair, loops[pair.source], loops[pair.target], designs)
         errors.update(case.errors)
         scenarios[str(sid)] = {"source": pair.source, "target": pair.target, "rmse_without": case.rmse_without,
@@ -444,7 +475,7 @@ class CampaignResult:
         return {
             "samples": o.samples, "seed": o.seed,
             "uncertainty": self.uncertainty,
-            "scale": o.scale, "robust_models": o.robust_models, "rho": o.rho,
+            "scale": o.scale, "robust_models": o.robust_models, "rho": o.rho, "law": o.law,
             "duration": o.duration, "runs_per_method": o.samples * len(o.scenarios),
             "rejected_plants": self.rejected, "resumed_samples": self.resumed, "workers": self.workers,
             "wall_time_s": self.wall_time_s, "sample_time_s": self.sample_time_s,
@@ -462,7 +493,7 @@ class CampaignResult:
         """Plain-text tables: every run, then per scenario."""
         o = self.options
         head = (f"campaign: {o.samples} samples x {len(o.scenarios)} scenarios, true plants from "
-                f"{self.uncertainty}, robust: 1 + {o.robust_models} models, rho {o.rho:g}; "
+                f"{self.uncertainty}, robust: 1 + {o.robust_models} models, rho {o.rho:g}, law {o.law}; "
                 "ratio = ||e_j|| / ||e'_j||\n")
 
         def block(title: str, stats: Mapping[str, MethodStatistics]) -> str:

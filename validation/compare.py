@@ -9,8 +9,13 @@ it. The figure of merit is the paper's improvement ratio ``||e_j|| / ||e'_j||`` 
 < 1 means learning helped), ``e'_j`` being system j's DOB-only error in the same case. The
 robust design's models are exactly these 1 + K cases (its own sample set), so theory promises
 its ratio <= rho on them, up to what its predictions cannot know: the two systems' own
-noises differ (design notes section 4), and the reference term ``(1 - G_r) r`` of moving
+noises differ (paper Sec. IV; docs/theory.md section 4), and the reference term ``(1 - G_r) r`` of moving
 scenarios enters its predictions only through the reconstruction.
+
+Every design learns with the same learning law (``CompareOptions.law``,
+:mod:`ilcdob.design.laws`): ``paper`` (default) or ``exact-reference``, which removes system
+j-1's model reference error before the design's filter and adds system j's reference
+correction after it.
 
 Design time is the time to build the design plus its mean time per trial.
 """
@@ -26,8 +31,9 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from ilcdob.design.fir import FIROptions
+from ilcdob.design.laws import DEFAULT_LAW, check_law
 from ilcdob.design.norm_optimal import NormOptimalOptions
-from ilcdob.design.pair import METHODS, PairDesign, design_pair, fleet_delta_sets
+from ilcdob.design.pair import DEFAULT_METHODS, METHODS, PairDesign, design_pair, fleet_delta_sets
 from ilcdob.design.robust import RobustOptions
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.fleet import Fleet
@@ -57,6 +63,9 @@ class CompareOptions:
     duration : float, optional
         Fly only the first ``duration`` seconds of the scenario (default: all of it).
     robust, fir, norm_optimal : options of the designs (defaults: their own).
+    law : {"paper", "exact-reference"}
+        Learning law (:mod:`ilcdob.design.laws`) applied around every design. ``multi-source``
+        is refused: a comparison flies one pair from one DOB-only trial, where it is the paper's law.
     """
 
     samples: int = 8
@@ -67,6 +76,7 @@ class CompareOptions:
     robust: RobustOptions = field(default_factory=RobustOptions)
     fir: FIROptions | None = None
     norm_optimal: NormOptimalOptions | None = None
+    law: str = DEFAULT_LAW
 
     def __post_init__(self) -> None:
         if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
@@ -75,6 +85,10 @@ class CompareOptions:
             raise SpecError(f"`duration`: got {self.duration!r}, expected a duration > 0 s")
         if not (np.isfinite(self.scale) and self.scale > 0):
             raise SpecError(f"`scale`: got {self.scale!r}, expected a factor > 0")
+        if check_law(self.law) == "multi-source":
+            raise SpecError("`law`: 'multi-source' learns from every earlier system's trial, but a comparison flies "
+                            "one pair (j-1 -> j) from a single DOB-only trial of j-1, where it is the paper's law; "
+                            "use 'paper' or 'exact-reference' here, or reproduce(..., law='multi-source')")
 
 
 @dataclass(frozen=True)
@@ -116,20 +130,22 @@ class Comparison:
     rmse_without_nominal: float
     rmse_without_worst: float
     methods: list[MethodComparison]
+    law: str = DEFAULT_LAW
 
     def row(self, method: str) -> MethodComparison:
         return next(m for m in self.methods if m.method == method)
 
     def to_dict(self) -> dict[str, object]:
         return {"scenario": self.scenario, "source": self.source, "target": self.target, "samples": self.samples,
-                "delta_set": self.delta_set, "units": {"rmse": "m", "ratio": "||e_j|| / ||e'_j||",
+                "delta_set": self.delta_set, "law": self.law, "units": {"rmse": "m", "ratio": "||e_j|| / ||e'_j||",
                                                         "design_time": "s"},
                 "rmse_without_learning": {"nominal": self.rmse_without_nominal, "worst": self.rmse_without_worst},
                 "methods": {m.method: m.to_dict() for m in self.methods}}
 
     def table(self) -> str:
         """Plain-text table, one row per design."""
-        head = (f"scenario {self.scenario}: {self.target} learning from {self.source}; nominal plants and "
+        head = (f"scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law}); "
+                f"nominal plants and "
                 f"{self.samples} Delta samples ({self.delta_set}); ratio = ||e_j|| / ||e'_j||\n"
                 f"without learning: RMSE {1e3 * self.rmse_without_nominal:.2f} mm nominal, "
                 f"{1e3 * self.rmse_without_worst:.2f} mm worst sample\n")
@@ -266,7 +282,7 @@ def evaluate_case(pair: PairScenario, source_loop: LoopSystem, target_loop: Loop
     return CaseResult(rmse(e_wo), ratios, rmses, times, errors)
 
 
-def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = METHODS,
+def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEFAULT_METHODS,
                     options: CompareOptions | None = None,
                     progress: Callable[[str], None] | None = None) -> Comparison:
     """Fly every design of ``methods`` through scenario ``scenario_id`` (see module docstring).
@@ -277,7 +293,7 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = MET
     scenario_id : int
         1-4 (:mod:`ilcdob.validation.scenarios`); its learning order's first pair is used.
     methods : sequence of str
-        Subset of :data:`ilcdob.design.pair.METHODS`.
+        Subset of :data:`ilcdob.design.pair.METHODS` (default :data:`~ilcdob.design.pair.DEFAULT_METHODS`).
     options : CompareOptions, optional
     progress : callable, optional
         Receives one line per design (default: printed to stderr).
@@ -299,7 +315,9 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = MET
         try:
             designs[method] = design_pair(fleet, source, target, method, n=pair.t.size,
                                           norm_optimal=opts.norm_optimal, fir=opts.fir, deltas=deltas,
-                                          robust=opts.robust, lifted=False)
+                                          robust=opts.robust, lifted=False, law=opts.law,
+                                          **({"reference": pair.r, "acceleration": pair.a_ref}
+                                             if opts.law == "exact-reference" else {}))
         except IlcdobError as exc:  # a design that cannot be made is a result of the comparison
             failed[method] = MethodComparison.failed(method, str(exc), time.perf_counter() - t0)
         build[method] = time.perf_counter() - t0
@@ -326,7 +344,8 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = MET
             f"({build[method] + sum(per_trial):.1f} s)")
     return Comparison(scenario=scenario_id, source=source, target=target, samples=opts.samples,
                       delta_set=deltas[source].source, rmse_without_nominal=results[0].rmse_without,
-                      rmse_without_worst=float(max(r.rmse_without for r in results[1:])), methods=rows)
+                      rmse_without_worst=float(max(r.rmse_without for r in results[1:])), methods=rows,
+                      law=opts.law)
 
 
 def write_comparison(cmp: Comparison, out: str | Path, rho: float | None = None) -> list[Path]:
@@ -354,7 +373,7 @@ def write_comparison(cmp: Comparison, out: str | Path, rho: float | None = None)
     ax.set_xticks(range(len(rows)), [m.method for m in rows])
     ax.set_yscale("log")
     ax.set_ylabel("||e_j|| / ||e'_j||")
-    ax.set_title(f"Scenario {cmp.scenario}: {cmp.target} learning from {cmp.source}")
+    ax.set_title(f"Scenario {cmp.scenario}: {cmp.target} learning from {cmp.source} (law {cmp.law})")
     ax.legend(fontsize=8)
     fig.tight_layout()
     with atomic_path(out / "compare_ratios.png") as tmp:
