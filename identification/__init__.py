@@ -8,6 +8,8 @@
   filtering, :mod:`.oe`) with covariance, residual tests and a
   multiplicative uncertainty bound;
 * :mod:`.quadrotor` - a nonlinear 6-DOF quadrotor for synthetic flights;
+* :mod:`.synthetic` - closed-loop flights of a linear plant under a PID (synthetic data with
+  known truth);
 * :mod:`.fleet_id` - identify a whole fleet from synthetic flights;
 * :mod:`.plots` - compare / residual / Bode-with-uncertainty figures.
 """

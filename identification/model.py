@@ -23,6 +23,11 @@ from ilcdob.errors import SpecError
 __all__ = ["ModelStructure", "simulate_zoh", "companion"]
 
 
+#: Largest model order a fit accepts: the companion-form coefficients of higher orders span
+#: too many decades to be estimated in double precision.
+MAX_POLES = 12
+
+
 @dataclass(frozen=True)
 class ModelStructure:
     """Orders of a continuous-time transfer-function model.
@@ -46,8 +51,10 @@ class ModelStructure:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise SpecError(f"`{name}`: got {v!r}, expected an integer >= 0")
-        if self.n_poles < 1:
-            raise SpecError(f"`n_poles`: got {self.n_poles}, expected >= 1")
+        if not 1 <= self.n_poles <= MAX_POLES:
+            raise SpecError(f"`n_poles`: got {self.n_poles}, expected 1 to {MAX_POLES} (a flight vehicle's "
+                            "input-output model rarely needs more than 6; polynomial coefficients of higher "
+                            "orders are numerically meaningless)")
         if self.n_zeros >= self.n_poles:
             raise SpecError(f"`n_zeros`: got {self.n_zeros} with {self.n_poles} poles; the model must be "
                             f"strictly proper (n_zeros <= {self.n_poles - 1})")
@@ -133,11 +140,9 @@ def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts
                  delay: float = 0.0, x0: np.ndarray | None = None) -> np.ndarray:
     """Output of the model for a ZOH input ``u`` sampled at ``ts`` (from rest unless ``x0``,
     the companion-form state at the first sample); computed by filtering (:mod:`.oe`)."""
-    from .oe import delayed_input, discretise, response
+    from .oe import discretise, response, zoh_inputs
 
     d = discretise(structure, theta, ts, delay, derivatives=False)
     u = np.asarray(u, dtype=float)
-    ud = delayed_input(u, d.nd)
-    inputs = [(d.g0, ud), (d.g1, delayed_input(ud, 1))] if d.f > 0 else [(d.g0, ud)]
     x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
-    return response(d.phi, d.c[0], d.sos, d.den, u.size, inputs, x0)
+    return response(d.phi, d.c[0], d.sos, d.den, u.size, zoh_inputs(d, u), x0)

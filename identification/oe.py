@@ -45,7 +45,7 @@ from scipy.linalg import expm
 
 from .model import ModelStructure, companion
 
-__all__ = ["Discretisation", "discretise", "response", "allpole_sos", "delay_split", "delayed_input"]
+__all__ = ["Discretisation", "discretise", "response", "zoh_inputs", "allpole_sos", "delay_split", "delayed_input"]
 
 
 def delay_split(delay: float, ts: float) -> tuple[int, float]:
@@ -167,6 +167,13 @@ def discretise(structure: ModelStructure, theta: np.ndarray, ts: float, delay: f
     return Discretisation(phi=phi, g0=g0, g1=g1, c=c, nd=nd, f=f, dphi=tuple(dphi), dg0=tuple(dg0),
                           dg1=tuple(dg1), g_delay=phi_r @ b, poles=poles, sos=sos, den=dpoly, sos2=sos2,
                           den2=dpoly2)
+
+
+def zoh_inputs(d: Discretisation, u: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The ``(g, v)`` input pairs of :func:`response` for input ``u`` under ``d``:
+    ``G0 u[k-nd]`` and, with a fractional delay, ``G1 u[k-nd-1]``."""
+    ud = delayed_input(u, d.nd)
+    return [(d.g0, ud), (d.g1, delayed_input(ud, 1))] if d.f > 0 else [(d.g0, ud)]
 
 
 def _markov(phi: np.ndarray, c: np.ndarray, vec: np.ndarray, count: int) -> np.ndarray:

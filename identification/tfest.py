@@ -56,7 +56,7 @@ from ilcdob.errors import IlcdobError, SignalError, SpecError
 
 from .data import FlightData
 from .model import ModelStructure
-from .oe import Discretisation, delayed_input, discretise, response
+from .oe import Discretisation, delayed_input, discretise, response, zoh_inputs
 from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
@@ -148,7 +148,7 @@ class FitOptions:
 class _Exp:
     u: np.ndarray
     y: np.ndarray
-    trend: np.ndarray        # N x n_trend basis (normalised time powers)
+    trend: np.ndarray        # N x n_trend Legendre basis (trend degrees the free response does not span)
     source: str
 
     @property
@@ -157,10 +157,8 @@ class _Exp:
 
 
 def _trend_basis(n: int, structure: ModelStructure, opts: FitOptions) -> np.ndarray:
-    if opts.trend is None:
-        return np.zeros((n, 0))
     covered = structure.n_integrators if opts.estimate_x0 else 0
-    if opts.trend < covered:
+    if opts.trend is None or opts.trend < covered:
         return np.zeros((n, 0))
     return trend_basis(n, opts.trend)[:, covered:]
 
@@ -208,8 +206,7 @@ class _Point:
     delay: float
     locals_: list[np.ndarray]         # per experiment: initial condition, trend coefficients
     sse: float
-    disc: Discretisation | None = None
-    cols: list | None = None          # per experiment: numerator rows, local rows
+    cols: list | None = None          # per experiment: numerator rows, local rows (None: recompute)
 
 
 class _Model:
@@ -244,14 +241,10 @@ class _Model:
             return True
         return bool(np.all(np.roots(np.concatenate([[1.0], a])).real < 0))
 
-    def inputs(self, d: Discretisation, e: _Exp) -> list[tuple[np.ndarray, np.ndarray]]:
-        ud = delayed_input(e.u, d.nd)
-        return [(d.g0, ud), (d.g1, delayed_input(ud, 1))] if d.f > 0 else [(d.g0, ud)]
-
     def columns(self, d: Discretisation, e: _Exp) -> tuple[np.ndarray, np.ndarray]:
         """Linear-parameter signals of one experiment as rows: numerator (theta order), locals."""
         eye = np.eye(self.n)
-        num_rows = np.atleast_2d(response(d.phi, eye[self.nb - 1::-1], d.sos, d.den, e.n, self.inputs(d, e)))
+        num_rows = np.atleast_2d(response(d.phi, eye[self.nb - 1::-1], d.sos, d.den, e.n, zoh_inputs(d, e.u)))
         if not self.n_beta:
             return num_rows, e.trend.T
         # e_1' Phi^k e_i = e_i' (Phi')^k e_1: every free-response signal in one pass, computed
@@ -291,12 +284,12 @@ class _Model:
         theta = np.concatenate([a, b])
         if not (np.all(np.isfinite(theta)) and math.isfinite(sse)):
             return bad
-        return _Point(alpha, theta, delay, locs, sse, d, cols)
+        return _Point(alpha, theta, delay, locs, sse, cols)
 
     def sensitivities(self, p: _Point, d: Discretisation, e: _Exp, loc: np.ndarray) -> np.ndarray:
         """Rows ``d yhat / d alpha`` of one experiment, linear parameters held (:mod:`.oe`)."""
         n = self.n
-        ins = self.inputs(d, e)
+        ins = zoh_inputs(d, e.u)
         rows = np.empty((self.n_alpha, e.n))
         z = np.zeros((n, n))
         c2 = np.concatenate([np.zeros(n), d.c[0]])
@@ -362,6 +355,8 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
     if model.n_alpha == 0:
         return _LMResult(p, "converged", 0)
     h, grad = model.reduced_normal(p)
+    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(grad))):
+        return _LMResult(p, "numerical", 0)
     mu, nu = None, 2.0
     lo, hi = 0.0, opts.max_delay
     n_obs = sum(e.n for e in model.exps)
@@ -407,6 +402,8 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
                 if converged:
                     return _LMResult(p, "converged", it)
                 h, grad = model.reduced_normal(p)
+                if not (np.all(np.isfinite(h)) and np.all(np.isfinite(grad))):
+                    return _LMResult(p, "numerical", it)
                 break
             mu, nu = mu * nu, nu * 2.0
             if small or mu > 1e16 * max(1.0, float(np.max(np.diag(hs)))):
@@ -528,7 +525,7 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
     say("delay sweep (s: SSE): " + ", ".join(f"{p.delay:.3g}: {p.sse:.4g}" for p in prof))
     minima = [prof[i] for i in range(len(prof))
               if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
-    return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.disc, p.cols)
+    return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.cols)
             for p in sorted(minima, key=lambda p: p.sse)]
 
 
@@ -559,6 +556,9 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
                                   f"{structure.n_params} parameters (need at least {need})")
             if np.std(u) == 0:
                 raise SignalError(f"{fd.source}: input `{input}` is constant: it does not excite the system")
+            if np.std(y) == 0:
+                raise SignalError(f"{fd.source}: output `{output}` is constant ({y[0]:g}): there is no response "
+                                  "to fit; check the signal name and the log")
             exps.append(_Exp(u, y, _trend_basis(u.size, structure, opts), piece.source))
     if not exps:
         raise SignalError(f"`data`: no piece of at least {need} samples between the gaps of the logs")
@@ -676,10 +676,12 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
         if res.status == "time_limit":
             break
     assert best is not None
+    why = {"max_iter": "at its iteration limit", "time_limit": "at its time limit",
+           "numerical": "where the sensitivities overflowed (the model order may exceed what the data support)"}
     if best.status != "converged":
-        warnings.warn(f"tfest stopped at its {'iteration' if best.status == 'max_iter' else 'time'} limit "
-                      f"({best.status}); the best iterate is returned (SSE {best.point.sse:.6g}); raise "
-                      "FitOptions.max_iter/time_limit or check the model structure", RuntimeWarning, stacklevel=3)
+        warnings.warn(f"tfest stopped {why[best.status]} ({best.status}); the best iterate is returned (SSE "
+                      f"{best.point.sse:.6g}); raise FitOptions.max_iter/time_limit or check the model structure",
+                      RuntimeWarning, stacklevel=3)
     p = best.point
     theta, delay = p.theta, p.delay
     n_obs = sum(e.n for e in exps)

@@ -319,3 +319,12 @@ def test_an_initial_model_skips_the_start_search_and_reaches_the_same_fit():
         tfest(data, "u", "y", structure, FitOptions(initial=(1.0, 2.0, 3.0)), **QUIET)
     with pytest.raises(SpecError, match=r"`initial`: the model .* cannot start the fit"):
         tfest(data, "u", "y", structure, FitOptions(initial=(-1.0, 4.0, 2.0, 3.0)), **QUIET)  # unstable
+
+
+def test_no_response_and_absurd_orders_are_clear_errors():
+    structure, theta = _truth(STABLE)
+    u = _excite(1000, 0)
+    with pytest.raises(__import__("ilcdob").errors.SignalError, match=r"output `y` is constant \(2\.5\)"):
+        tfest(_flight(u, np.full(1000, 2.5)), "u", "y", structure, **QUIET)
+    with pytest.raises(SpecError, match=r"`n_poles`: got 30, expected 1 to 12"):
+        ModelStructure(30, 0, 0)
