@@ -695,6 +695,6 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                                delay_estimated=estimate_delay, sigma2=sigma2,
                                experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
                                input=input, output=output, trend=opts.trend, fitted=fitted,
-                               solver={"engine": "levenberg-marquardt, filtered sensitivities",
+                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
                                        "status": best.status, "iterations": best.iterations, "starts": runs,
                                        "seconds": time.perf_counter() - t_start})
