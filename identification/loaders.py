@@ -44,6 +44,7 @@ import json
 import math
 import os
 import re
+import warnings
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any, Iterator, Mapping, Sequence
@@ -377,6 +378,23 @@ def _time_scale(unit: str, source: str, column: str) -> float:
     return _TIME_UNITS[u]
 
 
+#: Median time step (s) above which a time column whose unit is not stated (and so is read as
+#: seconds) draws a warning: flight logs sample at 1 Hz or faster, and a step of 10 read as
+#: 10 s is usually 10 ms.
+UNSTATED_UNIT_STEP_S = 0.5
+
+
+def _warn_unstated_unit(t: np.ndarray, stated: bool, source: str, column: str) -> None:
+    """Warn when an unstated time unit read as s gives a step that looks like milliseconds."""
+    if stated or t.size < 3:
+        return
+    step = float(np.median(np.diff(t)))
+    if step >= UNSTATED_UNIT_STEP_S:
+        warnings.warn(f"{source}: time column `{column}`: no unit stated, read as s: median step {step:g} s "
+                      f"({1.0 / step:.3g} Hz); if the stamps are milliseconds, state it (units={{'time': 'ms'}}, "
+                      "a '# units: time=ms' line, or identify --time-unit ms)", UserWarning, stacklevel=3)
+
+
 def _tabular_arguments(path, columns, time, units, ts, start, stop):
     """Check the arguments shared by the CSV and Parquet loaders."""
     source = _source_of(path)
@@ -497,6 +515,7 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
     tunit = units_arg.get("time", file_units.get(time, "s"))
     scale = _time_scale(tunit, source, time)
     t = out[time] * scale
+    _warn_unstated_unit(t, "time" in units_arg or time in file_units, source, time)
     origin = 0.0
     if np.isfinite(t[0]) and abs(t[0]) >= EPOCH_SHIFT_S:
         # subtract the first stamp in decimal arithmetic: exact differences of the text
@@ -601,6 +620,7 @@ def load_parquet(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[
     t, origin = data[time]
     if not origin:
         t = t * _time_scale(tunit, source, time)
+    _warn_unstated_unit(t, "time" in units_arg or time in file_units, source, time)
     sig_units = {n: units_arg.get(n, file_units.get(c, "")) for n, c in cols.items()}
     what = {n: f"signal `{n}` (column `{c}`)" for n, c in cols.items()}
     meta = {"format": "parquet", "columns": dict(cols), "time_column": time}

@@ -70,6 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     idf.add_argument("--input", required=True, help="input signal: COLUMN, TOPIC.FIELD (ULog) or MESSAGE.FIELD")
     idf.add_argument("--output", required=True, help="output signal, same forms as --input")
     idf.add_argument("--time", default=None, help="time column of CSV/Parquet files (default: time), in s")
+    idf.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
+                     help="unit of the CSV/Parquet time column (default: the file's '# units:' line, else s)")
     idf.add_argument("--poles", type=_positive_int, required=True, help="number of poles, integrators included")
     idf.add_argument("--zeros", type=int, default=0, help="number of zeros (default 0)")
     idf.add_argument("--integrators", type=int, default=0, help="poles fixed at s = 0 (default 0)")
@@ -262,12 +264,23 @@ def _identify(args: argparse.Namespace) -> int:
             raise SpecError(f"`--trend`: got {args.trend!r}, expected 'none' or a polynomial degree 0-5") from None
     structure = ModelStructure(args.poles, args.zeros, args.integrators)
     fields = {"u": args.input, "y": args.output}
+    say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     kw = {"start": args.start, "stop": args.stop}
     if args.time is not None:
         kw["time"] = args.time
+    if args.time_unit is not None:
+        logs = [f for f in [*args.files, *args.validate] if Path(f).suffix.lower() not in (".csv", ".parquet", ".pq")]
+        if logs:
+            raise SpecError(f"`--time-unit`: given with {logs[0]}; a flight log carries its own clock, so "
+                            "--time-unit applies to .csv/.parquet files only")
+        kw["units"] = {"time": args.time_unit}
     est_data = [load_flight(f, fields, **kw) for f in args.files]
     val_data = [load_flight(f, fields, **kw) for f in args.validate]
-    say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
+    for fd in est_data + val_data:
+        gaps = fd.metadata.get("gaps") or []
+        if gaps:
+            say(f"{fd.source}: {len(gaps)} dropout(s) in the time stamps, each piece fitted with its own initial "
+                "condition: " + ", ".join(f"{a:.6g} to {b:.6g} s" for a, b in gaps))
     say(f"fitting {structure.n_params} parameters to {sum(len(d) for d in est_data)} samples "
         f"from {len(est_data)} file(s)")
     est = tfest(est_data, "u", "y", structure, FitOptions(delay=delay, max_delay=args.max_delay, trend=trend,

@@ -55,3 +55,34 @@ def test_identify_reports_a_missing_column(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "thrust" in err and "chirp.csv" in err
     assert not (tmp_path / "m.json").exists()
+
+
+def test_time_in_milliseconds_and_dropouts_are_reported(tmp_path, capsys):
+    """A time column in ms without a stated unit draws a warning naming the fix; --time-unit ms
+    reads it right; a logger dropout is reported with its position and fitted around."""
+    import pytest
+
+    rng = np.random.default_rng(3)
+    t = np.arange(2500) * TS
+    u = 0.8 * np.cos(2 * np.pi * (0.2 * t + 3.8 * t**2 / (2 * t[-1])))
+    y = simulate_zoh(STRUCTURE, TRUE, u, TS, delay=0.04) + 0.002 * rng.standard_normal(t.size)
+    keep = ~((t > 20.0) & (t < 21.0))
+    path = tmp_path / "ms.csv"
+    np.savetxt(path, np.column_stack([1000 * t[keep], u[keep], y[keep]]), delimiter=",",
+               header="time,acc_cmd,x", comments="")
+    from ilcdob.identification.loaders import load_csv
+
+    with pytest.warns(UserWarning, match=r"no unit stated, read as s: median step 20 s .* --time-unit ms"):
+        load_csv(path, ["acc_cmd", "x"])
+    out = tmp_path / "model.json"
+    rc = main(["identify", str(path), "--input", "acc_cmd", "--output", "x", "--poles", "3", "--integrators", "2",
+               "--time-unit", "ms", "--delay", "0.04", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "1 dropout(s) in the time stamps" in err and "20 to 21 s" in err
+    model = json.loads(out.read_text())
+    assert abs(model["sample_time"] - TS) < 1e-12
+    np.testing.assert_allclose(model["den"], [1.0, 7.0, 0.0, 0.0], rtol=0.02, atol=1e-12)
+    rc = main(["identify", "log.ulg", "--input", "a.b", "--output", "c.d", "--poles", "1", "--time-unit", "ms",
+               "--out", str(tmp_path / "m2.json")])
+    assert rc == 2 and "--time-unit applies to .csv/.parquet files only" in capsys.readouterr().err
