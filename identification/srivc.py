@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .model import ModelStructure, simulate_zoh
-from .oe import response
+from .oe import discretise, response
 
 __all__ = ["srivc", "delayed"]
 
@@ -37,8 +37,6 @@ def _filter_bank(x: np.ndarray, lpoly: np.ndarray, orders: range, ts: float, hol
     consecutive samples (the trapezoid over each step: an O(ts^2) difference from the exact
     first-order hold, ample for an initial estimate). All orders come from the states of one
     companion realisation of ``1/L(s)`` (:func:`~ilcdob.identification.oe.response`)."""
-    from .oe import discretise
-
     n = lpoly.size - 1
     lead = lpoly[0]
     bank_structure = ModelStructure(n, 0, 0)
