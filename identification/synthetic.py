@@ -2,7 +2,7 @@
 
 Before flying an identification experiment, or to test an identification set-up on data with
 known truth, it helps to have the flight a linear model of the vehicle would give: the plant
-(ZOH-sampled, optional whole-sample input delay and actuator limit) under the outer-loop PID
+(ZOH-sampled with its input delay, optional actuator limit) under the outer-loop PID
 of :class:`~ilcdob.specs.PIDSpec` (Tustin), with measurement noise fed back as a real
 position loop feeds it back. The logged input is what the plant received (after the limit).
 """
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import math
 
-import control as ct
 import numpy as np
 
+from ilcdob.discretize import discretize_pid, discretize_plant
 from ilcdob.errors import SpecError
 from ilcdob.specs import PIDSpec, PlantSpec
 
@@ -27,9 +27,10 @@ def closed_loop_flight(plant: PlantSpec, pid: PIDSpec, reference: np.ndarray, ts
     Parameters
     ----------
     plant : PlantSpec
-        Continuous-time plant; its delay must be a whole number of samples.
+        Continuous-time plant with its input delay (:func:`ilcdob.discretize.discretize_plant`).
     pid : PIDSpec
-        ``C(s) = kp + ki/s + kd s/(derivative_filter s + 1)``, sampled with Tustin.
+        ``C(s) = kp + ki/s + kd s/(derivative_filter s + 1)``, sampled with Tustin
+        (:func:`ilcdob.discretize.discretize_pid`).
     reference : array
         Reference samples (m).
     ts : float
@@ -49,28 +50,20 @@ def closed_loop_flight(plant: PlantSpec, pid: PIDSpec, reference: np.ndarray, ts
     v = np.zeros_like(r) if noise is None else np.asarray(noise, dtype=float)
     if v.shape != r.shape:
         raise SpecError(f"`noise`: got shape {v.shape}, expected the reference's {r.shape}")
-    nd = plant.delay / ts
-    if abs(nd - round(nd)) > 1e-9 * max(1.0, nd):
-        raise SpecError(f"`plant.delay`: got {plant.delay!r} s, expected a whole number of samples of {ts} s")
-    nd = int(round(nd))
     if limit is not None and not (math.isfinite(limit) and limit > 0):
         raise SpecError(f"`limit`: got {limit!r}, expected None or a number > 0 (m/s^2)")
-    p = ct.ss(ct.sample_system(ct.tf(list(plant.num), list(plant.den)), ts, "zoh"))
-    tf_ = pid.derivative_filter
-    c = ct.ss(ct.sample_system(ct.tf([pid.kd + pid.kp * tf_, pid.kp + pid.ki * tf_, pid.ki], [tf_, 1.0, 0.0]),
-                               ts, "tustin"))
+    p = discretize_plant(plant, ts)          # the input delay as extra states
+    c = discretize_pid(pid, ts)
     pa, pb, pc = p.A, p.B[:, 0], p.C[0]
     ca, cb, cc, cd = c.A, c.B[:, 0], c.C[0], float(c.D[0, 0])
     xp, xc = np.zeros(p.nstates), np.zeros(c.nstates)
     y, u = np.zeros(r.size), np.zeros(r.size)
-    pipe = [0.0] * (nd + 1)
     for k in range(r.size):
         y[k] = pc @ xp
         e = r[k] - (y[k] + v[k])
         u[k] = cc @ xc + cd * e
         if limit is not None:
             u[k] = min(max(u[k], -limit), limit)
-        pipe.append(u[k])
-        xp = pa @ xp + pb * pipe[-1 - nd]
+        xp = pa @ xp + pb * u[k]
         xc = ca @ xc + cb * e
     return u, y
