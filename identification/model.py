@@ -11,12 +11,10 @@ flight-vehicle models need.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import control as ct
 import numpy as np
-from scipy.linalg import expm
 
 from ilcdob.errors import SpecError
 
@@ -111,29 +109,6 @@ def companion(den: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     c = np.zeros((1, n))
     c[0, : len(num)] = num[::-1]
     return a, b, c
-
-
-def _aug_expm(a: np.ndarray, b: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-    n = a.shape[0]
-    m = np.zeros((n + 1, n + 1))
-    m[:n, :n] = a * t
-    m[:n, n:] = b * t
-    e = expm(m)
-    return e[:n, :n], e[:n, n:]
-
-
-def zoh_matrices(den: np.ndarray, num: np.ndarray, ts: float, delay: float):
-    """``(Phi, G0, G1, C, n_delay)``: ``x+ = Phi x + G0 u[k-nd] + G1 u[k-nd-1]``, ``y = C x``."""
-    a, b, c = companion(den, num)
-    nd = int(math.floor(delay / ts + 1e-9))
-    frac = delay - nd * ts
-    if frac <= 1e-12 * ts:
-        phi, g0 = _aug_expm(a, b, ts)
-        return phi, g0, np.zeros_like(g0), c, nd
-    phi_rest, g0 = _aug_expm(a, b, ts - frac)
-    _, gf = _aug_expm(a, b, frac)
-    phi, _ = _aug_expm(a, b, ts)
-    return phi, g0, phi_rest @ gf, c, nd
 
 
 def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts: float,
