@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .model import ModelStructure, simulate_zoh
-from .oe import discretise, response
+from .oe import Discretisation, discretise, response
 
 __all__ = ["srivc", "delayed"]
 
@@ -31,16 +31,21 @@ def delayed(u: np.ndarray, delay_samples: float) -> np.ndarray:
     return np.interp(k, np.arange(n), u, left=0.0)
 
 
-def _filter_bank(x: np.ndarray, lpoly: np.ndarray, orders: range, ts: float, hold: str) -> list[np.ndarray]:
+def _bank(lpoly: np.ndarray, ts: float) -> Discretisation:
+    """The sampled companion realisation of ``1/L(s)`` whose states give the filter bank."""
+    n = lpoly.size - 1
+    return discretise(ModelStructure(n, 0, 0), np.concatenate([lpoly[1:] / lpoly[0], [1.0]]), ts, 0.0,
+                      derivatives=False)
+
+
+def _filter_bank(x: np.ndarray, lpoly: np.ndarray, d: Discretisation, orders: range, hold: str) -> list[np.ndarray]:
     """``s^k / L(s)`` applied to samples of ``x``: ``hold="zoh"`` for the piecewise-constant
     input; ``"foh"`` for the sampled continuous output, approximated by holding the mean of
     consecutive samples (the trapezoid over each step: an O(ts^2) difference from the exact
     first-order hold, ample for an initial estimate). All orders come from the states of one
-    companion realisation of ``1/L(s)`` (:func:`~ilcdob.identification.oe.response`)."""
+    companion realisation of ``1/L(s)`` (``d``, :func:`_bank`; :func:`~ilcdob.identification.oe.response`)."""
     n = lpoly.size - 1
     lead = lpoly[0]
-    bank_structure = ModelStructure(n, 0, 0)
-    d = discretise(bank_structure, np.concatenate([lpoly[1:] / lead, [1.0]]), ts, 0.0, derivatives=False)
     v = x if hold == "zoh" else 0.5 * (x + np.concatenate([x[1:], x[-1:]]))
     rows = n if max(orders) >= n else max(orders) + 1
     states = np.atleast_2d(response(d.phi, np.eye(n)[:rows], d.sos, d.den, x.size, [(d.g0, v)])) / lead
@@ -93,9 +98,10 @@ def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndar
     for it in range(iterations + 1):
         m_zp = 0.0
         m_zy = 0.0
+        bank = _bank(lpoly, ts)
         for u, y in data:
-            yf = _filter_bank(y, lpoly, range(n_tot + 1), ts, "foh")
-            uf = _filter_bank(u, lpoly, range(structure.n_zeros + 1), ts, "zoh")
+            yf = _filter_bank(y, lpoly, bank, range(n_tot + 1), "foh")
+            uf = _filter_bank(u, lpoly, bank, range(structure.n_zeros + 1), "zoh")
             skip = min(u.size // 4, int(np.ceil(6.0 / (lam * ts))))
             # regressors as rows (parameters x samples)
             u_rows = [uf[j][skip:] for j in range(structure.n_zeros, -1, -1)]
@@ -104,7 +110,7 @@ def srivc(structure: ModelStructure, experiments: list[tuple[np.ndarray, np.ndar
                 zeta = phi
             else:
                 xh = simulate_zoh(structure, theta, u, ts)
-                xf = _filter_bank(xh, lpoly, range(n_tot + 1), ts, "foh")
+                xf = _filter_bank(xh, lpoly, bank, range(n_tot + 1), "foh")
                 zeta = np.vstack([-xf[k][skip:] for k in free_orders] + u_rows)
             m_zp = m_zp + zeta @ phi.T
             m_zy = m_zy + zeta @ yf[n_tot][skip:]

@@ -306,8 +306,12 @@ class _Model:
             rows[-1] = response(d.phi, d.c[0], d.sos, d.den, e.n, [(-gd, ud), (gd, delayed_input(ud, 1))])
         return rows
 
-    def _cols(self, p: _Point, d: Discretisation) -> list:
-        return p.cols if p.cols is not None else [self.columns(d, e) for e in self.exps]
+    def _cols(self, p: _Point, d: Discretisation | None = None) -> list:
+        """The point's linear-parameter signals, recomputed (with ``d`` when given) if dropped."""
+        if p.cols is not None:
+            return p.cols
+        d = d or discretise(self.s, p.theta, self.ts, p.delay, derivatives=False)
+        return [self.columns(d, e) for e in self.exps]
 
     def reduced_normal(self, p: _Point) -> tuple[np.ndarray, np.ndarray]:
         """``(J'J, -J'r)`` of the projected residual in ``alpha`` (Kaufman's Jacobian)."""
@@ -401,6 +405,8 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
                         + (f", delay {p.delay:.5g} s" if model.estimate_delay else ""))
                 if converged:
                     return _LMResult(p, "converged", it)
+                if it == limit:                   # no further step: its normal equations are not needed
+                    return _LMResult(p, "max_iter", it)
                 h, grad = model.reduced_normal(p)
                 if not (np.all(np.isfinite(h)) and np.all(np.isfinite(grad))):
                     return _LMResult(p, "numerical", it)
@@ -689,8 +695,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     sigma2 = p.sse / max(n_obs - h.shape[0], 1)
     n_global = structure.n_params + (1 if estimate_delay else 0)
     cov = sigma2 * _scaled_pinv(h)[:n_global, :n_global]
-    d = discretise(structure, theta, ts, delay, derivatives=False)
-    fitted = [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p, d), p.locals_)]
+    fitted = [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p), p.locals_)]
     return TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
                                delay_estimated=estimate_delay, sigma2=sigma2,
                                experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
