@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 import ilcdob
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.validation.simulate import simulate_flight
 
 

@@ -30,8 +30,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
-from ilcdob.identification.data import FlightData
-from ilcdob.identification.model import ModelStructure, simulate_zoh
+from ilcdob.signals import FlightData
+from ilcdob.identification.oe import simulate_zoh
+from ilcdob.uncertainty import ModelStructure
 from ilcdob.identification.srivc import srivc
 from ilcdob.identification.synthetic import closed_loop_flight
 from ilcdob.identification.tfest import FitOptions, tfest
@@ -140,8 +141,9 @@ def seven_files(repeat: int = 1) -> dict[str, float]:
 _MEMORY_CHILD = r"""
 import json, resource, sys, time
 import numpy as np
-from ilcdob.identification.data import FlightData
-from ilcdob.identification.model import ModelStructure, simulate_zoh
+from ilcdob.signals import FlightData
+from ilcdob.identification.oe import simulate_zoh
+from ilcdob.uncertainty import ModelStructure
 from ilcdob.identification.tfest import tfest
 n, ts = 2_000_000, 0.001
 s = ModelStructure(2, 0, 0)

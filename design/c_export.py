@@ -42,9 +42,9 @@ from scipy import signal
 
 from ilcdob.atomic import write_json_atomic, write_text_atomic
 from ilcdob.errors import SpecError
+from ilcdob.signals import as_signal
 
 from .export import apply_coefficients
-from .noncausal import as_signal
 
 __all__ = ["CCode", "c_code", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
            "float_error", "design_readme", "write_design_folder", "FILTER_KEYS"]

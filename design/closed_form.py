@@ -34,8 +34,9 @@ import numpy as np
 
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import as_signal
 
-from .noncausal import ZPKFilter, as_signal
+from .noncausal import ZPKFilter
 
 __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "inverse_gd_filter",
            "reconstruct_disturbance"]

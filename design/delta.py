@@ -24,6 +24,7 @@ import numpy as np
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
+from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 
 __all__ = ["DeltaSet", "delta_set"]
 
@@ -64,8 +65,6 @@ class DeltaSet:
 
 
 def _identified_samples(spec: SystemSpec, k: int, rng: np.random.Generator, scale: float):
-    from ilcdob.identification.model import ModelStructure
-
     ident = spec.identification
     structure = ModelStructure(ident.poles, ident.zeros, ident.integrators)
     theta = np.asarray(ident.parameters)
@@ -129,9 +128,6 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
             raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
         gen, source, bnd = _bound_samples(spec, bound, k, rng), "fleet bound", np.full(w.size, float(bound))
     else:
-        from ilcdob.identification.model import ModelStructure
-        from ilcdob.identification.results import multiplicative_bound
-
         ident = spec.identification
         gen, source = _identified_samples(spec, k, rng, scale), "identification"
         bnd = scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),

@@ -29,8 +29,9 @@ import numpy as np
 from scipy import signal
 
 from ilcdob.errors import SpecError
+from ilcdob.signals import as_signal, extend_smoothly
 
-from .noncausal import ZPKFilter, as_signal, extend_smoothly
+from .noncausal import ZPKFilter
 
 __all__ = ["zpk_to_coefficients", "apply_coefficients", "direct_form_grid", "direct_form_disagreement",
            "DIRECT_FORM_RTOL"]

@@ -41,10 +41,10 @@ import numpy as np
 
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import as_signal, extend_smoothly
 
 from .closed_form import LearningFilters, closed_form_filters
 from .delta import DeltaSet
-from .noncausal import as_signal, extend_smoothly
 
 __all__ = ["FIROptions", "FIRFilter", "FIRDesign", "FIRDesignError", "design_fir", "fit_fir"]
 

@@ -49,8 +49,8 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
+from ilcdob.signals import as_signal
 
-from .noncausal import as_signal
 from .reference import inverse_gf_filter, reference_error
 
 __all__ = ["LAWS", "DEFAULT_LAW", "LAW_DESCRIPTIONS", "check_law", "ReferenceTerms", "reference_terms"]

@@ -22,9 +22,9 @@ from scipy.linalg import cho_factor, cho_solve, svdvals
 from ilcdob.errors import SpecError
 from ilcdob.lifted import lifted_operator, markov_parameters, relative_degree
 from ilcdob.loop import LoopSystem
+from ilcdob.signals import as_signal
 
 from .closed_form import _one_minus
-from .noncausal import as_signal
 
 __all__ = ["LiftedLearningFilters", "lifted_filters", "regularised_inverse"]
 

@@ -31,10 +31,10 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import as_signal
 
 from .closed_form import _one_minus, reconstruct_disturbance, simulate_map
 from .delta import DeltaSet
-from .noncausal import as_signal
 
 __all__ = ["SourceTrial", "reconstruction_error_power", "joint_disturbance", "multi_source_learning"]
 

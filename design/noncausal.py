@@ -26,35 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from ilcdob.errors import SignalError, SpecError
+from ilcdob.errors import SpecError
+from ilcdob.signals import as_signal, extend_smoothly
 
 __all__ = ["ZPKFilter", "as_signal", "extend_smoothly"]
 
 _CIRCLE_TOL = 1e-8
-
-
-def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
-    """Check the signal convention: 1-D finite float array (of length ``n`` if given)."""
-    arr = np.asarray(x, dtype=float)
-    if arr.ndim != 1:
-        raise SignalError(f"`{name}`: expected a 1-D array of samples, got shape {arr.shape}")
-    if n is not None and arr.size != n:
-        raise SignalError(f"`{name}`: expected {n} samples, got {arr.size}")
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise SignalError(f"`{name}`: non-finite value {arr[bad]!r} at sample {bad}")
-    return arr
-
-
-def extend_smoothly(x: np.ndarray, n_pad: int, n_fit: int = 16) -> np.ndarray:
-    """Append ``n_pad`` samples continuing ``x`` by a cubic fitted to its last ``n_fit``."""
-    if n_pad <= 0:
-        return x
-    m = min(n_fit, x.size)
-    deg = min(3, m - 1)
-    k = np.arange(m, dtype=float)
-    coef = np.polyfit(k, x[-m:], deg) if deg > 0 else np.array([x[-1]])
-    return np.concatenate([x, np.polyval(coef, np.arange(m, m + n_pad, dtype=float))])
 
 
 @dataclass(frozen=True)

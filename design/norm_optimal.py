@@ -27,9 +27,9 @@ import numpy as np
 from ilcdob.errors import SpecError
 from ilcdob.lifted import lifted_operator, markov_parameters
 from ilcdob.loop import LoopSystem
+from ilcdob.signals import as_signal
 
 from .closed_form import reconstruct_disturbance, simulate_map
-from .noncausal import as_signal
 
 __all__ = ["NormOptimalOptions", "NormOptimalDesigner", "norm_optimal_learning"]
 

@@ -21,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import as_signal
 
 from .closed_form import LearningFilters, _matched, simulate_map
-from .noncausal import ZPKFilter, as_signal
+from .noncausal import ZPKFilter
 
 __all__ = ["reference_error", "inverse_gf_filter", "ExactReferenceLearning"]
 

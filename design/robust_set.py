@@ -99,10 +99,10 @@ import numpy as np
 
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import as_signal
 
 from .closed_form import LearningFilters, _one_minus, closed_form_filters, reconstruct_disturbance, simulate_map
 from .fir import FIRFilter
-from .noncausal import as_signal
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
            "uncertainty_cones", "worst_case_ratio", "ratio_for_delta", "design_robust_set", "bound_on_grid"]

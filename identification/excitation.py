@@ -7,7 +7,7 @@
 * :func:`suggest_band` / :func:`suggest_band_for_loop` -- which frequencies a chirp should
   cover, from the closed-loop bandwidth (:func:`closed_loop_bandwidth`);
 * :func:`write_setpoint_csv` -- a CSV file a flight computer can play back, in the same
-  format as :meth:`FlightData.to_csv <ilcdob.identification.data.FlightData.to_csv>`.
+  format as :meth:`FlightData.to_csv <ilcdob.signals.FlightData.to_csv>`.
 
 Time is in s from the start of the experiment (``t = 0``), frequencies in Hz unless a
 name ends in ``_rad_s``.
@@ -25,8 +25,8 @@ from scipy.optimize import brentq
 
 from ilcdob.errors import SignalError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import FlightData
 
-from .data import FlightData
 
 __all__ = [
     "StepSequence",

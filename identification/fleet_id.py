@@ -1,6 +1,6 @@
 """Identify a fleet's plant models from synthetic flights of the nonlinear vehicles.
 
-For every vehicle (:func:`~ilcdob.identification.quadrotor.table_i_vehicles`), flown under
+For every vehicle (:func:`~ilcdob.vehicles.quadrotor.table_i_vehicles`), flown under
 its own outer-loop PID from the fleet file (closed loop, as the paper's vehicles fly):
 
 * estimation: a reference-step flight (5 cm steps: larger ones make the PID's derivative
@@ -28,11 +28,11 @@ import numpy as np
 from ilcdob.atomic import write_json_atomic, write_text_atomic
 from ilcdob.fleet import Fleet
 from ilcdob.specs import IdentificationSpec, PlantSpec
+from ilcdob.signals import FlightData
+from ilcdob.uncertainty import ModelStructure
+from ilcdob.vehicles.quadrotor import QuadrotorParams, fly, table_i_vehicles
 
-from .data import FlightData
 from .excitation import Chirp, StepSequence
-from .model import ModelStructure
-from .quadrotor import QuadrotorParams, fly, table_i_vehicles
 from .results import TFEstimate
 from .tfest import FitOptions, tfest
 

@@ -1,4 +1,4 @@
-"""Loaders of flight logs into :class:`~ilcdob.identification.data.FlightData`.
+"""Loaders of flight logs into :class:`~ilcdob.signals.FlightData`.
 
 One function per source, each returning a :class:`FlightData` on a uniform time grid:
 
@@ -52,8 +52,8 @@ from typing import Any, Iterator, Mapping, Sequence
 import numpy as np
 
 from ilcdob.errors import SignalError
+from ilcdob.signals import FlightData
 
-from .data import FlightData
 
 __all__ = [
     "load_csv",

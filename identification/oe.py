@@ -43,9 +43,9 @@ import numpy as np
 from scipy import signal
 from scipy.linalg import expm
 
-from .model import ModelStructure, companion
+from ilcdob.uncertainty import ModelStructure, companion
 
-__all__ = ["Discretisation", "discretise", "response", "zoh_inputs", "allpole_sos", "delay_split", "delayed_input"]
+__all__ = ["Discretisation", "discretise", "response", "simulate_zoh", "zoh_inputs", "allpole_sos", "delay_split", "delayed_input"]
 
 
 def delay_split(delay: float, ts: float) -> tuple[int, float]:
@@ -230,3 +230,13 @@ def response(phi: np.ndarray, c: np.ndarray, sos: np.ndarray, den: np.ndarray, n
             drive[r, :k] += np.convolve(den, h[r % h.shape[0]])[:k]
     y = signal.sosfilt(sos, drive, axis=-1)
     return y[0] if np.ndim(c) == 1 else y
+
+
+def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts: float,
+                 delay: float = 0.0, x0: np.ndarray | None = None) -> np.ndarray:
+    """Output of the model for a ZOH input ``u`` sampled at ``ts`` (from rest unless ``x0``,
+    the companion-form state at the first sample); computed by filtering (:mod:`.oe`)."""
+    d = discretise(structure, theta, ts, delay, derivatives=False)
+    u = np.asarray(u, dtype=float)
+    x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
+    return response(d.phi, d.c[0], d.sos, d.den, u.size, zoh_inputs(d, u), x0)

@@ -11,8 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ilcdob.atomic import savefig_atomic  # noqa: E402
+from ilcdob.signals import FlightData  # noqa: E402
 
-from .data import FlightData  # noqa: E402
 from .results import TFEstimate, fit_percent  # noqa: E402
 
 __all__ = ["plot_fit"]

@@ -14,12 +14,12 @@ from typing import Any
 import control as ct
 import numpy as np
 
-from .data import FlightData
-from .model import ModelStructure, simulate_zoh
-from .oe import discretise, response
+from ilcdob.signals import FlightData
+from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
-__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis", "frequency_response",
-           "multiplicative_bound"]
+from .oe import discretise, response, simulate_zoh
+
+__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis"]
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -34,38 +34,6 @@ def free_response_basis(structure: ModelStructure, theta: np.ndarray, ts: float,
     d = discretise(structure, theta, ts, 0.0, derivatives=False)
     eye = np.eye(d.phi.shape[0])
     return np.column_stack([response(d.phi, d.c[0], d.sos, d.den, n, (), eye[i]) for i in range(eye.shape[0])])
-
-
-def frequency_response(structure: ModelStructure, theta: np.ndarray, delay: float, w: np.ndarray) -> np.ndarray:
-    """``G(jw)`` of the model ``theta`` (with its delay) at ``w`` rad/s."""
-    den, num = structure.split(theta)
-    s = 1j * np.asarray(w, float)
-    return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay)
-
-
-def multiplicative_bound(structure: ModelStructure, theta: np.ndarray, covariance: np.ndarray, delay: float,
-                         delay_estimated: bool, w: np.ndarray, k: float = 3.0) -> np.ndarray:
-    """Frequency-wise multiplicative uncertainty ``|Delta(jw)|`` at ``k`` sigma.
-
-    Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
-    ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the linearised
-    relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate). ``covariance``
-    covers ``theta`` and, last, the delay when ``delay_estimated``.
-    """
-    w = np.asarray(w, float)
-    cov = np.asarray(covariance, float)
-    x = np.concatenate([theta, [delay]]) if delay_estimated else np.asarray(theta, float).copy()
-    g0 = frequency_response(structure, theta, delay, w)
-    grads = np.empty((x.size, w.size), dtype=complex)
-    for i in range(x.size):
-        h = 1e-6 * max(1.0, abs(x[i]))
-        xp = x.copy()
-        xp[i] += h
-        th, d = (xp[:-1], xp[-1]) if delay_estimated else (xp, delay)
-        grads[i] = (frequency_response(structure, th, d, w) - g0) / h
-    var = (np.einsum("iw,ij,jw->w", grads.real, cov, grads.real)
-           + np.einsum("iw,ij,jw->w", grads.imag, cov, grads.imag))
-    return k * np.sqrt(np.clip(var, 0, None)) / np.abs(g0)
 
 
 @dataclass(frozen=True)

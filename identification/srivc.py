@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import ModelStructure, simulate_zoh
-from .oe import Discretisation, discretise, response
+from ilcdob.uncertainty import ModelStructure
+
+from .oe import Discretisation, discretise, response, simulate_zoh
 
 __all__ = ["srivc", "delayed"]
 

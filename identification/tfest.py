@@ -53,9 +53,9 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from ilcdob.errors import IlcdobError, SignalError, SpecError
+from ilcdob.signals import FlightData
+from ilcdob.uncertainty import ModelStructure
 
-from .data import FlightData
-from .model import ModelStructure
 from .oe import Discretisation, delayed_input, discretise, response, zoh_inputs
 from .results import TFEstimate, trend_basis
 from .srivc import srivc

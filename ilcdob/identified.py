@@ -26,11 +26,10 @@ import control as ct
 import numpy as np
 
 from .errors import ModelFileError, SpecError
+from .uncertainty import ModelStructure
 from .specs import (DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec,
                     _poly)
 
-if TYPE_CHECKING:  # the identification package is heavy to import; load it only when asked for
-    from .identification.model import ModelStructure
 
 __all__ = ["IdentifiedModel", "load_model", "model_from_dict", "REQUIRED_KEYS"]
 
@@ -75,7 +74,7 @@ class IdentifiedModel:
 
     ``P(s) = num(s)/den(s) * exp(-delay*s)`` with ``den(s) = s^K A(s)``, ``A`` monic of
     degree ``poles - integrators``, and ``parameters = (a_{n-1}..a_0, b_m..b_0)`` (see
-    ``ilcdob.identification.model.ModelStructure``). Build with :func:`load_model` or
+    ``ilcdob.uncertainty.ModelStructure``). Build with :func:`load_model` or
     :func:`model_from_dict`.
 
     Attributes
@@ -203,10 +202,8 @@ class IdentifiedModel:
         return np.sqrt(np.clip(np.diag(np.asarray(self.covariance)), 0.0, None))
 
     @property
-    def structure(self) -> "ModelStructure":
-        """The model structure as ``ilcdob.identification.model.ModelStructure``."""
-        from .identification.model import ModelStructure
-
+    def structure(self) -> ModelStructure:
+        """The model structure as ``ilcdob.uncertainty.ModelStructure``."""
         return ModelStructure(self.poles, self.zeros, self.integrators)
 
     def plant_spec(self) -> PlantSpec:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, reference_trial, write_design_folder
 from ilcdob.design.export import DIRECT_FORM_RTOL, apply_coefficients, direct_form_disagreement
 from ilcdob.design.pair import design_pair

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.fleet import load_fleet
-from ilcdob.html_report import json_tables
+from ilcdob.app.html import json_tables
 from ilcdob.validation.campaign import (SAMPLES_FILE, SETTINGS_FILE, CampaignError, CampaignOptions,
                                         MethodStatistics, SampleStore, draw_true_loops, run_campaign)
 

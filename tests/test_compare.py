@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design.robust import RobustOptions
 from ilcdob.errors import SpecError
 from ilcdob.validation.compare import CompareOptions, compare_designs

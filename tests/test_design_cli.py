@@ -8,10 +8,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters
 from ilcdob.design.export import apply_coefficients
-from ilcdob.identification.data import FlightData
+from ilcdob.signals import FlightData
 from ilcdob.identification.loaders import load_csv
 from ilcdob.validation.simulate import rmse, simulate_flight
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.identification.fleet_id import segments
-from ilcdob.identification.data import FlightData
+from ilcdob.signals import FlightData
 
 
 def test_identify_fleet_cli_fits_every_vehicle(tmp_path, capsys):

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from ilcdob.cli import main
-from ilcdob.html_report import ReportError, ReportOptions, build_report, json_tables, write_report
-from ilcdob.report import write_reproduction
+from ilcdob.app.cli import main
+from ilcdob.app.html import ReportError, ReportOptions, build_report, json_tables, write_report
+from ilcdob.app.output import write_reproduction
 from ilcdob.validation.reproduce import reproduce
 
 CHROMIUM = "/usr/bin/chromium"

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from ilcdob.errors import SignalError, SpecError
-from ilcdob.identification.data import FlightData
-from ilcdob.identification.model import ModelStructure, simulate_zoh
+from ilcdob.signals import FlightData
+from ilcdob.identification.oe import simulate_zoh
+from ilcdob.uncertainty import ModelStructure
 from ilcdob.identification.results import fit_percent
 from ilcdob.identification.synthetic import closed_loop_flight
 from ilcdob.identification.tfest import FitOptions, tfest

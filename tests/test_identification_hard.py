@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from ilcdob.errors import SpecError
-from ilcdob.identification.data import FlightData
+from ilcdob.signals import FlightData
 from ilcdob.identification.loaders import load_csv
-from ilcdob.identification.model import ModelStructure, simulate_zoh
+from ilcdob.identification.oe import simulate_zoh
+from ilcdob.uncertainty import ModelStructure
 from ilcdob.identification.results import compare, fit_percent
 from ilcdob.identification.synthetic import closed_loop_flight
 from ilcdob.identification.tfest import FitOptions, tfest
@@ -271,7 +272,7 @@ def test_real_px4_log_identifies_through_the_cli(tmp_path, capsys):
 
     from scipy.optimize import least_squares
 
-    from ilcdob.cli import main
+    from ilcdob.app.cli import main
     from ilcdob.identification.loaders import load_flight
     from ilcdob.identification.srivc import srivc
 

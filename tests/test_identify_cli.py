@@ -6,9 +6,10 @@ import json
 
 import numpy as np
 
-from ilcdob.cli import main
-from ilcdob.identification.data import FlightData
-from ilcdob.identification.model import ModelStructure, simulate_zoh
+from ilcdob.app.cli import main
+from ilcdob.signals import FlightData
+from ilcdob.identification.oe import simulate_zoh
+from ilcdob.uncertainty import ModelStructure
 
 TS = 0.02
 STRUCTURE = ModelStructure(3, 0, 2)

@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design.laws import LAWS, check_law, reference_terms
 from ilcdob.design.pair import design_pair, with_law
 from ilcdob.errors import SpecError
-from ilcdob.html_report import build_report
-from ilcdob.identification.data import FlightData
+from ilcdob.app.html import build_report
+from ilcdob.signals import FlightData
 from ilcdob.identification.loaders import load_csv
-from ilcdob.report import write_reproduction
+from ilcdob.app.output import write_reproduction
 from ilcdob.specs import NoiseSpec
 from ilcdob.validation.campaign import CampaignError, CampaignOptions, campaign_settings, run_sample
 from ilcdob.validation.compare import CompareOptions, compare_designs

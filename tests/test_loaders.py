@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from ilcdob.errors import SignalError
-from ilcdob.identification.data import FlightData
+from ilcdob.signals import FlightData
 from ilcdob.identification.loaders import (SNAP_RTOL, SUFFIXES, load_csv, load_dataflash, load_flight,
                                            load_parquet, load_ulog)
 

@@ -17,7 +17,7 @@ import pytest
 
 import ilcdob
 from ilcdob import FleetError, ModelFileError, SpecError
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design.pair import fleet_delta_sets
 from ilcdob.fleet_io import fleet_to_toml, model_reference
 from ilcdob.loop import freqresp
@@ -82,8 +82,8 @@ def test_plant_from_model_file_carries_the_identification(tmp_path, monkeypatch)
 
 def test_delta_set_of_a_model_file_is_the_identified_one(tmp_path):
     """The Delta set equals that of the same identification written inline (identify-fleet form)."""
-    from ilcdob.identification.model import ModelStructure
-    from ilcdob.identification.results import multiplicative_bound
+    from ilcdob.uncertainty import ModelStructure
+    from ilcdob.uncertainty import multiplicative_bound
 
     _write_model(tmp_path / "uav4.json")
     by_file = ilcdob.load_fleet(_write_fleet(tmp_path / "a.toml", 'plant = { model = "uav4.json" }'))
@@ -377,7 +377,7 @@ def _fly_chirp(path: Path, a0: float, b0: float, delay: float, pid: ilcdob.PIDSp
     injection = np.sin(2 * np.pi * (0.1 * t + (2.0 - 0.1) * t**2 / (2 * t[-1])))
     out = ct.forced_response(loop.closed_loop, T=t, U=np.vstack([r, 0 * t, injection])).outputs
     x = out[0] + 0.001 * np.random.default_rng(seed).standard_normal(t.size)
-    from ilcdob.identification.data import FlightData
+    from ilcdob.signals import FlightData
 
     FlightData(t, {"acc_cmd": out[3], "x": x}, {"acc_cmd": "m/s^2", "x": "m"}).to_csv(path)
 

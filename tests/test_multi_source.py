@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters
 from ilcdob.design.multi_source import SourceTrial, joint_disturbance, multi_source_learning
 from ilcdob.errors import SpecError
-from ilcdob.validation.beyond import extensions_study
+from ilcdob.validation.extensions import extensions_study
 from ilcdob.validation.scenarios import scenario
 from ilcdob.validation.simulate import simulate_flight
 

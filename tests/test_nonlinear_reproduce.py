@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters
 from ilcdob.errors import SpecError
-from ilcdob.identification.quadrotor import table_i_vehicles
+from ilcdob.vehicles.quadrotor import table_i_vehicles
 from ilcdob.validation.nonlinear import (NonlinearReproduction, NonlinearSettings, VehicleLearning,
                                          airframe_path_filter, fly_loop, learning_horizon, model_attitude,
                                          reproduce_nonlinear, robustness_filter, run_nonlinear_scenario)

@@ -11,8 +11,8 @@ import pytest
 
 from ilcdob.discretize import discretize_plant
 from ilcdob.errors import SignalError, SpecError
-from ilcdob.identification.data import FlightData
-from ilcdob.identification.quadrotor import (
+from ilcdob.signals import FlightData
+from ilcdob.vehicles.quadrotor import (
     QuadrotorParams,
     equivalent_tau,
     fit_first_order,

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ilcdob.cli import main
+from ilcdob.app.cli import main
 from ilcdob.validation.reproduce import reproduce, run_scenario
 from ilcdob.validation.scenarios import SCENARIOS, parse_scenarios, scenario
 from ilcdob.errors import SpecError

@@ -25,6 +25,7 @@ from ilcdob.design import LearningFilters  # noqa: E402
 from ilcdob.fleet import Fleet  # noqa: E402
 from ilcdob.loop import LoopSystem, build_loop, freqresp  # noqa: E402
 from ilcdob.specs import PlantSpec  # noqa: E402
+from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound  # noqa: E402
 
 from .reproduce import ReproductionResult  # noqa: E402
 
@@ -194,9 +195,6 @@ def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters], out:
 
 def identified_bounds(fleet: Fleet, w: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``name -> (G(jw), |Delta(jw)| at 3 sigma)`` for every system with an identified plant."""
-    from ilcdob.identification.model import ModelStructure
-    from ilcdob.identification.results import frequency_response, multiplicative_bound
-
     out = {}
     for spec in fleet.systems:
         ident = spec.identification

@@ -2,7 +2,7 @@
 
 The paper validates twice: in simulation with exact models and in flight, where the
 models are identified and therefore wrong. This module gives the second kind of evidence
-without hardware: the nonlinear vehicles of :mod:`ilcdob.identification.quadrotor` are the
+without hardware: the nonlinear vehicles of :mod:`ilcdob.vehicles.quadrotor` are the
 "real vehicles" and the pipeline is the paper's (Sec. IV):
 
 1. fly step and chirp experiments with every vehicle and identify its plant
@@ -26,7 +26,7 @@ nonlinear vehicle in between::
 ``u2`` is the vehicle's commanded x acceleration and nothing else: the wind ``d(t)`` and the
 vehicle's own noise (:class:`ilcdob.specs.NoiseSpec`) act on the airframe as an external
 force ``m d(t)``, evaluated at the vehicle's inner (integration) rate. y and z are held at 0
-by their own PIDs, as in :func:`~ilcdob.identification.quadrotor.fly`. Every trial starts
+by their own PIDs, as in :func:`~ilcdob.vehicles.quadrotor.fly`. Every trial starts
 from hover at rest at the origin with every controller state at zero, which is consistent:
 each scenario starts with ``r = 0``, ``dr/dt = 0`` and ``d = 0``.
 
@@ -88,11 +88,11 @@ from scipy import signal as sps
 
 from ilcdob.design import LearningFilters, closed_form_filters
 from ilcdob.design.closed_form import simulate_map
-from ilcdob.design.noncausal import as_signal
+from ilcdob.signals import as_signal
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.identification.fleet_id import VehicleIdentification, fleet_toml, identify_vehicle
-from ilcdob.identification.quadrotor import (DiscretePID, QuadrotorParams, limit_tilt, make_advance,
+from ilcdob.vehicles.quadrotor import (DiscretePID, QuadrotorParams, limit_tilt, make_advance,
                                              table_i_vehicles)
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
@@ -732,10 +732,10 @@ class NonlinearReproduction(ReproductionResult):
         return rows
 
     def markdown_plant(self) -> list[str]:
-        """The description of this run for the report's README.md (:mod:`ilcdob.report`)."""
+        """The description of this run for the report's README.md (:mod:`ilcdob.app.output`)."""
         s = self.settings
         lines = [
-            f"**Plant: nonlinear.** The nonlinear 6-DOF quadrotors (`ilcdob.identification.quadrotor`, "
+            f"**Plant: nonlinear.** The nonlinear 6-DOF quadrotors (`ilcdob.vehicles.quadrotor`, "
             f"Table I vehicles, inner loops at {s.inner_rate_hz:g} Hz) fly every trial; the outer loop (PID + DOB "
             f"+ learning signal, x axis) runs at the fleet's sample time {self.fleet.sample_time} s with "
             f"{1e3 * s.sensor_noise_std:g} mm of white position-sensor noise; wind and per-vehicle noise act on "

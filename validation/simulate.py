@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ilcdob.design.noncausal import as_signal
+from ilcdob.signals import as_signal
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 

@@ -59,9 +59,9 @@ from typing import Any
 
 import numpy as np
 
-from .atomic import write_text_atomic
-from .errors import IlcdobError
-from .fleet import DEFAULT_FLEET_PATH, DEFAULT_FLEET_SOURCE, Fleet, default_fleet, load_fleet
+from ilcdob.atomic import write_text_atomic
+from ilcdob.errors import IlcdobError
+from ilcdob.fleet import DEFAULT_FLEET_PATH, DEFAULT_FLEET_SOURCE, Fleet, default_fleet, load_fleet
 
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "write_report"]
@@ -477,7 +477,7 @@ class _Section:
 
 
 def _fleet_html(fleet: Fleet, origin: str) -> str:
-    from .validation.figures import identified_bounds
+    from ilcdob.validation.figures import identified_bounds
 
     ts = fleet.sample_time
     w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 300)
@@ -533,7 +533,7 @@ def _rmse_table(data: dict) -> str:
 def _plant_section(res: JsonInput) -> str:
     data = res.data
     folder = res.folder
-    from .design.laws import LAW_DESCRIPTIONS
+    from ilcdob.design.laws import LAW_DESCRIPTIONS
 
     law = data.get("law")
     law_html = (f"learning law <strong>{escape(str(law))}</strong>"
@@ -565,8 +565,8 @@ def _orders(data: dict) -> list[list[str]]:
 
 
 def _theorem_html(fleet: Fleet, origin: str, orders: list[list[str]], options: ReportOptions) -> str:
-    from .design.pair import fleet_delta_sets
-    from .design.theorem import format_theorem_table, theorem_check
+    from ilcdob.design.pair import fleet_delta_sets
+    from ilcdob.design.theorem import format_theorem_table, theorem_check
 
     missing = [s.name for s in fleet.systems if s.identification is None]
     if missing:

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from ilcdob.atomic import atomic_path
-from ilcdob.errors import SignalError
+from .atomic import atomic_path
+from .errors import SignalError
 
-__all__ = ["FlightData", "check_time", "check_signal", "resample_onto"]
+__all__ = ["FlightData", "as_signal", "check_time", "check_signal", "extend_smoothly", "resample_onto"]
 
 #: Relative tolerance on the spacing of a "uniform" time grid.
 UNIFORM_RTOL = 1e-6
@@ -27,6 +27,30 @@ UNIFORM_RTOL = 1e-6
 #: ``metadata["gaps"]`` and :meth:`FlightData.pieces` cuts the record there, instead of
 #: fitting a model to the straight line that interpolation draws across it.
 GAP_FACTOR = 5.0
+
+
+def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
+    """Check the signal convention: 1-D finite float array (of length ``n`` if given)."""
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim != 1:
+        raise SignalError(f"`{name}`: expected a 1-D array of samples, got shape {arr.shape}")
+    if n is not None and arr.size != n:
+        raise SignalError(f"`{name}`: expected {n} samples, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+        raise SignalError(f"`{name}`: non-finite value {arr[bad]!r} at sample {bad}")
+    return arr
+
+
+def extend_smoothly(x: np.ndarray, n_pad: int, n_fit: int = 16) -> np.ndarray:
+    """Append ``n_pad`` samples continuing ``x`` by a cubic fitted to its last ``n_fit``."""
+    if n_pad <= 0:
+        return x
+    m = min(n_fit, x.size)
+    deg = min(3, m - 1)
+    k = np.arange(m, dtype=float)
+    coef = np.polyfit(k, x[-m:], deg) if deg > 0 else np.array([x[-1]])
+    return np.concatenate([x, np.polyval(coef, np.arange(m, m + n_pad, dtype=float))])
 
 
 def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:

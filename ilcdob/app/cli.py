@@ -18,7 +18,7 @@ design through every scenario over N sampled true plants on Dask and writes rati
 (``DIR/campaign.json``); run it again to resume (``ilcdob.validation.campaign``).
 
 ``ilcdob report DIR [DIR ...] --out report.html`` writes one self-contained HTML report from
-output folders of ``reproduce``, ``compare`` and ``campaign`` (see ``ilcdob.html_report``).
+output folders of ``reproduce``, ``compare`` and ``campaign`` (see ``ilcdob.app.html``).
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import IlcdobError
-from .fleet import default_fleet, load_fleet
+from ilcdob.errors import IlcdobError
+from ilcdob.fleet import default_fleet, load_fleet
 
 __all__ = ["main", "build_parser"]
 
@@ -206,11 +206,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    from .design.laws import check_law
-    from .errors import SpecError
-    from .report import write_reproduction
-    from .validation.reproduce import reproduce
-    from .validation.scenarios import parse_scenarios
+    from ilcdob.design.laws import check_law
+    from ilcdob.errors import SpecError
+    from ilcdob.app.output import write_reproduction
+    from ilcdob.validation.reproduce import reproduce
+    from ilcdob.validation.scenarios import parse_scenarios
 
     ids = parse_scenarios(args.scenarios)
     law = check_law(args.law, "--law")
@@ -222,8 +222,8 @@ def _reproduce(args: argparse.Namespace) -> int:
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     start = time.perf_counter()
     if args.plant == "nonlinear":
-        from .atomic import write_text_atomic
-        from .validation.nonlinear import NonlinearSettings, reproduce_nonlinear
+        from ilcdob.atomic import write_text_atomic
+        from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
 
         res = reproduce_nonlinear(fleet if args.fleet else None, ids, args.iterations,
                                   NonlinearSettings(seed=args.seed))
@@ -242,11 +242,11 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from .atomic import write_json_atomic
-    from .errors import SpecError
-    from .identification.loaders import load_flight
-    from .identification.model import ModelStructure
-    from .identification.tfest import FitOptions, tfest
+    from ilcdob.atomic import write_json_atomic
+    from ilcdob.errors import SpecError
+    from ilcdob.identification.loaders import load_flight
+    from ilcdob.uncertainty import ModelStructure
+    from ilcdob.identification.tfest import FitOptions, tfest
 
     if args.delay == "auto":
         delay: float | str = "auto"
@@ -295,7 +295,7 @@ def _identify(args: argparse.Namespace) -> int:
         say(f"note: the fit stopped at its {est.solver.get('status')}; model.json holds the best model found "
             "(solver.status)")
     if args.plot:
-        from .identification.plots import plot_fit
+        from ilcdob.identification.plots import plot_fit
 
         for path in plot_fit(est, est_data, val_data, args.plot):
             say(f"wrote {path}")
@@ -320,14 +320,14 @@ def _design(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from .atomic import atomic_path
-    from .design.c_export import check_c_prefix, write_design_folder
-    from .design.laws import check_law
-    from .design.pair import design_pair, fleet_delta_sets
-    from .design.robust import RobustOptions
-    from .errors import SpecError
-    from .identification.data import FlightData
-    from .identification.loaders import load_csv
+    from ilcdob.atomic import atomic_path
+    from ilcdob.design.c_export import check_c_prefix, write_design_folder
+    from ilcdob.design.laws import check_law
+    from ilcdob.design.pair import design_pair, fleet_delta_sets
+    from ilcdob.design.robust import RobustOptions
+    from ilcdob.errors import SpecError
+    from ilcdob.signals import FlightData
+    from ilcdob.identification.loaders import load_csv
 
     if args.c_prefix is not None:
         check_c_prefix(args.c_prefix)
@@ -349,7 +349,7 @@ def _design(args: argparse.Namespace) -> int:
             columns["a"] = "acceleration"
     trial = load_csv(args.trial, columns) if args.trial else None
     if trial is not None and abs(trial.ts - fleet.sample_time) > 1e-9:
-        from .errors import SignalError
+        from ilcdob.errors import SignalError
 
         raise SignalError(f"{args.trial}: sample time {trial.ts} s differs from the fleet's {fleet.sample_time} s")
     if args.method == "robust" and trial is None:
@@ -408,9 +408,9 @@ def _design(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from .design.robust import RobustOptions
-    from .validation.compare import CompareOptions, compare_designs, write_comparison
-    from .validation.scenarios import parse_scenarios
+    from ilcdob.design.robust import RobustOptions
+    from ilcdob.validation.compare import CompareOptions, compare_designs, write_comparison
+    from ilcdob.validation.scenarios import parse_scenarios
 
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     (sid,) = parse_scenarios(str(args.scenario))
@@ -428,9 +428,9 @@ def _extensions(args: argparse.Namespace) -> int:
     from dataclasses import asdict
     from pathlib import Path
 
-    from .atomic import write_json_atomic, write_text_atomic
-    from .validation.beyond import extensions_study, format_extensions
-    from .validation.scenarios import parse_scenarios
+    from ilcdob.atomic import write_json_atomic, write_text_atomic
+    from ilcdob.validation.extensions import extensions_study, format_extensions
+    from ilcdob.validation.scenarios import parse_scenarios
 
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     rows = extensions_study(fleet, parse_scenarios(args.scenarios))
@@ -445,8 +445,8 @@ def _extensions(args: argparse.Namespace) -> int:
 
 
 def _campaign(args: argparse.Namespace) -> int:
-    from .validation.campaign import CampaignOptions, run_campaign
-    from .validation.scenarios import parse_scenarios
+    from ilcdob.validation.campaign import CampaignOptions, run_campaign
+    from ilcdob.validation.scenarios import parse_scenarios
 
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     opts = CampaignOptions(samples=args.samples, seed=args.seed, scale=args.scale, bound=args.bound,
@@ -460,9 +460,9 @@ def _campaign(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from .atomic import write_json_atomic
-    from .design.pair import fleet_delta_sets
-    from .design.theorem import format_theorem_table, theorem_check
+    from ilcdob.atomic import write_json_atomic
+    from ilcdob.design.pair import fleet_delta_sets
+    from ilcdob.design.theorem import format_theorem_table, theorem_check
 
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     order = [s.strip() for s in args.order.split(",")] if args.order else fleet.names
@@ -477,7 +477,7 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _identify_fleet(args: argparse.Namespace) -> int:
-    from .identification.fleet_id import identify_fleet
+    from ilcdob.identification.fleet_id import identify_fleet
 
     fleet = load_fleet(args.fleet) if args.fleet else default_fleet()
     say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
@@ -489,10 +489,10 @@ def _identify_fleet(args: argparse.Namespace) -> int:
 
 
 def _fleet(args: argparse.Namespace) -> int:
-    from .errors import SpecError
-    from .fleet_io import add_system
-    from .identified import load_model
-    from .specs import DOBSpec, PIDSpec
+    from ilcdob.errors import SpecError
+    from ilcdob.fleet_io import add_system
+    from ilcdob.identified import load_model
+    from ilcdob.specs import DOBSpec, PIDSpec
 
     path = Path(args.fleet_file)
     created = not path.exists()
@@ -515,7 +515,7 @@ def _fleet(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from .html_report import ReportOptions, write_report
+    from ilcdob.app.html import ReportOptions, write_report
 
     path = write_report(args.dirs, args.out, ReportOptions(fleet=args.fleet))
     print(f"wrote {path}", file=sys.stderr)

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import write_json_atomic, write_text_atomic
-from .design.laws import LAW_DESCRIPTIONS
-from .validation.figures import write_figures
-from .validation.reproduce import ReproductionResult
+from ilcdob.atomic import write_json_atomic, write_text_atomic
+from ilcdob.design.laws import LAW_DESCRIPTIONS
+from ilcdob.validation.figures import write_figures
+from ilcdob.validation.reproduce import ReproductionResult
 
 __all__ = ["write_reproduction", "markdown_index"]
 

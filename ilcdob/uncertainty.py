@@ -1,4 +1,7 @@
-"""Continuous-time transfer-function model structure used by the fits.
+"""Parametric model uncertainty: the transfer-function structure of an identified model, its
+frequency response and the multiplicative error bound its covariance implies.
+
+The structure is the one the fits of :mod:`ilcdob.identification` estimate:
 
 ``G(s) = B(s) / (s^K A(s)) * exp(-s * delay)`` with ``A(s) = s^n + a_{n-1} s^{n-1} + ... + a_0``
 (monic, ``n = n_poles - K`` free poles), ``B(s) = b_m s^m + ... + b_0`` (``m = n_zeros``)
@@ -16,9 +19,9 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 
-from ilcdob.errors import SpecError
+from .errors import SpecError
 
-__all__ = ["ModelStructure", "simulate_zoh", "companion"]
+__all__ = ["MAX_POLES", "ModelStructure", "companion", "frequency_response", "multiplicative_bound"]
 
 
 #: Largest model order a fit accepts: the companion-form coefficients of higher orders span
@@ -111,13 +114,33 @@ def companion(den: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return a, b, c
 
 
-def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts: float,
-                 delay: float = 0.0, x0: np.ndarray | None = None) -> np.ndarray:
-    """Output of the model for a ZOH input ``u`` sampled at ``ts`` (from rest unless ``x0``,
-    the companion-form state at the first sample); computed by filtering (:mod:`.oe`)."""
-    from .oe import discretise, response, zoh_inputs
+def frequency_response(structure: ModelStructure, theta: np.ndarray, delay: float, w: np.ndarray) -> np.ndarray:
+    """``G(jw)`` of the model ``theta`` (with its delay) at ``w`` rad/s."""
+    den, num = structure.split(theta)
+    s = 1j * np.asarray(w, float)
+    return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay)
 
-    d = discretise(structure, theta, ts, delay, derivatives=False)
-    u = np.asarray(u, dtype=float)
-    x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
-    return response(d.phi, d.c[0], d.sos, d.den, u.size, zoh_inputs(d, u), x0)
+
+def multiplicative_bound(structure: ModelStructure, theta: np.ndarray, covariance: np.ndarray, delay: float,
+                         delay_estimated: bool, w: np.ndarray, k: float = 3.0) -> np.ndarray:
+    """Frequency-wise multiplicative uncertainty ``|Delta(jw)|`` at ``k`` sigma.
+
+    Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
+    ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the linearised
+    relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate). ``covariance``
+    covers ``theta`` and, last, the delay when ``delay_estimated``.
+    """
+    w = np.asarray(w, float)
+    cov = np.asarray(covariance, float)
+    x = np.concatenate([theta, [delay]]) if delay_estimated else np.asarray(theta, float).copy()
+    g0 = frequency_response(structure, theta, delay, w)
+    grads = np.empty((x.size, w.size), dtype=complex)
+    for i in range(x.size):
+        h = 1e-6 * max(1.0, abs(x[i]))
+        xp = x.copy()
+        xp[i] += h
+        th, d = (xp[:-1], xp[-1]) if delay_estimated else (xp, delay)
+        grads[i] = (frequency_response(structure, th, d, w) - g0) / h
+    var = (np.einsum("iw,ij,jw->w", grads.real, cov, grads.real)
+           + np.einsum("iw,ij,jw->w", grads.imag, cov, grads.imag))
+    return k * np.sqrt(np.clip(var, 0, None)) / np.abs(g0)

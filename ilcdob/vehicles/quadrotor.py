@@ -70,9 +70,8 @@ from scipy.signal import lfilter, ss2tf
 
 from ilcdob.discretize import discretize_pid
 from ilcdob.errors import SignalError, SpecError
+from ilcdob.signals import FlightData
 from ilcdob.specs import PIDSpec, SystemSpec
-
-from .data import FlightData
 
 __all__ = [
     "GRAVITY", "QuadrotorParams", "TauFit", "TABLE_I", "table_i_vehicles", "fly", "equivalent_tau",
@@ -774,7 +773,7 @@ def fly(params: QuadrotorParams, controller_spec: PIDSpec | SystemSpec, t_end: f
         "inner_rate_hz": params.inner_rate_hz, "tau_design_s": params.tau, "mass_kg": params.mass,
         "arm_m": params.arm, "controller": {"kp": pid.kp, "ki": pid.ki, "kd": pid.kd,
                                              "derivative_filter": pid.derivative_filter},
-        "plant_input": "acc_cmd", "plant_output": "x", "simulator": "ilcdob.identification.quadrotor",
+        "plant_input": "acc_cmd", "plant_output": "x", "simulator": "ilcdob.vehicles.quadrotor",
     }
     src = f"quadrotor simulation {params.name}" + (f" ({params.frame})" if params.frame else "") + \
         f", {experiment}, seed {seed_meta}"
