@@ -22,7 +22,7 @@ from ilcdob.validation.campaign import CampaignOptions, CampaignResult, run_camp
 
 def _run(options: CampaignOptions, workers: int) -> CampaignResult:
     with tempfile.TemporaryDirectory() as out:
-        return run_campaign(ilcdob.default_fleet(), options, out, workers=workers, progress=lambda m: None)
+        return run_campaign(ilcdob.default_fleet(), options, out, workers=workers)
 
 
 def run(samples: int = 24, robust_models: int = 1, duration: float | None = None) -> dict[str, float]:

@@ -42,7 +42,7 @@ TS = 0.02
 N = 30_000
 STRUCTURE = ModelStructure(2, 1, 0)
 TRUE = STRUCTURE.join([2.0, 3.0], [1.0, 1.4, 4.0])  # (a1, a0, b1, b0)
-QUIET = {"progress": lambda msg: None}
+QUIET = {"progress": None}
 
 
 def _data(seed: int = 0) -> FlightData:
@@ -154,7 +154,7 @@ y = simulate_zoh(s, theta, u, ts) + 0.01 * rng.standard_normal(n)
 data = FlightData(np.arange(n) * ts, {"u": u, "y": y})
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.perf_counter()
-est = tfest(data, "u", "y", s, progress=lambda m: None)
+est = tfest(data, "u", "y", s)
 print(json.dumps({"seconds": time.perf_counter() - t0, "peak_rss_mb": resource.getrusage(
     resource.RUSAGE_SELF).ru_maxrss / 1024, "rss_before_fit_mb": before / 1024,
     "max_rel_err": float(np.max(np.abs(est.theta / theta - 1)))}))

@@ -1,8 +1,11 @@
-"""Learning-filter design: closed-form filters of the Theorem and their lifted form."""
+"""Learning-filter design: closed-form filters of the Theorem and their lifted form, FIR,
+norm-optimal and robust designs, model reduction (:mod:`.reduction`) and the learning law
+as flown on a real vehicle with wrong models (:mod:`.flown`)."""
 
 from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, reconstruct_disturbance,
                           simulate_map)
 from .delta import DeltaSet, delta_set
+from .flown import VehicleLearning, vehicle_learning
 from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .laws import LAWS, ReferenceTerms, check_law, reference_terms
@@ -18,4 +21,5 @@ __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter"
            "NormOptimalDesigner", "NormOptimalOptions", "norm_optimal_learning",
            "METHODS", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
            "reference_terms", "PairCheck", "format_theorem_table", "theorem_check",
-           "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner"]
+           "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner",
+           "VehicleLearning", "vehicle_learning"]

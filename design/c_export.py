@@ -9,7 +9,7 @@ see :func:`default_c_prefix`), ::
 filtering one recorded trial exactly as :func:`~ilcdob.design.export.apply_coefficients`
 does: the input is taken as zero before the trial, continued past its end by the
 least-squares cubic through its last 16 samples
-(:func:`~ilcdob.design.noncausal.extend_smoothly`), run through the second-order sections
+(:func:`~ilcdob.signals.extend_smoothly`), run through the second-order sections
 (or, for a FIR, the direct form) in the operation order of ``scipy.signal.sosfilt``
 (``lfilter``), and read ``advance`` samples ahead. The C code allocates nothing: the
 sections' state and the cubic's coefficients live in fixed-size local arrays, and the
@@ -40,14 +40,13 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from ilcdob.atomic import write_json_atomic, write_text_atomic
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal
 
 from .export import apply_coefficients
 
 __all__ = ["CCode", "c_code", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
-           "float_error", "design_readme", "write_design_folder", "FILTER_KEYS"]
+           "float_error", "design_readme", "design_files", "FILTER_KEYS"]
 
 #: The filters of ``filters.json`` that get C functions, and their lower-case C names.
 FILTER_KEYS = ("L1", "L2")
@@ -64,7 +63,21 @@ _REFERENCE_TEXT = ("sin(0.5 t) + 0.3 sin(2.3 t + 0.4) + 0.05 sin(11 t + 1.1), t 
 
 
 def default_c_prefix(source: str, target: str) -> str:
-    """``ilcdob_<source>_<target>_`` in lower case, other characters than ``[a-z0-9_]`` -> ``_``."""
+    """The default prefix of a pair's C functions.
+
+    Parameters
+    ----------
+    source : str
+        Name of the system learned from.
+    target : str
+        Name of the learning system.
+
+    Returns
+    -------
+    str
+        ``ilcdob_<source>_<target>_`` in lower case, every character other than
+        ``[a-z0-9_]`` replaced by ``_``.
+    """
     return re.sub(r"[^a-z0-9_]", "_", f"ilcdob_{source}_{target}_".lower())
 
 
@@ -74,6 +87,21 @@ def check_c_prefix(prefix: str) -> str:
     Valid: an ASCII letter followed by letters, digits and underscores (identifiers starting
     with an underscore are reserved in C). The functions are named ``<prefix>l1_apply``, so
     end the prefix with ``_`` for readable names.
+
+    Parameters
+    ----------
+    prefix : str
+        The prefix asked for (``--c-prefix``).
+
+    Returns
+    -------
+    str
+        ``prefix``, unchanged.
+
+    Raises
+    ------
+    SpecError
+        Not a string, or not the start of a C identifier.
     """
     if not isinstance(prefix, str) or not _C_IDENTIFIER.fullmatch(prefix):
         raise SpecError(f"`--c-prefix`: got {prefix!r}, expected the start of a C identifier: an ASCII letter "
@@ -87,8 +115,20 @@ def check_c_prefix(prefix: str) -> str:
 def reference_trial(ts: float, n: int = _REFERENCE_N) -> np.ndarray:
     """The test signal on which the float variant's error is measured.
 
-    ``sin(0.5 t) + 0.3 sin(2.3 t + 0.4) + 0.05 sin(11 t + 1.1)`` at ``t = k ts``, ``n`` samples
-    (default 2000): slow, medium and fast content, ending mid-slope.
+    ``sin(0.5 t) + 0.3 sin(2.3 t + 0.4) + 0.05 sin(11 t + 1.1)`` at ``t = k ts``: slow,
+    medium and fast content, ending mid-slope.
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+    n : int
+        Number of samples (default 2000).
+
+    Returns
+    -------
+    numpy.ndarray
+        The trial.
     """
     t = np.arange(n) * float(ts)
     return np.sin(0.5 * t) + 0.3 * np.sin(2.3 * t + 0.4) + 0.05 * np.sin(11.0 * t + 1.1)
@@ -157,6 +197,7 @@ def emulate_c_filter(coeffs: dict[str, Any], x: object, dtype: type = np.float32
     x : array_like
         A trial (rounded to ``dtype`` first, as the C caller's array would be).
     dtype : numpy.float32 or numpy.float64
+        Precision of the data, coefficients and arithmetic.
 
     Returns
     -------
@@ -180,7 +221,22 @@ def emulate_c_filter(coeffs: dict[str, Any], x: object, dtype: type = np.float32
 
 
 def float_error(coeffs: dict[str, Any], ts: float) -> float:
-    """Measured ``max |y_float - y_double| / max |y_double|`` on :func:`reference_trial`."""
+    """Error of the float variant of a filter's C code, measured on :func:`reference_trial`.
+
+    Parameters
+    ----------
+    coeffs : dict
+        One filter of ``filters.json``.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    float
+        ``max |y_float - y_double| / max |y_double|``, the float arithmetic emulated by
+        :func:`emulate_c_filter` and the double result by
+        :func:`~ilcdob.design.export.apply_coefficients`.
+    """
     x = reference_trial(ts)
     ref = apply_coefficients(coeffs, x)
     y32 = emulate_c_filter(coeffs, x, np.float32).astype(float)
@@ -218,7 +274,7 @@ def _tail_c(prefix: str, ct: _CType) -> str:
     return f"""\
 /* Continuation of a trial past its end: the least-squares polynomial of degree
    min(3, m - 1) through its last m = min(16, n) samples (numpy.polyfit + polyval in
-   ilcdob.design.noncausal.extend_smoothly), here in orthogonal polynomials on the centred
+   ilcdob.signals.extend_smoothly), here in orthogonal polynomials on the centred
    abscissa t_i = i - (m - 1)/2, i = 0..m-1 (Forsythe's three-term recurrence). */
 struct {prefix}tail{s} {{
     int {'':<{len(T) - 3}}deg;         /* polynomial degree */
@@ -585,20 +641,17 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
     return "\n".join(lines) + "\n"
 
 
-def write_design_folder(out: str | Path, filters: dict[str, Any], others: Sequence[str] = (),
-                        prefix: str | None = None, float_variant: bool = False) -> dict[str, Any]:
-    """Write ``filters.h``, ``filters.c`` (when the design has L1/L2), ``README.md`` and ``filters.json``.
-
-    Each file is written atomically; ``filters.json`` last.
+def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: str | None = None,
+                 float_variant: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The files of a design folder: ``filters.json``, ``filters.h``/``filters.c`` (when the design
+    has L1/L2) and ``README.md``.
 
     Parameters
     ----------
-    out : path
-        The design folder (created if needed).
     filters : dict
         ``filters.json`` content; not modified.
     others : sequence of str
-        Files the caller wrote in the folder (``lifted.npz``, ``learning_signal.csv``), for the README.
+        Other files of the folder (``lifted.npz``, ``learning_signal.csv``), for the README.
     prefix : str, optional
         C symbol prefix (default :func:`default_c_prefix`).
     float_variant : bool
@@ -606,19 +659,18 @@ def write_design_folder(out: str | Path, filters: dict[str, Any], others: Sequen
 
     Returns
     -------
-    dict
-        The ``filters.json`` content written: ``filters`` plus, with C code, key ``c``
-        (:attr:`CCode.info`).
+    tuple of (dict, dict)
+        The content map (file name -> text or JSON document), and the ``filters.json``
+        content: ``filters`` plus, with C code, key ``c`` (:attr:`CCode.info`).
     """
-    out = Path(out)
     data = dict(filters)
+    files: dict[str, Any] = {}
     code = None
     if all(k in filters for k in FILTER_KEYS):
         code = c_code(filters, prefix, float_variant)
         data["c"] = code.info
-        write_text_atomic(out / "filters.h", code.header)
-        write_text_atomic(out / "filters.c", code.source)
-    files = ["filters.json", *(["filters.h", "filters.c"] if code else []), *others, "README.md"]
-    write_text_atomic(out / "README.md", design_readme(data, files, code))
-    write_json_atomic(out / "filters.json", data)
-    return data
+        files = {"filters.h": code.header, "filters.c": code.source}
+    names = ["filters.json", *files, *others, "README.md"]
+    files["README.md"] = design_readme(data, names, code)
+    files["filters.json"] = data
+    return files, data

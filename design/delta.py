@@ -36,6 +36,7 @@ class DeltaSet:
     Attributes
     ----------
     system : str
+        The system's name.
     nominal : LoopSystem
         The loop with the model as plant.
     loops : tuple of LoopSystem
@@ -58,7 +59,18 @@ class DeltaSet:
     source: str
 
     def deltas(self, w: np.ndarray | None = None) -> np.ndarray:
-        """``Delta_k(e^{jw Ts}) = P_k / P_hat - 1`` of every sample (K x len(w))."""
+        """Multiplicative model errors ``Delta_k(e^{jw Ts}) = P_k / P_hat - 1`` of every sample.
+
+        Parameters
+        ----------
+        w : array_like, optional
+            Frequencies, rad/s (default: :attr:`w`).
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex, ``K x len(w)``.
+        """
         w = self.w if w is None else np.asarray(w, float)
         p_hat = freqresp(self.nominal.P, w)
         return np.array([freqresp(lp.P, w) / p_hat - 1 for lp in self.loops])
@@ -111,6 +123,19 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
         identification (in that order of precedence).
     w : array, optional
         Frequencies of the bound, rad/s (default: log grid to Nyquist).
+    max_rejections : int
+        Sampled plants whose loop is unstable are redrawn; more rejections than this raise.
+
+    Returns
+    -------
+    DeltaSet
+        The ``k`` sampled loops and the bound.
+
+    Raises
+    ------
+    SpecError
+        ``k < 1``, no uncertainty to sample from (neither a bound nor an identification), a
+        bound outside (0, 1), or too many unstable samples.
     """
     if k < 1:
         raise SpecError(f"`k`: got {k}, expected >= 1 samples")

@@ -50,6 +50,16 @@ def direct_form_grid(ts: float) -> np.ndarray:
     2048 linearly spaced points up to Nyquist: dense at low frequency, where clustered poles
     make the direct form lose accuracy, and over the whole band. ``w = 0`` is excluded (the
     PID integrator puts a pole of L1 at z = 1).
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    numpy.ndarray
+        Sorted unique frequencies, rad/s.
     """
     wn = math.pi / ts
     return np.unique(np.concatenate([np.geomspace(wn * 10.0 ** -_BAND_DECADES, wn, _GRID_POINTS),
@@ -58,6 +68,15 @@ def direct_form_grid(ts: float) -> np.ndarray:
 
 def direct_form_disagreement(num: Any, den: Any, sos: Any, ts: float) -> tuple[float, float]:
     """Largest relative difference of ``num/den`` from ``sos`` on :func:`direct_form_grid`.
+
+    Parameters
+    ----------
+    num, den : array_like
+        Direct-form numerator and denominator, powers of ``z^-1``, highest first.
+    sos : array_like
+        Second-order sections, rows ``[b0, b1, b2, 1, a1, a2]``.
+    ts : float
+        Sample time, s.
 
     Returns
     -------
@@ -83,6 +102,7 @@ def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, Any]:
     Parameters
     ----------
     f : ZPKFilter
+        The filter.
     tol : float
         Truncation of the series of the anti-causal poles (relative size of the last term).
 
@@ -147,7 +167,7 @@ def apply_coefficients(coeffs: dict[str, Any], x: object) -> np.ndarray:
     -------
     numpy.ndarray
         The filtered trial, same length as ``x``. The input is continued past its end by
-        :func:`~ilcdob.design.noncausal.extend_smoothly` (the advance needs it) and taken
+        :func:`~ilcdob.signals.extend_smoothly` (the advance needs it) and taken
         as zero before its start.
     """
     x = as_signal(x, "x")

@@ -15,8 +15,8 @@ ideal response ``L(e^{jw Ts})`` on a log grid ``w_min <= w <= w_max`` (default: 
     with        Te1_k = Gd_j^k / Gd_{j-1}^k - Gf_j^k H        (the k-th sampled true loops of
                                                                both systems, paired)
 
-i.e. robust monotone convergence of the error map of the Theorem over the Delta set (design
-notes section 3). The relative (``1/|L|^2``) weighting makes the fit scale-free: ``|L1|`` spans
+i.e. robust monotone convergence of the error map of the Theorem over the Delta set
+(docs/theory.md section 3). The relative (``1/|L|^2``) weighting makes the fit scale-free: ``|L1|`` spans
 five decades between ``w_min`` and Nyquist (an inverse plant at high frequency). ``weight(w)``
 is ``band_weight`` inside ``weight_band`` and 1 elsewhere.
 
@@ -119,7 +119,23 @@ class FIROptions:
             raise SpecError(f"`max_iter`: got {self.max_iter!r}, expected an integer >= 1")
 
     def grid(self, ts: float) -> np.ndarray:
-        """Log-spaced design grid, rad/s."""
+        """Log-spaced design grid from ``w_min`` to ``w_max``.
+
+        Parameters
+        ----------
+        ts : float
+            Sample time, s (gives the default ``w_max``, just below Nyquist).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``n_grid`` frequencies, rad/s.
+
+        Raises
+        ------
+        SpecError
+            ``w_max`` above Nyquist or not above ``w_min``.
+        """
         nyq = 0.999 * np.pi / ts
         w_max = nyq if self.w_max is None else float(self.w_max)
         if w_max > np.pi / ts or self.w_min >= w_max:
@@ -128,7 +144,18 @@ class FIROptions:
         return np.logspace(np.log10(self.w_min), np.log10(w_max), self.n_grid)
 
     def weights(self, w: np.ndarray) -> np.ndarray:
-        """Band emphasis ``weight(w)``."""
+        """Band emphasis ``weight(w)``: ``band_weight`` inside ``weight_band``, 1 elsewhere.
+
+        Parameters
+        ----------
+        w : numpy.ndarray
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            The weights, the shape of ``w``.
+        """
         lo, hi = self.weight_band
         return np.where((w >= lo) & (w <= hi), self.band_weight, 1.0)
 
@@ -170,10 +197,22 @@ class FIRFilter:
 
     @property
     def n_taps(self) -> int:
+        """Number of coefficients ``n``."""
         return int(self.h.size)
 
     def freqresp(self, w: np.ndarray) -> np.ndarray:
-        """``H(e^{jw Ts}) = e^{jw Ts a} sum_i h[i] e^{-jw Ts i}`` at ``w`` rad/s."""
+        """Frequency response ``H(e^{jw Ts}) = e^{jw Ts a} sum_i h[i] e^{-jw Ts i}``.
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex response, the shape of ``w``.
+        """
         w = np.asarray(w, dtype=float)
         return _fir_matrix(w.reshape(-1), self.n_taps, self.advance, self.ts).dot(self.h).reshape(w.shape)
 
@@ -182,8 +221,20 @@ class FIRFilter:
 
         Before the trial the input is taken as zero (the system starts at rest); the
         ``advance`` samples needed past its end continue the input by a cubic fitted to the
-        last samples (:func:`ilcdob.design.noncausal.extend_smoothly`), never by zeros (a
-        step into a differentiating filter would spike).
+        last samples (:func:`ilcdob.signals.extend_smoothly`), never by zeros (a step into a
+        differentiating filter would spike).
+
+        Parameters
+        ----------
+        x : array_like
+            The trial, one sample per sample time.
+        name : str
+            The signal's name, for error messages.
+
+        Returns
+        -------
+        numpy.ndarray
+            The filtered trial, same length.
         """
         x = as_signal(x, name)
         n, m = x.size, self.n_taps
@@ -193,10 +244,16 @@ class FIRFilter:
         return full[start:start + n]
 
     def to_dict(self) -> dict:
-        """``{"num": [...], "den": [1.0], "advance": a}``: ``H(z) = z^a sum_i num[i] z^-i``.
+        """The filter in the coefficient form of ``filters.json`` (:mod:`.export`).
 
         ``num`` lists the coefficients of ``z^0, z^-1, ...`` (highest power first), so
         ``output(k) = sum_i num[i] * input(k + advance - i)``.
+
+        Returns
+        -------
+        dict
+            ``{"num": [...], "den": [1.0], "advance": a, "ts": Ts}``:
+            ``H(z) = z^a sum_i num[i] z^-i``.
         """
         return {"num": [float(v) for v in self.h], "den": [1.0], "advance": int(self.advance),
                 "ts": float(self.ts)}
@@ -209,7 +266,9 @@ class FIRDesign:
     Attributes
     ----------
     source, target : str
+        Names of systems j-1 and j.
     L1, L2 : FIRFilter
+        The filters replacing the closed-form ``L1`` and ``L2``.
     w : numpy.ndarray
         Design grid, rad/s.
     te1 : numpy.ndarray
@@ -224,6 +283,7 @@ class FIRDesign:
         ``max |Te1|`` over models on a check grid from 1e-3 rad/s to ``w_min`` (not
         constrained, see module docstring: the FIR has no integrator).
     options : FIROptions
+        The options of the design.
     solver_status : str
         IPOPT's return status for L1.
     """
@@ -242,13 +302,34 @@ class FIRDesign:
     solver_status: str = field(default="")
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem), m/s^2."""
+        """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem, paper Sec. III).
+
+        Parameters
+        ----------
+        e_prev : array_like
+            Tracking error of system j-1 over the trial, m.
+        df_prev : array_like
+            Learning signal system j-1 flew with, m/s^2 (zeros if none), same length.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j``, m/s^2, same length.
+        """
         e = as_signal(e_prev, "e_prev")
         df = as_signal(df_prev, "df_prev", e.size)
         out = self.L1.apply(e, "e_prev")
         return out + self.L2.apply(df, "df_prev") if np.any(df) else out
 
     def to_dict(self) -> dict:
+        """The design as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``source``, ``target``, both filters (:meth:`FIRFilter.to_dict`), the worst
+            ``|Te1|`` with its frequency and model, ``te1_below_band`` and both fit errors.
+        """
         return {"source": self.source, "target": self.target, "L1": self.L1.to_dict(),
                 "L2": self.L2.to_dict(), "worst_te1": self.worst_te1, "worst_w": self.worst_w,
                 "worst_model": self.worst_model, "te1_below_band": self.te1_below_band,

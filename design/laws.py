@@ -106,16 +106,49 @@ class ReferenceTerms:
     correction: np.ndarray
 
     def error_in(self, e_prev: object) -> np.ndarray:
-        """System j-1's error with its reference term removed, m."""
+        """System j-1's error with its reference term removed.
+
+        Parameters
+        ----------
+        e_prev : array_like
+            Tracking error of system j-1, m, the length of the trajectory.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``e_{j-1} - e_ref,{j-1}``, m.
+        """
         return as_signal(e_prev, "e_prev", self.source_error.size) - self.source_error
 
     def signal_out(self, d_f: object) -> np.ndarray:
-        """A learning signal of the disturbance part plus the reference correction, m/s^2."""
+        """A learning signal of the disturbance part plus the reference correction.
+
+        Parameters
+        ----------
+        d_f : array_like
+            Learning signal computed from the disturbance part, m/s^2.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f + Gf_hat_j^{-1}{e_ref,j}``, m/s^2.
+        """
         return as_signal(d_f, "d_f", self.correction.size) + self.correction
 
     def wrap(self, learn: Callable[[np.ndarray, np.ndarray], np.ndarray]
              ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-        """``learn`` (trial of j-1 -> d_f,j) with both reference terms applied around it."""
+        """A learning function with both reference terms applied around it.
+
+        Parameters
+        ----------
+        learn : callable
+            ``learn(e_prev, df_prev) -> d_f,j`` of the paper's law (m, m/s^2 -> m/s^2).
+
+        Returns
+        -------
+        callable
+            ``(e_prev, df_prev) -> signal_out(learn(error_in(e_prev), df_prev))``.
+        """
 
         def exact_reference_learn(e_prev: np.ndarray, df_prev: np.ndarray) -> np.ndarray:
             return self.signal_out(learn(self.error_in(e_prev), df_prev))

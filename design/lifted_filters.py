@@ -24,7 +24,7 @@ from ilcdob.lifted import lifted_operator, markov_parameters, relative_degree
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 
-from .closed_form import _one_minus
+from .closed_form import one_minus
 
 __all__ = ["LiftedLearningFilters", "lifted_filters", "regularised_inverse"]
 
@@ -55,7 +55,20 @@ class LiftedLearningFilters:
     regularisation: float
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """``d_f,j = L1 e_{j-1} + L2 d_f,{j-1}`` (m/s^2)."""
+        """Learning signal of system j, ``d_f,j = L1 e_{j-1} + L2 d_f,{j-1}`` (the Theorem, lifted).
+
+        Parameters
+        ----------
+        e_prev : array_like
+            Tracking error of system j-1, m, N samples.
+        df_prev : array_like
+            Learning signal system j-1 flew with, m/s^2 (zeros if none), N samples.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j``, m/s^2, N samples.
+        """
         n = self.L1.shape[0]
         e = as_signal(e_prev, "e_prev", n)
         df = as_signal(df_prev, "df_prev", n)
@@ -65,7 +78,29 @@ class LiftedLearningFilters:
 def regularised_inverse(h: np.ndarray, regularisation: float = 1e-12) -> tuple[np.ndarray, int, np.ndarray]:
     """Tikhonov inverse ``Gd^+`` (N x N) of the lifted map with Markov parameters ``h``.
 
-    Returns ``(Gd^+, shift m, singular values of the shifted operator)``; see module docstring.
+    See the module docstring (docs/theory.md section 3): the relative degree is shifted out,
+    then the regularised normal equations are solved by Cholesky.
+
+    Parameters
+    ----------
+    h : numpy.ndarray
+        Markov parameters of the map over the trial (N samples).
+    regularisation : float
+        Relative Tikhonov weight ``alpha / sigma_max^2``, > 0.
+
+    Returns
+    -------
+    pinv : numpy.ndarray
+        ``Gd^+``, N x N.
+    shift : int
+        The relative degree ``m`` shifted out.
+    singular_values : numpy.ndarray
+        Singular values of the shifted lifted operator, largest first.
+
+    Raises
+    ------
+    SpecError
+        ``regularisation`` not > 0.
     """
     if not regularisation > 0:
         raise SpecError(f"`regularisation`: got {regularisation!r}, expected a number > 0")
@@ -94,11 +129,16 @@ def lifted_filters(prev: LoopSystem, nxt: LoopSystem, n: int,
         thousand takes seconds.
     regularisation : float
         Relative Tikhonov weight, > 0.
+
+    Returns
+    -------
+    LiftedLearningFilters
+        The N x N matrices ``L1``, ``L2`` and their conditioning.
     """
     src = prev.nominal
     gd_pinv, m, sv = regularised_inverse(markov_parameters(src.G_d, n), regularisation)
     alpha = regularisation * sv[0] ** 2
-    t_1mq = lifted_operator(markov_parameters(_one_minus(nxt.Q), n))
+    t_1mq = lifted_operator(markov_parameters(one_minus(nxt.Q), n))
     l1 = -t_1mq @ gd_pinv
     l2 = l1 @ lifted_operator(markov_parameters(src.G_f, n))
     return LiftedLearningFilters(

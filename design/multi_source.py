@@ -18,8 +18,9 @@ each system's own noise)::
 and system j's learning signal is the Theorem's ``L1`` acting on it: since
 ``L1_j = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``d_f,j = (1 - Q_j){d_hat}`` (the Theorem's L1, paper
 Sec. III, factored). With one source this is exactly the closed form. This is the
-``multi-source`` learning law of :mod:`ilcdob.design.laws` (``reproduce(law="multi-source")``). The weighting is applied on the FFT grid of
-the zero-padded trial (the weights are smooth in w, so wrap-around is negligible).
+``multi-source`` learning law of :mod:`ilcdob.design.laws` (``reproduce(law="multi-source")``).
+The weighting is applied on the FFT grid of the zero-padded trial (the weights are smooth in
+w, so wrap-around is negligible).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
-from .closed_form import _one_minus, reconstruct_disturbance, simulate_map
+from .closed_form import one_minus, reconstruct_disturbance, simulate_map
 from .delta import DeltaSet
 
 __all__ = ["SourceTrial", "reconstruction_error_power", "joint_disturbance", "multi_source_learning"]
@@ -65,7 +66,24 @@ class SourceTrial:
 
 
 def reconstruction_error_power(trial: SourceTrial, w: np.ndarray, floor: float = FLOOR) -> np.ndarray:
-    """``v_i(w) = mean_k |Gd_i,k(w)/Gd_hat_i(w) - 1|^2 + floor`` over the Delta samples (module docstring)."""
+    """Error power of one system's reconstruction, ``v_i(w)`` (module docstring).
+
+    ``v_i(w) = mean_k |Gd_i,k(w)/Gd_hat_i(w) - 1|^2 + floor`` over the Delta samples ``k``.
+
+    Parameters
+    ----------
+    trial : SourceTrial
+        The system and its Delta set (without one: ``floor`` everywhere).
+    w : array_like
+        Frequencies, rad/s.
+    floor : float
+        Error-power floor added (the error sources a Delta set does not hold).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``v_i(w)``, the shape of ``w``.
+    """
     if trial.delta is None:
         return np.full(np.shape(w), floor)
     gd_hat = freqresp(trial.loop.nominal.G_d, w)
@@ -89,6 +107,17 @@ def joint_disturbance(trials: Sequence[SourceTrial], weighting: str = "confidenc
         Reused across calls for the error powers ``v_i(w)`` (keyed by system name, grid and
         floor; a learning chain evaluates the same systems' Delta sets on the same grid at every
         step). Only valid while each name keeps its Delta set.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``d_hat``, m/s^2, the length of the trials.
+
+    Raises
+    ------
+    SpecError
+        No trials, an unknown ``weighting``, a bad ``floor``, or trials of different lengths or
+        sample times.
     """
     if not trials:
         raise SpecError("`trials`: got none, expected at least one earlier system's trial")
@@ -129,6 +158,22 @@ def multi_source_learning(target: LoopSystem, trials: Sequence[SourceTrial], wei
                           floor: float = FLOOR, power_cache: dict | None = None) -> np.ndarray:
     """Learning signal of ``target`` from every earlier trial: ``(1 - Q_j){d_hat}`` (m/s^2).
 
-    Parameters as :func:`joint_disturbance`.
+    Parameters
+    ----------
+    target : LoopSystem
+        System j, the learning system (its ``Q`` is used).
+    trials : sequence of SourceTrial
+        Earlier systems' trials (see :func:`joint_disturbance`).
+    weighting : {"confidence", "equal"}
+        Inverse error power per frequency, or a plain average.
+    floor : float
+        Error-power floor (> 0).
+    power_cache : dict, optional
+        Cache of the error powers, see :func:`joint_disturbance`.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``d_f,j``, m/s^2, the length of the trials.
     """
-    return simulate_map(_one_minus(target.Q), joint_disturbance(trials, weighting, floor, power_cache))
+    return simulate_map(one_minus(target.Q), joint_disturbance(trials, weighting, floor, power_cache))

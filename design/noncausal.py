@@ -61,10 +61,12 @@ class ZPKFilter:
 
     @property
     def causal_poles(self) -> np.ndarray:
+        """Poles with ``|p| <= 1`` (the integrator at z = 1 included): run forwards."""
         return self.poles[np.abs(self.poles) <= 1 + _CIRCLE_TOL]
 
     @property
     def anticausal_poles(self) -> np.ndarray:
+        """Poles with ``|p| > 1``: run backwards from the end of the trial."""
         return self.poles[np.abs(self.poles) > 1 + _CIRCLE_TOL]
 
     @property
@@ -80,13 +82,34 @@ class ZPKFilter:
         return self.gain * num / den
 
     def freqresp(self, w: np.ndarray) -> np.ndarray:
-        """Frequency response at ``w`` rad/s."""
+        """Frequency response ``F(e^{j w Ts})``.
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex response, the shape of ``w``.
+        """
         return self(np.exp(1j * np.asarray(w, dtype=float) * self.ts))
 
     def apply(self, x: object, name: str = "x") -> np.ndarray:
-        """Apply the filter to a whole trial ``x`` non-causally (see module docstring).
+        """Apply the filter to a whole trial non-causally (stable inversion, module docstring).
 
-        Returns an array of the same length as ``x``.
+        Parameters
+        ----------
+        x : array_like
+            The trial, one sample per sample time, starting at rest.
+        name : str
+            The signal's name, for error messages.
+
+        Returns
+        -------
+        numpy.ndarray
+            The filtered trial, same length as ``x``.
         """
         x = as_signal(x, name)
         n = x.size

@@ -70,8 +70,14 @@ class NormOptimalDesigner:
     target : LoopSystem
         System j; its nominal (model) ``G_f`` is used.
     n : int
-        Trial length, samples.
-    options : NormOptimalOptions
+        Trial length, samples (>= 2).
+    options : NormOptimalOptions, optional
+        Weights of the cost (default ``NormOptimalOptions()``).
+
+    Notes
+    -----
+    The backward Riccati recursion for the gains runs once, here (O(N n^3)); each
+    :meth:`solve` then costs O(N n^2) (module docstring; docs/theory.md section 3).
     """
 
     def __init__(self, target: LoopSystem, n: int, options: NormOptimalOptions | None = None) -> None:
@@ -113,7 +119,18 @@ class NormOptimalDesigner:
             self._closed[t] = (abar - np.outer(bbar, k)).T
 
     def solve(self, e0: object) -> np.ndarray:
-        """Optimal learning signal ``d_f`` (m/s^2) for the predicted error ``e0`` (m)."""
+        """Optimal learning signal for a predicted error without learning.
+
+        Parameters
+        ----------
+        e0 : array_like
+            Predicted error of system j without learning, m, ``n`` samples.
+
+        Returns
+        -------
+        numpy.ndarray
+            The minimiser ``d_f`` of ``J`` (module docstring), m/s^2, ``n`` samples.
+        """
         e0 = as_signal(e0, "e0", self.n)
         w = self.options.weight
         nz = self._abar.shape[0]
@@ -133,7 +150,20 @@ class NormOptimalDesigner:
         return u
 
     def cost(self, e0: np.ndarray, d_f: np.ndarray) -> float:
-        """Value of the cost for a given ``d_f`` (for checks)."""
+        """Value of the cost ``J`` for a given learning signal (for checks).
+
+        Parameters
+        ----------
+        e0 : numpy.ndarray
+            Predicted error without learning, m.
+        d_f : numpy.ndarray
+            Learning signal, m/s^2, same length.
+
+        Returns
+        -------
+        float
+            ``J`` (module docstring).
+        """
         o = self.options
         y = simulate_map(self.target.nominal.G_f, d_f)
         du = np.diff(np.concatenate([[0.0], d_f]))
@@ -154,6 +184,18 @@ class NormOptimalDesigner:
         solution matrix and ``Gd_{j-1}^+`` the
         regularised inverse of :func:`~ilcdob.design.lifted_filters.regularised_inverse`;
         ``L2 = L1 Gf_{j-1}``. Dense, O(N^3): for export and checks at moderate N.
+
+        Parameters
+        ----------
+        source : LoopSystem
+            System j-1 (its model is used).
+        regularisation : float
+            Relative Tikhonov weight of the inverse of ``Gd_{j-1}``, > 0.
+
+        Returns
+        -------
+        L1, L2 : numpy.ndarray
+            N x N learning matrices.
         """
         from .lifted_filters import regularised_inverse
 
@@ -172,6 +214,24 @@ def norm_optimal_learning(source: LoopSystem, target: LoopSystem, e_prev: object
 
     ``e0 = -Gd_j{d_rec}``, ``d_rec = reconstruct_disturbance(source, e_prev, df_prev)``; then the
     Riccati solution of :class:`NormOptimalDesigner`.
+
+    Parameters
+    ----------
+    source : LoopSystem
+        System j-1, which flew (its model is used for the reconstruction).
+    target : LoopSystem
+        System j, the learning system (its model's ``G_d`` and ``G_f`` are used).
+    e_prev : array_like
+        Tracking error of system j-1 over the trial, m.
+    df_prev : array_like
+        Learning signal system j-1 flew with, m/s^2 (zeros if none), same length.
+    options : NormOptimalOptions, optional
+        Weights of the cost.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``d_f,j``, m/s^2, same length as ``e_prev``.
     """
     e_prev = as_signal(e_prev, "e_prev")
     d_rec = reconstruct_disturbance(source, e_prev, df_prev)

@@ -41,6 +41,7 @@ class PairDesign:
     Attributes
     ----------
     method : str
+        Design method (one of :data:`METHODS`).
     filters : dict
         ``filters.json`` content.
     lifted : dict of str -> array, or None
@@ -86,7 +87,29 @@ def _filter_size(coeffs: dict[str, Any]) -> str:
 
 def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | None = None,
                      scale: float = 1.0, seed: int = 0) -> dict[str, DeltaSet]:
-    """Delta sets of the named systems: from each identification (scaled), or a common ``bound``."""
+    """Delta sets of the named systems: from each identification (scaled), or a common ``bound``.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet.
+    names : list of str
+        Systems to draw Delta sets for, in this order (one generator serves them all).
+    k : int
+        Sampled true plants per system.
+    bound : float, optional
+        A common multiplicative bound for every system (default: each system's own stated
+        bound or identification, see :func:`~ilcdob.design.delta.delta_set`).
+    scale : float
+        Multiplier of the identified standard deviations.
+    seed : int
+        Seed of the random generator.
+
+    Returns
+    -------
+    dict of str to DeltaSet
+        Name -> Delta set.
+    """
     rng = np.random.default_rng(seed)
     return {name: delta_set(next(s for s in fleet.systems if s.name == name), fleet.sample_time, k, rng,
                             scale=scale, bound=bound) for name in names}

@@ -23,7 +23,7 @@ import numpy as np
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
-from .closed_form import LearningFilters, _matched, simulate_map
+from .closed_form import LearningFilters, matched, simulate_map
 from .noncausal import ZPKFilter
 
 __all__ = ["reference_error", "inverse_gf_filter", "ExactReferenceLearning"]
@@ -32,8 +32,22 @@ __all__ = ["reference_error", "inverse_gf_filter", "ExactReferenceLearning"]
 def reference_error(loop: LoopSystem, r: object, a_ref: object | None = None) -> np.ndarray:
     """Error of ``loop``'s model flying reference ``r`` (m) without disturbance or learning, m.
 
-    ``a_ref`` (m/s^2) is fed forward only if the controller's ``acceleration_feedforward`` is on,
-    as in :func:`ilcdob.validation.simulate.simulate_flight`.
+    ``e_ref = r - G_r{r} + G_f{a_ref}`` with the model's maps (module docstring).
+
+    Parameters
+    ----------
+    loop : LoopSystem
+        The system (its model, ``loop.nominal``, is flown).
+    r : array_like
+        Position reference, m.
+    a_ref : array_like, optional
+        Reference acceleration, m/s^2, same length; fed forward only if the controller's
+        ``acceleration_feedforward`` is on, as in :func:`ilcdob.validation.simulate.simulate_flight`.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``e_ref``, m, same length as ``r``.
     """
     src = loop.nominal
     r = as_signal(r, "r")
@@ -48,6 +62,17 @@ def inverse_gf_filter(loop: LoopSystem) -> ZPKFilter:
 
     Zeros: the closed-loop poles; poles: zeros of P_hat (the ZOH sampling zero outside the unit
     circle becomes anti-causal) and the poles of Q, M and C.
+
+    Parameters
+    ----------
+    loop : LoopSystem
+        The system whose model's learning map ``G_f`` is inverted.
+
+    Returns
+    -------
+    ZPKFilter
+        ``G_f^{-1}``, with its gain matched to the block formula
+        (:func:`~ilcdob.design.closed_form.matched`).
     """
     src = loop.nominal
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)
@@ -59,7 +84,7 @@ def inverse_gf_filter(loop: LoopSystem) -> ZPKFilter:
         p, m, c, q = (freqresp(s, w) for s in (src.P, src.M, src.C, src.Q))
         return -((1 - q) / p + m + c)
 
-    return _matched(zeros, poles, src.ts, exact, f"Gf^-1 of {loop.name!r}")
+    return matched(zeros, poles, src.ts, exact, f"Gf^-1 of {loop.name!r}")
 
 
 class ExactReferenceLearning:
@@ -83,6 +108,19 @@ class ExactReferenceLearning:
                                                                   "e_ref")
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """Learning signal of system j (m/s^2) from system j-1's trial (m, m/s^2)."""
+        """Learning signal of system j from system j-1's trial, reference term kept (module docstring).
+
+        Parameters
+        ----------
+        e_prev : array_like
+            Tracking error of system j-1, m, the length of ``r``.
+        df_prev : array_like
+            Learning signal system j-1 flew with, m/s^2 (zeros if none), same length.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j``, m/s^2.
+        """
         e = as_signal(e_prev, "e_prev", self.r.size)
         return self.filters.apply(e - self.e_ref_prev, df_prev) + self.correction

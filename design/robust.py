@@ -16,13 +16,14 @@ exactly the regularised least-squares (norm-optimal ILC) problem
 Scale (docs/theory.md section 5): the predicted errors are not formed with dense N x N lifted
 matrices. Each ``Gf_k`` enters through its state-space equations as sparse equality
 constraints ``x_{t+1} = A x_t + B d_t``, ``x_0 = 0``, ``y_t = C x_t + D d_t``, in a balanced
-truncation (:func:`reduced_realisation`, SLICOT AB09AD in discrete time), so the states are
-well scaled and few (6-7 of 11-12 at the default ``reduction_tol``). The truncation's error
-bound ``eps_k`` (``>= ||Gf_k - Gf_k,r||_inf``) is carried into the improvement constraint,
-``||e_k,r|| + eps_k ||d_f|| <= rho ||e0_k||``, so the guarantee holds for the full models;
-every reported ratio is recomputed by simulating the full models. The signals are normalised
-inside: ``e0`` by ``s = max_k ||e0_k||`` and ``d_f`` by ``s / g`` with ``g`` the peak gain of the
-first model's ``Gf``; the weights are rescaled so the optimum is unchanged.
+truncation (:func:`~ilcdob.design.reduction.reduced_realisation`, SLICOT AB09AD in discrete
+time), so the states are well scaled and few (6-7 of 11-12 at the default ``reduction_tol``).
+The truncation's error bound ``eps_k`` (``>= ||Gf_k - Gf_k,r||_inf``) is carried into the
+improvement constraint, ``||e_k,r|| + eps_k ||d_f|| <= rho ||e0_k||``, so the guarantee holds
+for the full models; every reported ratio is recomputed by simulating the full models. The
+signals are normalised inside: ``e0`` by ``s = max_k ||e0_k||`` and ``d_f`` by ``s / g`` with
+``g`` the peak gain of the first model's ``Gf``; the weights are rescaled so the optimum is
+unchanged.
 
 The cvxpy problem is built once with Parameters (the normalised ``e0`` and the right-hand
 sides ``rho ||e0_k||``) and checked to be DPP. By default (``backend="direct"``) the same conic
@@ -46,18 +47,16 @@ import clarabel
 import control as ct
 import cvxpy as cp
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
-import slycot
-from slycot.exceptions import SlycotResultWarning
 
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
 from .closed_form import reconstruct_disturbance, simulate_map
+from .reduction import reduced_realisation
 
 __all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustPairDesigner", "RobustInfeasibleError",
-           "RobustSolverError", "predicted_errors", "design_ratios", "reduced_realisation"]
+           "RobustSolverError", "predicted_errors"]
 
 _OK = ("optimal", "optimal_inaccurate")
 _DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl on these KKT systems
@@ -69,6 +68,13 @@ _CLARABEL_STATUS = {"Solved": "optimal", "AlmostSolved": "optimal_inaccurate",
 
 class RobustInfeasibleError(IlcdobError, ValueError):
     """No learning signal meets ``||e_k|| <= rho ||e0_k||`` for every model.
+
+    Parameters
+    ----------
+    message : str
+        The error message (states the smallest feasible rho and the next step).
+    rho, rho_feasible, binding
+        Stored as the attributes below.
 
     Attributes
     ----------
@@ -120,9 +126,10 @@ class RobustOptions:
         so use it for small problems or other solvers only.
     reduction_tol : float
         Balanced truncation of each ``Gf_k``: states with Hankel singular value below
-        ``reduction_tol`` times the largest are dropped (:func:`reduced_realisation`). The
-        truncation error bound ``eps_k`` is added to the improvement constraint, which stays
-        a guarantee for the full model. In [0, 0.1); default 1e-5 (6-7 of 11-12 states).
+        ``reduction_tol`` times the largest are dropped
+        (:func:`~ilcdob.design.reduction.reduced_realisation`). The truncation error bound
+        ``eps_k`` is added to the improvement constraint, which stays a guarantee for the full
+        model. In [0, 0.1); default 1e-5 (6-7 of 11-12 states).
     """
 
     rho: float = 0.95
@@ -215,46 +222,6 @@ def predicted_errors(d_rec: object, loops: Sequence[LoopSystem]) -> np.ndarray:
     if len(loops) < 1:
         raise SpecError("`loops`: got no loops, expected one LoopSystem per model (DeltaSet.loops)")
     return np.array([-simulate_map(lp.G_d, d) for lp in loops])
-
-
-def design_ratios(d_f: object, e0: object, loops: Sequence[LoopSystem]) -> np.ndarray:
-    """``||e0_k - Gf_k{d_f}|| / ||e0_k||`` of any learning signal under every model (K,)."""
-    e0 = np.atleast_2d(np.asarray(e0, dtype=float))
-    d = np.asarray(d_f, dtype=float)
-    e = np.array([e0[k] - simulate_map(lp.G_f, d) for k, lp in enumerate(loops)])
-    return np.linalg.norm(e, axis=1) / np.linalg.norm(e0, axis=1)
-
-
-def hankel_singular_values(sys: ct.StateSpace) -> np.ndarray:
-    """Hankel singular values of a stable discrete SISO map, largest first (discrete Gramians)."""
-    a, b, c = (np.asarray(m, float) for m in (sys.A, sys.B, sys.C))
-    wc = sla.solve_discrete_lyapunov(a, b @ b.T)
-    wo = sla.solve_discrete_lyapunov(a.T, c.T @ c)
-    return np.sqrt(np.sort(np.abs(np.linalg.eigvals(wc @ wo)))[::-1])
-
-
-def reduced_realisation(sys: ct.StateSpace, tol: float) -> tuple[ct.StateSpace, float]:
-    """Balanced truncation of a stable discrete SISO map, and its error bound.
-
-    States whose Hankel singular value is below ``tol`` times the largest are truncated
-    (SLICOT AB09AD, square-root balance & truncate, ``dico='D'``). The returned bound
-    ``2 sum(discarded HSV)`` bounds ``||G - G_r||_inf`` and hence the l2 gain of the error
-    on any finite trial from rest.
-
-    Note: ``control.balred`` (python-control 0.10) hard-codes continuous time and returns a
-    ``dt = 0`` system, so it cannot be used on discrete maps; slycot is called directly.
-    """
-    m = ct.minreal(sys, verbose=False)
-    if m.nstates == 0:
-        return m, 0.0
-    hsv = hankel_singular_values(m)
-    order = max(1, int(np.sum(hsv > tol * hsv[0])))
-    with warnings.catch_warnings():  # AB09AD lowers nr itself to the minimal order, with a warning
-        warnings.simplefilter("ignore", SlycotResultWarning)
-        nr, ar, br, cr, _ = slycot.ab09ad("D", "B", "N", m.nstates, 1, 1, np.asarray(m.A, float),
-                                          np.asarray(m.B, float), np.asarray(m.C, float), nr=order)
-    red = ct.ss(ar[:nr, :nr], br[:nr, :], cr[:, :nr], m.D, m.dt)
-    return red, float(2.0 * np.sum(hsv[nr:]))
 
 
 def _state_space_blocks(sys: ct.StateSpace, n: int, gain: float):
@@ -596,12 +563,43 @@ class RobustPairDesigner:
         self._designers: dict[int, RobustDesigner] = {}
 
     def predicted_errors(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """``e0_k`` (K, N), m: system j's error without learning under every hypothesis."""
+        """``e0_k`` (K, N), m: system j's error without learning under every hypothesis.
+
+        Parameters
+        ----------
+        e_prev : array, m
+            System j-1's tracking error in its trial.
+        df_prev : array, m/s^2
+            The learning signal system j-1 flew with (zeros if none).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``-Gd_{j,k}{d_rec,k}`` for every hypothesis ``k`` (docs/theory.md section 3).
+        """
         return np.array([-simulate_map(tgt.G_d, reconstruct_disturbance(src, e_prev, df_prev, model=False))
                          for src, tgt in zip(self.sources, self.targets)])
 
     def design(self, e_prev: object, df_prev: object) -> RobustDesign:
-        """Robust learning signal of system j for one trial of system j-1 (m, m/s^2)."""
+        """Robust learning signal of system j for one trial of system j-1.
+
+        Parameters
+        ----------
+        e_prev : array, m
+            System j-1's tracking error in its trial.
+        df_prev : array, m/s^2
+            The learning signal system j-1 flew with (zeros if none).
+
+        Returns
+        -------
+        RobustDesign
+            The design (at a relaxed rho, with a warning, when ``relax`` and rho is infeasible).
+
+        Raises
+        ------
+        RobustInfeasibleError
+            ``rho`` is infeasible and ``relax`` is False.
+        """
         e0 = self.predicted_errors(e_prev, df_prev)
         n = e0.shape[1]
         if n not in self._designers:
@@ -618,5 +616,18 @@ class RobustPairDesigner:
             return designer.solve(e0, rho=rho)
 
     def learn(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """The learning signal only (``design(...).d_f``), m/s^2."""
+        """The learning signal only (``design(...).d_f``), m/s^2.
+
+        Parameters
+        ----------
+        e_prev : array, m
+            System j-1's tracking error in its trial.
+        df_prev : array, m/s^2
+            The learning signal system j-1 flew with (zeros if none).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j``, m/s^2.
+        """
         return self.design(e_prev, df_prev).d_f

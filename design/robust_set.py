@@ -101,7 +101,7 @@ from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
-from .closed_form import LearningFilters, _one_minus, closed_form_filters, reconstruct_disturbance, simulate_map
+from .closed_form import LearningFilters, closed_form_filters, one_minus, reconstruct_disturbance, simulate_map
 from .fir import FIRFilter
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
@@ -114,12 +114,21 @@ _DIRECT_METHOD = "faer"  # supernodal, multithreaded: the dense tap columns make
 class RobustSetInfeasibleError(IlcdobError, ValueError):
     """The asked rho cannot be guaranteed over the Delta set by any FIR of the given order.
 
+    Parameters
+    ----------
+    message : str
+        The error message.
+    rho : float
+        The asked improvement factor.
+    rho_best : float
+        The smallest factor an FIR of this order guarantees (minimised directly).
+
     Attributes
     ----------
     rho : float
         The asked improvement factor.
     rho_best : float
-        The smallest factor an FIR of this order guarantees (minimised directly).
+        The smallest factor an FIR of this order guarantees.
     """
 
     def __init__(self, message: str, rho: float, rho_best: float):
@@ -230,9 +239,26 @@ class RobustSetOptions:
         return self.n_taps // 2 if self.advance is None else int(self.advance)
 
     def grid(self, ts: float) -> np.ndarray:
-        """Design grid, rad/s: ``n_grid`` log-spaced from ``w_min`` to Nyquist, joined with a linear grid
-        of ``n_taps`` points to Nyquist (spacing half the FIR's resolution ``2 pi/(n_taps Ts)``); the
-        exchange step adds what it misses."""
+        """Design grid: ``n_grid`` log-spaced from ``w_min`` to Nyquist, joined with a linear grid.
+
+        The linear grid has ``n_taps`` points to Nyquist (spacing half the FIR's resolution
+        ``2 pi/(n_taps Ts)``); the exchange step adds what it misses.
+
+        Parameters
+        ----------
+        ts : float
+            Sample time, s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Sorted frequencies, rad/s.
+
+        Raises
+        ------
+        SpecError
+            ``w_min`` at or above Nyquist.
+        """
         nyq = np.pi / ts
         if self.w_min >= nyq:
             raise SpecError(f"`w_min`: got {self.w_min} rad/s, expected below Nyquist {nyq:.4g} rad/s")
@@ -240,19 +266,55 @@ class RobustSetOptions:
         return np.unique(np.concatenate([np.logspace(np.log10(self.w_min), np.log10(nyq), self.n_grid), lin]))
 
     def verify_grid(self, ts: float) -> np.ndarray:
-        """Dense verification grid: log from 1e-4 rad/s to ``w_min``, then linear to Nyquist, rad/s."""
+        """Dense verification grid: log from 1e-4 rad/s to ``w_min``, then linear to Nyquist.
+
+        Parameters
+        ----------
+        ts : float
+            Sample time, s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Sorted frequencies, rad/s (200 log-spaced plus ``n_verify`` linearly spaced).
+        """
         nyq = np.pi / ts
         low = np.logspace(-4, np.log10(self.w_min), 200)
         return np.unique(np.concatenate([low, np.linspace(self.w_min, nyq, self.n_verify)]))
 
     def weights(self, w: np.ndarray) -> np.ndarray:
-        """Nominal-criterion weight per frequency."""
+        """Nominal-criterion weight per frequency: ``band_weight`` inside ``weight_band``, else 1.
+
+        Parameters
+        ----------
+        w : numpy.ndarray
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            The weights, the shape of ``w``.
+        """
         lo, hi = self.weight_band
         return np.where((w >= lo) & (w <= hi), self.band_weight, 1.0)
 
 
 def bound_on_grid(w_bound: np.ndarray, bound: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``W(w)`` on ``w``: linear interpolation in log frequency, held constant beyond the ends.
+
+    Parameters
+    ----------
+    w_bound : array_like
+        Frequencies of the bound, rad/s (> 0, any order).
+    bound : array_like
+        Multiplicative bound ``|Delta|`` on ``w_bound`` (>= 0); one value is a constant bound.
+    w : array_like
+        Frequencies wanted, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``W`` on ``w``.
 
     Raises
     ------
@@ -323,6 +385,18 @@ def worst_case_ratio(F: np.ndarray, a: np.ndarray, b: np.ndarray, R: np.ndarray)
 
     ``inf`` where ``a <= 0`` (unbounded image: the disc reaches the stability boundary) and
     ``F != 0``; 1 there if ``F = 0``.
+
+    Parameters
+    ----------
+    F : array_like
+        Response of the robustness filter on the grid (complex).
+    a, b, R : numpy.ndarray
+        Cone data of :func:`uncertainty_cones` on the same grid.
+
+    Returns
+    -------
+    numpy.ndarray
+        The worst-case ``|T(w)|`` per frequency.
     """
     F = np.asarray(F, complex)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -331,7 +405,22 @@ def worst_case_ratio(F: np.ndarray, a: np.ndarray, b: np.ndarray, R: np.ndarray)
 
 
 def ratio_for_delta(F: np.ndarray, t0: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """``|T(w)| = |1 - F (1 + Delta)/(1 + T0 Delta)|`` for one given ``Delta(w)`` (complex)."""
+    """``|T(w)| = |1 - F (1 + Delta)/(1 + T0 Delta)|`` for one given ``Delta(w)`` (module docstring).
+
+    Parameters
+    ----------
+    F : array_like
+        Response of the robustness filter (complex).
+    t0 : numpy.ndarray
+        ``T0``, complementary sensitivity of system j-1's nominal DOB loop, same grid.
+    delta : array_like
+        The multiplicative model error ``Delta(w)`` (complex), same grid.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``|T(w)|``.
+    """
     delta = np.asarray(delta, complex)
     return np.abs(1 - np.asarray(F, complex) * (1 + delta) / (1 + t0 * delta))
 
@@ -386,8 +475,7 @@ class RobustSetDesign:
     solve_time: float = 0.0
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """Learning signal of system j, ``(1 - Q_j){F{d_hat}}`` with ``d_hat = -Gd_{j-1}^{-1}{e'_{j-1}}``
-        (m, m/s^2 -> m/s^2).
+        """Learning signal of system j, ``(1 - Q_j){F{d_hat}}`` with ``d_hat = -Gd_{j-1}^{-1}{e'_{j-1}}``.
 
         Over an infinite horizon this is ``F{L1{e'_{j-1}}}`` (``L1 = -(1 - Q_j) Gd_{j-1}^{-1}``, paper
         Sec. III). On a finite trial ``F`` acts on the reconstructed disturbance ``d_hat``
@@ -396,6 +484,18 @@ class RobustSetDesign:
         4 (30 s, nominal plants, |Delta| <= 0.5 design): ratio 0.32 / 0.69 this way, against 0.48 /
         1.34 with ``F`` after ``L1`` (the FIR's look-ahead continues ``L1``'s output by a cubic) and
         3.9 / 7.1 with ``F`` before ``L1`` (the inversion differentiates ``F``'s start transient).
+
+        Parameters
+        ----------
+        e_prev : array_like
+            Tracking error of system j-1, m.
+        df_prev : array_like
+            Learning signal system j-1 flew with, m/s^2 (zeros if none), same length.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j``, m/s^2, same length.
         """
         e = as_signal(e_prev, "e_prev")
         df = as_signal(df_prev, "df_prev", e.size)
@@ -403,10 +503,21 @@ class RobustSetDesign:
         h, a, n = self.F.h, self.F.advance, e.size
         padded = np.concatenate([np.zeros(h.size - 1), d_hat, np.full(a, d_hat[-1])])
         smoothed = np.convolve(padded, h)[h.size - 1 + a:h.size - 1 + a + n]
-        return simulate_map(_one_minus(self.filters.target.Q), smoothed)
+        return simulate_map(one_minus(self.filters.target.Q), smoothed)
 
     def response(self, w: np.ndarray) -> np.ndarray:
-        """Frequency response of ``F`` at ``w`` rad/s."""
+        """Frequency response of the robustness filter ``F``.
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``F(e^{j w Ts})``, complex.
+        """
         return self.F.freqresp(w)
 
     def to_dict(self) -> dict:

@@ -34,9 +34,13 @@ _SOURCES = ("bound", "samples")
 class PairCheck:
     """The Theorem's condition for one learning step ``source`` (j-1) -> ``target`` (j).
 
+    The condition of the Theorem (paper Sec. III, Case II; docs/theory.md section 2),
+    frequency by frequency.
+
     Attributes
     ----------
     source, target : str
+        Names of systems j-1 and j.
     w : numpy.ndarray
         Frequencies, rad/s.
     delta : numpy.ndarray
@@ -68,6 +72,7 @@ class PairCheck:
 
     @property
     def holds_everywhere(self) -> bool:
+        """Whether the condition holds at every frequency of ``w``."""
         return bool(np.all(self.holds))
 
     @property
@@ -77,6 +82,14 @@ class PairCheck:
         return None if bad.size == 0 else (float(bad.min()), float(bad.max()))
 
     def to_dict(self) -> dict:
+        """The check as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            Every attribute (arrays as lists; infinite margins as None) plus
+            ``holds_everywhere`` and ``failing_band``.
+        """
         band = self.failing_band
         return {"source": self.source, "target": self.target, "w": self.w.tolist(),
                 "delta": self.delta.tolist(), "rhs": self.rhs.tolist(), "holds": self.holds.tolist(),
@@ -87,7 +100,26 @@ class PairCheck:
 
 
 def learning_pairs(names: list[str], order: list[str] | tuple[str, ...]) -> list[tuple[str, str]]:
-    """Cyclic pairs ``(order[i-1], order[i])``: ``[a, b, c]`` -> ``(a, b), (b, c), (c, a)``."""
+    """Cyclic learning pairs ``(order[i-1], order[i])``: ``[a, b, c]`` -> ``(a, b), (b, c), (c, a)``.
+
+    Parameters
+    ----------
+    names : list of str
+        The fleet's system names.
+    order : sequence of str
+        Learning order (paper Sec. IV: scenario 4 flies ``["UAV1", "UAV3", "UAV2"]``); each
+        name once, at least two.
+
+    Returns
+    -------
+    list of (str, str)
+        ``(source, target)`` pairs, the cycle closed by ``(order[-1], order[0])``.
+
+    Raises
+    ------
+    SpecError
+        Fewer than two names, an unknown or a repeated name.
+    """
     order = list(order)
     if len(order) < 2:
         raise SpecError(f"`order`: got {order!r}, expected at least two system names")
@@ -106,6 +138,7 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
     Parameters
     ----------
     fleet : ilcdob.Fleet
+        The fleet.
     order : list of str or None
         Learning order (cyclic; None: the fleet's order). Scenario 4 flies
         ``["UAV1", "UAV3", "UAV2"]``.
@@ -119,7 +152,8 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
 
     Returns
     -------
-    list of PairCheck, in the order of the pairs.
+    list of PairCheck
+        One per pair, in the order of the pairs.
     """
     if source not in _SOURCES:
         raise SpecError(f"`source`: got {source!r}, expected one of {_SOURCES}")
@@ -158,7 +192,18 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
 
 
 def format_theorem_table(checks: list[PairCheck]) -> str:
-    """Plain-text table: one row per pair with verdict, minimum margin, worst frequency, failing band."""
+    """Plain-text table: one row per pair with verdict, minimum margin, worst frequency, failing band.
+
+    Parameters
+    ----------
+    checks : list of PairCheck
+        Results of :func:`theorem_check`.
+
+    Returns
+    -------
+    str
+        The table, a header row and a rule first.
+    """
     head = f"{'pair':<16} {'holds':<6} {'min margin':>10} {'worst w [rad/s]':>16}  failing band [rad/s]"
     rows = [head, "-" * len(head)]
     for c in checks:

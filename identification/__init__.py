@@ -28,5 +28,6 @@ __all__ = [
     "FlightData", "Chirp", "StepSequence", "suggest_band", "suggest_band_for_loop", "write_setpoint_csv",
     "load_csv", "load_dataflash", "load_flight", "load_parquet", "load_ulog",
     "ModelStructure", "simulate_zoh", "ResidualTest", "TFEstimate", "fit_percent", "multiplicative_bound",
+    "frequency_response",
     "FitOptions", "tfest",
 ]

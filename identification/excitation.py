@@ -114,7 +114,18 @@ class StepSequence:
         return len(self.levels) * self.hold
 
     def signal(self, t: np.ndarray) -> np.ndarray:
-        """The set-point at times ``t`` (s); same shape as ``t``."""
+        """The set-point at given times.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s (any shape).
+
+        Returns
+        -------
+        numpy.ndarray
+            The set-point, same shape as ``t``.
+        """
         t = _time_array(t, "StepSequence")
         lv = np.asarray(self.levels)
         k = np.clip(np.floor(t / self.hold).astype(int), 0, lv.size - 1)
@@ -128,7 +139,20 @@ class StepSequence:
         return x
 
     def sample(self, ts: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(t, x)`` on the grid ``t = k ts`` covering ``[0, duration]``, s."""
+        """The staircase sampled on the grid ``t = k ts`` covering ``[0, duration]``.
+
+        Parameters
+        ----------
+        ts : float
+            Sample time, s (> 0, not longer than the duration).
+
+        Returns
+        -------
+        t : numpy.ndarray
+            Times, s.
+        x : numpy.ndarray
+            The set-point at ``t``.
+        """
         t = _grid(ts, self.duration, "StepSequence")
         return t, self.signal(t)
 
@@ -159,6 +183,7 @@ class Chirp:
     amplitude : float
         Peak value (> 0), in the unit of the driven signal (m or m/s^2).
     sweep : {"linear", "log"}
+        Linear or exponential sweep.
     fade : float
         Raised-cosine fade-in and fade-out length, s (``0 <= fade <= duration / 2``).
     ts : float, optional
@@ -214,14 +239,36 @@ class Chirp:
             object.__setattr__(self, name, v)
 
     def frequency(self, t: np.ndarray) -> np.ndarray:
-        """Instantaneous frequency at ``t`` (s), Hz; ``t`` clipped to ``[0, duration]``."""
+        """Instantaneous frequency ``f(t)``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s; clipped to ``[0, duration]``.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``f(t)``, Hz.
+        """
         tau = np.clip(_time_array(t, "Chirp"), 0.0, self.duration) / self.duration
         if self.sweep == "linear":
             return self.f0 + (self.f1 - self.f0) * tau
         return self.f0 * (self.f1 / self.f0) ** tau
 
     def phase(self, t: np.ndarray) -> np.ndarray:
-        """``phi(t)``, rad (``t`` clipped to ``[0, duration]``)."""
+        """Phase ``phi(t)``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s; clipped to ``[0, duration]``.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``phi(t)``, rad.
+        """
         tt = np.clip(_time_array(t, "Chirp"), 0.0, self.duration)
         T = self.duration
         if self.sweep == "linear":
@@ -230,7 +277,18 @@ class Chirp:
         return 2 * np.pi * self.f0 * T * np.expm1(lk * tt / T) / lk
 
     def envelope(self, t: np.ndarray) -> np.ndarray:
-        """Fade window ``w(t)`` (0 outside ``[0, duration]``)."""
+        """Fade window ``w(t)``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``w(t)`` in [0, 1] (0 outside ``[0, duration]``).
+        """
         t = _time_array(t, "Chirp")
         w = ((t >= 0) & (t <= self.duration)).astype(float)
         if self.fade > 0:
@@ -240,11 +298,40 @@ class Chirp:
         return w
 
     def signal(self, t: np.ndarray) -> np.ndarray:
-        """The chirp at times ``t`` (s); same shape as ``t``."""
+        """The chirp at given times.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s (any shape).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``amplitude * w(t) * sin(phi(t))``, same shape as ``t``.
+        """
         return self.amplitude * self.envelope(t) * np.sin(self.phase(t))
 
     def sample(self, ts: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """``(t, x)`` on the grid ``t = k ts`` covering ``[0, duration]``; default ``ts`` the field."""
+        """The chirp sampled on the grid ``t = k ts`` covering ``[0, duration]``.
+
+        Parameters
+        ----------
+        ts : float, optional
+            Sample time, s (default: the field ``ts``); checked against Nyquist like the field.
+
+        Returns
+        -------
+        t : numpy.ndarray
+            Times, s.
+        x : numpy.ndarray
+            The chirp at ``t``.
+
+        Raises
+        ------
+        SpecError
+            No sample time, or one too long for the chirp's frequencies or duration.
+        """
         ts = self.ts if ts is None else ts
         if ts is None:
             raise SpecError("Chirp.sample: `ts`: not given and the chirp has no `ts`; give a sample time > 0 (s)")
@@ -359,6 +446,11 @@ def suggest_band_for_loop(loop: LoopSystem) -> tuple[float, float]:
 
     The bandwidth is :func:`closed_loop_bandwidth` of ``loop.G_r`` (rad/s); the upper edge
     is capped at ``NYQUIST_FRACTION`` of the loop's Nyquist frequency ``1 / (2 loop.ts)``.
+
+    Parameters
+    ----------
+    loop : LoopSystem
+        The system's loop (from :func:`ilcdob.build_loop` or ``fleet.loops``).
 
     Returns
     -------

@@ -13,22 +13,26 @@ estimation data, from commanded x acceleration (m/s^2) to measured x position (m
 flight is cut into 10 s segments, each with its own estimated initial state: a simulation-
 error fit of a double integrator over a long record lets tiny low-frequency mismatches
 (drag, tilt nonlinearity) accumulate into position drift that swamps the fit; 10 s windows
-bound that drift while keeping several periods of the slowest excitation. The flights are
-written as CSV and Parquet, so the same data can be re-fitted with ``ilcdob identify``.
+bound that drift while keeping several periods of the slowest excitation.
+
+Nothing is written here: :func:`identify_fleet` returns a :class:`FleetIdentification` whose
+:meth:`~FleetIdentification.files` maps every output file (flights as CSV and Parquet, so the
+same data can be re-fitted with ``ilcdob identify``; ``model.json``; fit figures; the fleet
+file of the models) to its content. docs/identification.md describes the fit.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from ilcdob.atomic import write_json_atomic, write_text_atomic
 from ilcdob.fleet import Fleet
-from ilcdob.specs import IdentificationSpec, PlantSpec
+from ilcdob.fleet_io import fleet_to_toml
 from ilcdob.signals import FlightData
+from ilcdob.specs import IdentificationSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.quadrotor import QuadrotorParams, fly, table_i_vehicles
 
@@ -36,20 +40,36 @@ from .excitation import Chirp, StepSequence
 from .results import TFEstimate
 from .tfest import FitOptions, tfest
 
-__all__ = ["VehicleIdentification", "identify_vehicle", "identify_fleet", "fleet_toml", "segments",
-           "PLANT_STRUCTURE"]
+__all__ = ["VehicleIdentification", "FleetIdentification", "identify_vehicle", "identify_fleet",
+           "identified_systems", "segments", "PLANT_STRUCTURE", "IDENTIFICATION_SOURCE"]
 
 #: Commanded acceleration -> position: double integrator behind one attitude lag.
 PLANT_STRUCTURE = ModelStructure(n_poles=3, n_zeros=0, n_integrators=2)
 INPUT, OUTPUT = "acc_cmd", "x"
 
+#: ``source`` of the identification tables written for the identified plants.
+IDENTIFICATION_SOURCE = "synthetic step + chirp flights of the nonlinear vehicle (ilcdob.identification.fleet_id)"
 
 SEGMENT_S = 10.0  # s, window of each fitted segment (own initial state)
 
 
 def segments(flights: list[FlightData], length: float = SEGMENT_S) -> list[FlightData]:
-    """Cut flights into consecutive windows of ``length`` seconds (the tail shorter than half
-    a window is merged into the last one)."""
+    """Cut flights into consecutive windows of ``length`` seconds.
+
+    The tail shorter than half a window is merged into the last one.
+
+    Parameters
+    ----------
+    flights : list of FlightData
+        The flights, each cut on its own.
+    length : float
+        Window length, s.
+
+    Returns
+    -------
+    list of FlightData
+        The windows of every flight, in order.
+    """
     out = []
     for fd in flights:
         starts = np.arange(fd.t[0], fd.t[-1] - 0.5 * length + 1e-9, length)
@@ -61,7 +81,19 @@ def segments(flights: list[FlightData], length: float = SEGMENT_S) -> list[Fligh
 
 @dataclass(frozen=True)
 class VehicleIdentification:
-    """The flights and the fit of one vehicle."""
+    """The flights and the fit of one vehicle.
+
+    Attributes
+    ----------
+    name : str
+        The vehicle's name in the fleet.
+    estimate : TFEstimate
+        The fitted plant.
+    estimation : tuple of FlightData
+        The step and chirp flights fitted (``metadata["experiment"]``: ``"steps"``, ``"chirp"``).
+    validation : tuple of FlightData
+        The held-out flights (``"steps-validation"``, ``"chirp-validation"``).
+    """
 
     name: str
     estimate: TFEstimate
@@ -70,13 +102,31 @@ class VehicleIdentification:
 
 
 def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 0.003,
-                     progress: Callable[[str], None] | None = None,
+                     progress: Callable[[int, int, str], None] | None = None,
                      vehicle: QuadrotorParams | None = None) -> VehicleIdentification:
     """Fly the estimation and validation experiments of ``name`` and fit its plant.
 
-    ``vehicle`` is the nonlinear vehicle flown (default: the Table I vehicle ``name``).
+    Parameters
+    ----------
+    name : str
+        The system of ``fleet`` whose controller flies the experiments.
+    fleet : Fleet
+        Supplies the system's PID and the sample time.
+    seed : int
+        Seed of the first flight's noise; the other three use ``seed + 1 .. seed + 3``.
+    noise_std : float
+        Standard deviation of the white position-sensor noise, m.
+    progress : callable, optional
+        ``progress(done, total, what)`` after the flights (1 of 2) and after the fit
+        (2 of 2); None: silent.
+    vehicle : QuadrotorParams, optional
+        The nonlinear vehicle flown (default: the Table I vehicle ``name``).
+
+    Returns
+    -------
+    VehicleIdentification
     """
-    say = progress or (lambda msg: None)
+    say = progress if progress is not None else (lambda done, total, what: None)
     params = vehicle if vehicle is not None else table_i_vehicles()[name]
     spec = next(s for s in fleet.systems if s.name == name)
     ts = fleet.sample_time
@@ -88,71 +138,145 @@ def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 
                    noise_std=noise_std, seed=seed + 2, experiment="steps-validation")
     chirp_val = fly(params, spec, 30.0, ts, injection=Chirp(0.15, 1.5, 30.0, 1.2, fade=2.0).signal,
                     noise_std=noise_std, seed=seed + 3, experiment="chirp-validation")
-    say(f"{name}: flew 4 experiments ({sum(len(f) for f in (step_est, chirp_est, step_val, chirp_val))} samples)")
+    say(1, 2, f"{name}: flew 4 experiments ({sum(len(f) for f in (step_est, chirp_est, step_val, chirp_val))} "
+              "samples)")
     est = tfest(segments([step_est, chirp_est]), INPUT, OUTPUT, PLANT_STRUCTURE, FitOptions(delay=0.0),
-                validation=segments([step_val, chirp_val]), progress=say)
-    say(f"{name}: fit {est.fit_estimation:.2f} % (estimation), {est.fit_validation:.2f} % (validation)")
+                validation=segments([step_val, chirp_val]))
+    say(2, 2, f"{name}: fit {est.fit_estimation:.2f} % (estimation), {est.fit_validation:.2f} % (validation)")
     return VehicleIdentification(name, est, (step_est, chirp_est), (step_val, chirp_val))
 
 
-def identify_fleet(fleet: Fleet, out: str | Path | None = None, seed: int = 0,
-                   progress: Callable[[str], None] | None = None) -> dict[str, VehicleIdentification]:
-    """Identify every vehicle of ``fleet``; with ``out``, write flights, models and figures."""
-    results = {}
-    for i, name in enumerate(fleet.names):
-        results[name] = identify_vehicle(name, fleet, seed=seed + 10 * i, progress=progress)
-    if out is not None:
-        from .plots import plot_fit
+def identified_systems(fleet: Fleet, results: dict[str, VehicleIdentification]) -> tuple[SystemSpec, ...]:
+    """The systems of ``fleet`` with every identified plant replacing the original one.
 
-        out = Path(out)
-        for name, vid in results.items():
-            folder = out / name
-            for fd in vid.estimation + vid.validation:
-                stem = fd.metadata.get("experiment", "flight")
-                fd.to_csv(folder / f"{stem}.csv")
-                fd.to_parquet(folder / f"{stem}.parquet")
-            write_json_atomic(folder / "model.json", vid.estimate.to_dict())
-            plot_fit(vid.estimate, list(vid.estimation), list(vid.validation), folder)
-        write_text_atomic(out / "identified_fleet.toml", fleet_toml(fleet, results))
-    return results
+    A system with a result flies its identified ``P_hat`` as its plant (no separate model)
+    and carries the fit as its ``identification`` (parameters, covariance, fits: the Delta
+    set of docs/theory.md section 3); controller, DOB, noise and uncertainty bound stay
+    ``fleet``'s. A system without a result is unchanged. Write them with
+    :func:`ilcdob.fleet_io.fleet_to_toml`.
 
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet identified.
+    results : dict
+        System name -> :class:`VehicleIdentification` (any subset of the systems).
 
-def _fmt(values) -> str:
-    return "[" + ", ".join(f"{float(v):.10g}" for v in values) + "]"
-
-
-def fleet_toml(fleet: Fleet, results: dict[str, VehicleIdentification], header: str = "") -> str:
-    """The fleet file with every identified plant replacing the original one."""
-    lines = [header.rstrip()] if header else []
-    lines += [f"sample_time = {fleet.sample_time}   # s", ""]
+    Returns
+    -------
+    tuple of SystemSpec
+        In ``fleet``'s order.
+    """
+    systems = []
     for spec in fleet.systems:
         vid = results.get(spec.name)
-        plant = spec.plant
-        ident = None
         if vid is not None:
             e = vid.estimate
-            plant = PlantSpec(tuple(e.num), tuple(e.den), e.delay)
             ident = IdentificationSpec(e.structure.n_poles, e.structure.n_zeros, e.structure.n_integrators,
                                        tuple(e.theta), tuple(map(tuple, e.covariance)), e.delay_estimated,
-                                       e.fit_estimation, e.fit_validation or float("nan"),
-                                       "synthetic step + chirp flights of the nonlinear vehicle (ilcdob.identification.fleet_id)")
-        c, q, n = spec.controller, spec.dob, spec.noise
-        lines += ["[[system]]", f'name = "{spec.name}"',
-                  f"plant = {{ num = {_fmt(plant.num)}, den = {_fmt(plant.den)} }}",
-                  f"delay = {plant.delay:.6g}",
-                  f"controller = {{ kp = {c.kp:g}, ki = {c.ki:g}, kd = {c.kd:g}, derivative_filter = {c.derivative_filter:g}"
-                  + ("" if c.acceleration_feedforward else ", acceleration_feedforward = false") + " }",
-                  f"dob = {{ q_order = {q.q_order}, q_time_constant = {q.q_time_constant:g} }}",
-                  f"noise = {{ amplitude = {n.amplitude:g}, frequency = {n.frequency:g}, phase = {n.phase:g} }}"]
-        if ident is not None:
-            cov = "[" + ", ".join(_fmt(r) for r in ident.covariance) + "]"
-            lines.append(
-                f"identification = {{ poles = {ident.poles}, zeros = {ident.zeros}, integrators = {ident.integrators}, "
-                f"parameters = {_fmt(ident.parameters)}, covariance = {cov}, "
-                f"delay_estimated = {'true' if ident.delay_estimated else 'false'}, "
-                f"fit_estimation = {ident.fit_estimation:.4f}, fit_validation = {ident.fit_validation:.4f}, "
-                f'source = "{ident.source}" }}')
-        if spec.uncertainty is not None:
-            lines.append(f"uncertainty = {{ bound = {spec.uncertainty.bound:g} }}")
-        lines.append("")
-    return "\n".join(lines)
+                                       e.fit_estimation,
+                                       e.fit_validation if e.fit_validation is not None else float("nan"),
+                                       IDENTIFICATION_SOURCE)
+            spec = dataclasses.replace(spec, plant=PlantSpec(tuple(e.num), tuple(e.den), e.delay), model=None,
+                                       identification=ident)
+        systems.append(spec)
+    return tuple(systems)
+
+
+@dataclass(frozen=True)
+class FleetIdentification:
+    """The identification of every vehicle of a fleet (:func:`identify_fleet`).
+
+    Attributes
+    ----------
+    fleet : Fleet
+        The fleet identified (controllers, DOBs, noises).
+    results : dict
+        System name -> :class:`VehicleIdentification`, in the fleet's order.
+    seed : int
+        Seed of the experiments (vehicle ``i`` flies with ``seed + 10 i``).
+    """
+
+    fleet: Fleet
+    results: dict[str, VehicleIdentification]
+    seed: int = 0
+
+    @property
+    def identified_toml(self) -> str:
+        """The fleet file with every identified plant (TOML text, :func:`identified_systems`)."""
+        return fleet_to_toml(self.fleet.sample_time, identified_systems(self.fleet, self.results))
+
+    def files(self, figures: bool = True) -> dict[str, object]:
+        """Every output file of the identification, name -> content; nothing is written.
+
+        Per vehicle ``NAME`` (every flight by its ``metadata["experiment"]``: ``steps``,
+        ``chirp``, ``steps-validation``, ``chirp-validation``):
+
+        * ``NAME/<experiment>.csv``, ``NAME/<experiment>.parquet``: the flight, as the
+          callable writer :meth:`~ilcdob.signals.FlightData.to_csv` /
+          :meth:`~ilcdob.signals.FlightData.to_parquet` taking the destination path;
+        * ``NAME/model.json``: the fit (:meth:`~ilcdob.identification.results.TFEstimate.to_dict`);
+        * with ``figures``, ``NAME/compare.png``, ``NAME/residuals.png``, ``NAME/bode.png``:
+          the fit's figures (:func:`ilcdob.identification.plots.fit_figures`), as
+          :class:`matplotlib.figure.Figure`;
+
+        and ``identified_fleet.toml``, the fleet file of the models (:attr:`identified_toml`).
+
+        Parameters
+        ----------
+        figures : bool
+            Include the figures.
+
+        Returns
+        -------
+        dict
+            Relative file name (``/``-separated) -> ``str`` (text), ``dict`` (a JSON
+            document), :class:`matplotlib.figure.Figure` (PNG) or a callable writing the
+            file at the path it is given.
+        """
+        out: dict[str, object] = {}
+        for name, vid in self.results.items():
+            for fd in vid.estimation + vid.validation:
+                stem = fd.metadata.get("experiment", "flight")
+                out[f"{name}/{stem}.csv"] = fd.to_csv
+                out[f"{name}/{stem}.parquet"] = fd.to_parquet
+            out[f"{name}/model.json"] = vid.estimate.to_dict()
+            if figures:
+                from .plots import fit_figures
+
+                for fig_name, fig in fit_figures(vid.estimate, list(vid.estimation), list(vid.validation)).items():
+                    out[f"{name}/{fig_name}"] = fig
+        out["identified_fleet.toml"] = self.identified_toml
+        return out
+
+
+def identify_fleet(fleet: Fleet, *, seed: int = 0,
+                   progress: Callable[[int, int, str], None] | None = None) -> FleetIdentification:
+    """Identify every vehicle of ``fleet`` from its step and chirp flights (module docstring).
+
+    Nothing is written: :meth:`FleetIdentification.files` gives the output files.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet whose vehicles are flown (Table I vehicles of the same names) under their
+        own PIDs.
+    seed : int
+        Seed of the experiments; vehicle ``i`` (fleet order) flies with ``seed + 10 i``.
+    progress : callable, optional
+        ``progress(done, total, what)`` after each vehicle (``total``: the number of
+        vehicles, ``what``: its fit); None (default): silent.
+
+    Returns
+    -------
+    FleetIdentification
+    """
+    say = progress if progress is not None else (lambda done, total, what: None)
+    results = {}
+    for i, name in enumerate(fleet.names):
+        vid = identify_vehicle(name, fleet, seed=seed + 10 * i)
+        results[name] = vid
+        e = vid.estimate
+        say(i + 1, len(fleet.names), f"{name}: fit {e.fit_estimation:.2f} % (estimation), "
+                                     f"{e.fit_validation:.2f} % (validation)")
+    return FleetIdentification(fleet, results, seed)

@@ -1,6 +1,6 @@
 """Exact sampled responses of a continuous-time model and their parameter sensitivities.
 
-The model of :mod:`.model`, ``G(s) = B(s) / (s^K A(s)) e^{-s tau}``, driven by a zero-order
+The model of :mod:`ilcdob.uncertainty`, ``G(s) = B(s) / (s^K A(s)) e^{-s tau}``, driven by a zero-order
 hold input, is in controllable companion form ``x' = A_c x + e_n u(t - tau)``; sampled
 exactly at ``ts`` with the delay split as ``tau = nd ts + f`` (``0 <= f < ts``)::
 
@@ -45,11 +45,27 @@ from scipy.linalg import expm
 
 from ilcdob.uncertainty import ModelStructure, companion
 
-__all__ = ["Discretisation", "discretise", "response", "simulate_zoh", "zoh_inputs", "allpole_sos", "delay_split", "delayed_input"]
+__all__ = ["Discretisation", "discretise", "response", "simulate_zoh", "zoh_inputs", "allpole_sos", "delay_split",
+           "delayed_input"]
 
 
 def delay_split(delay: float, ts: float) -> tuple[int, float]:
-    """``delay = nd * ts + f`` with integer ``nd >= 0`` and ``0 <= f < ts``."""
+    """Split a delay into whole samples and a fraction: ``delay = nd * ts + f``.
+
+    Parameters
+    ----------
+    delay : float
+        Input delay, s (>= 0).
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    nd : int
+        Whole samples, >= 0.
+    f : float
+        Fraction, s, ``0 <= f < ts`` (below ``1e-12 ts``: 0).
+    """
     nd = int(math.floor(delay / ts + 1e-9))
     f = delay - nd * ts
     if f < 1e-12 * ts:
@@ -58,7 +74,20 @@ def delay_split(delay: float, ts: float) -> tuple[int, float]:
 
 
 def delayed_input(u: np.ndarray, nd: int) -> np.ndarray:
-    """``u[k - nd]`` with zeros before the record."""
+    """The input delayed by whole samples, ``u[k - nd]``, zero before the record.
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The input.
+    nd : int
+        Delay, samples (``<= 0``: ``u`` itself).
+
+    Returns
+    -------
+    numpy.ndarray
+        The delayed input, same length.
+    """
     if nd <= 0:
         return u
     out = np.zeros_like(u)
@@ -71,8 +100,20 @@ def allpole_sos(poles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """All-pole second-order sections ``1 / prod(1 - p z^-1)`` and the denominator polynomial.
 
     Conjugate pairs share a section, real poles are paired in sorted order; poles at exactly
-    1 give the exact coefficients ``[1, -2, 1]``. Returns ``(sos, a)`` with ``a`` the product
-    of the sections' denominators (powers of ``z^-1``).
+    1 give the exact coefficients ``[1, -2, 1]``.
+
+    Parameters
+    ----------
+    poles : array_like
+        z-plane poles (complex ones with their conjugates).
+
+    Returns
+    -------
+    sos : numpy.ndarray
+        Sections, rows ``[1, 0, 0, 1, a1, a2]``.
+    a : numpy.ndarray
+        Product of the sections' denominators (powers of ``z^-1``), ``len(poles) + 1``
+        coefficients.
     """
     poles = np.asarray(poles, complex)
     cplx = poles[poles.imag > 1e-12 * np.maximum(1.0, np.abs(poles))]
@@ -95,6 +136,30 @@ class Discretisation:
 
     ``dphi``, ``dg0``, ``dg1`` hold one matrix per free denominator coefficient
     ``a_{nf-1} .. a_0`` (the order of ``theta``).
+
+    Attributes
+    ----------
+    phi : numpy.ndarray
+        ``Phi = e^{A_c ts}``.
+    g0, g1 : numpy.ndarray
+        Input vectors of ``u[k-nd]`` and ``u[k-nd-1]`` (``g1`` zero without a fractional
+        delay).
+    c : numpy.ndarray
+        Output row (numerator coefficients, companion form), ``1 x n``.
+    nd : int
+        Whole samples of the delay.
+    f : float
+        Fractional part of the delay, s.
+    dphi, dg0, dg1 : tuple of numpy.ndarray
+        Derivatives of ``phi``, ``g0``, ``g1`` along each free denominator coefficient.
+    g_delay : numpy.ndarray
+        ``e^{A_c (ts - f)} e_n``, the input vector of the delay sensitivity.
+    poles : numpy.ndarray
+        Discrete poles ``e^{p ts}`` (integrators exactly at 1).
+    sos, den : numpy.ndarray
+        All-pole sections of ``poles`` and their product polynomial (:func:`allpole_sos`).
+    sos2, den2 : numpy.ndarray
+        The same for every pole twice (the block-triangular sensitivity systems).
     """
 
     phi: np.ndarray
@@ -136,7 +201,26 @@ def _block_expm(a: np.ndarray, b: np.ndarray, das: list[np.ndarray], t: float):
 
 def discretise(structure: ModelStructure, theta: np.ndarray, ts: float, delay: float,
                derivatives: bool = True) -> Discretisation:
-    """Exact ZOH sampling of the model and (optionally) the derivatives of its matrices."""
+    """Exact ZOH sampling of the model and (optionally) the derivatives of its matrices.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : numpy.ndarray
+        Its parameters (:meth:`~ilcdob.uncertainty.ModelStructure.split`).
+    ts : float
+        Sample time, s.
+    delay : float
+        Input delay, s (split by :func:`delay_split`; modified z-transform for the fraction).
+    derivatives : bool
+        Also compute ``dphi``, ``dg0``, ``dg1`` (Van Loan's block exponential).
+
+    Returns
+    -------
+    Discretisation
+        The sampled model.
+    """
     den, num = structure.split(theta)
     a, b, c = companion(den, num)
     n = a.shape[0]
@@ -170,8 +254,20 @@ def discretise(structure: ModelStructure, theta: np.ndarray, ts: float, delay: f
 
 
 def zoh_inputs(d: Discretisation, u: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The ``(g, v)`` input pairs of :func:`response` for input ``u`` under ``d``:
-    ``G0 u[k-nd]`` and, with a fractional delay, ``G1 u[k-nd-1]``."""
+    """The ``(g, v)`` input pairs of :func:`response` for a ZOH input.
+
+    Parameters
+    ----------
+    d : Discretisation
+        The sampled model.
+    u : numpy.ndarray
+        The input samples.
+
+    Returns
+    -------
+    list of (numpy.ndarray, numpy.ndarray)
+        ``(G0, u[k-nd])`` and, with a fractional delay, ``(G1, u[k-nd-1])``.
+    """
     ud = delayed_input(u, d.nd)
     return [(d.g0, ud), (d.g1, delayed_input(ud, 1))] if d.f > 0 else [(d.g0, ud)]
 
@@ -207,6 +303,8 @@ def response(phi: np.ndarray, c: np.ndarray, sos: np.ndarray, den: np.ndarray, n
         Input vectors and their signals (length ``n``).
     x0 : array, optional
         Initial state (free response), observed through ``c_free`` (default ``c``).
+    c_free : array, optional
+        Output row(s) through which the free response of ``x0`` is observed (default ``c``).
 
     Returns
     -------
@@ -234,8 +332,28 @@ def response(phi: np.ndarray, c: np.ndarray, sos: np.ndarray, den: np.ndarray, n
 
 def simulate_zoh(structure: ModelStructure, theta: np.ndarray, u: np.ndarray, ts: float,
                  delay: float = 0.0, x0: np.ndarray | None = None) -> np.ndarray:
-    """Output of the model for a ZOH input ``u`` sampled at ``ts`` (from rest unless ``x0``,
-    the companion-form state at the first sample); computed by filtering (:mod:`.oe`)."""
+    """Output of the model for a zero-order-hold input, computed by filtering (module docstring).
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : numpy.ndarray
+        Its parameters.
+    u : array_like
+        Input samples, held over each sample time.
+    ts : float
+        Sample time, s.
+    delay : float
+        Input delay, s.
+    x0 : array_like, optional
+        Companion-form state at the first sample (default: from rest).
+
+    Returns
+    -------
+    numpy.ndarray
+        The output samples, same length as ``u``.
+    """
     d = discretise(structure, theta, ts, delay, derivatives=False)
     u = np.asarray(u, dtype=float)
     x0 = None if x0 is None else np.asarray(x0, dtype=float).reshape(-1)

@@ -1,21 +1,26 @@
-"""Figures of a fit: measured vs simulated, residual correlations, Bode with uncertainty band."""
+"""Figures of a fit: measured vs simulated, residual correlations, Bode with uncertainty band.
+
+:func:`fit_figures` builds the figures as :class:`matplotlib.figure.Figure` objects (no
+pyplot, no global backend: safe in threads and in programs with their own GUI backend);
+:func:`plot_fit` writes them as PNG files.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from ilcdob.atomic import savefig_atomic
+from ilcdob.signals import FlightData
 
-from ilcdob.atomic import savefig_atomic  # noqa: E402
-from ilcdob.signals import FlightData  # noqa: E402
+from .results import TFEstimate, fit_percent
 
-from .results import TFEstimate, fit_percent  # noqa: E402
+__all__ = ["fit_figures", "plot_fit"]
 
-__all__ = ["plot_fit"]
+#: Resolution of the figures (dots per inch), used when they are saved.
+DPI = 110
 
 
 def _compare_axes(ax, fd: FlightData, est: TFEstimate, label: str) -> None:
@@ -29,23 +34,20 @@ def _compare_axes(ax, fd: FlightData, est: TFEstimate, label: str) -> None:
     ax.legend(fontsize=7)
 
 
-def plot_fit(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData], out: str | Path,
-             w: np.ndarray | None = None) -> list[Path]:
-    """Write ``compare.png``, ``residuals.png`` and ``bode.png`` into ``out``; returns the paths."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
+def _compare_figure(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData]) -> Figure:
     sets = [("estimation", fd) for fd in estimation] + [("validation", fd) for fd in validation]
-    fig, axes = plt.subplots(len(sets), 1, figsize=(9, 2.4 * len(sets)), squeeze=False)
+    fig = Figure(figsize=(9, 2.4 * len(sets)), dpi=DPI)
+    axes = fig.subplots(len(sets), 1, squeeze=False)
     for ax, (label, fd) in zip(axes[:, 0], sets):
         _compare_axes(ax, fd, est, label)
     axes[-1, 0].set_xlabel("time (s)")
     fig.tight_layout()
-    savefig_atomic(fig, out / "compare.png", dpi=110)
-    plt.close(fig)
-    paths.append(out / "compare.png")
+    return fig
 
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5.5))
+
+def _residuals_figure(est: TFEstimate) -> Figure:
+    fig = Figure(figsize=(8, 5.5), dpi=DPI)
+    axes = fig.subplots(2, 1)
     for ax, test, title in [(axes[0], est.whiteness, "residual autocorrelation"),
                             (axes[1], est.input_correlation, f"cross-correlation of {est.input} and residuals")]:
         ax.stem(test.lags, test.values, basefmt=" ")
@@ -55,15 +57,16 @@ def plot_fit(est: TFEstimate, estimation: list[FlightData], validation: list[Fli
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    savefig_atomic(fig, out / "residuals.png", dpi=110)
-    plt.close(fig)
-    paths.append(out / "residuals.png")
+    return fig
 
+
+def _bode_figure(est: TFEstimate, w: np.ndarray | None) -> Figure:
     if w is None:
         w = np.logspace(-2, np.log10(0.999 * np.pi / est.ts), 300)
     g = est.frequency_response(w)
     bound = est.uncertainty(w)
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig = Figure(figsize=(8, 6), dpi=DPI)
+    axes = fig.subplots(2, 1, sharex=True)
     mag = 20 * np.log10(np.abs(g))
     axes[0].semilogx(w, mag, color="k", label="estimate")
     lo = 20 * np.log10(np.maximum(1 - bound, 1e-6))
@@ -81,7 +84,66 @@ def plot_fit(est: TFEstimate, estimation: list[FlightData], validation: list[Fli
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_title("Identified model with its multiplicative uncertainty bound", fontsize=9)
     fig.tight_layout()
-    savefig_atomic(fig, out / "bode.png", dpi=110)
-    plt.close(fig)
-    paths.append(out / "bode.png")
+    return fig
+
+
+def fit_figures(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData],
+                w: np.ndarray | None = None) -> dict[str, Figure]:
+    """The figures of a fit, by file name.
+
+    Parameters
+    ----------
+    est : TFEstimate
+        The fitted model.
+    estimation : list of FlightData
+        The experiments it was fitted to.
+    validation : list of FlightData
+        Held-out experiments (may be empty).
+    w : numpy.ndarray, optional
+        Frequencies of the Bode figure, rad/s (default: 300 log-spaced points from 0.01 rad/s
+        to just below Nyquist).
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure
+        ``"compare.png"``: measured and simulated output of every experiment, with its fit
+        percent; ``"residuals.png"``: residual autocorrelation and input-residual
+        cross-correlation with their 99 % bands; ``"bode.png"``: the model's Bode diagram with
+        the 3-sigma multiplicative uncertainty band (docs/identification.md). The figures are
+        not attached to pyplot; their resolution is :data:`DPI`.
+    """
+    return {"compare.png": _compare_figure(est, list(estimation), list(validation)),
+            "residuals.png": _residuals_figure(est),
+            "bode.png": _bode_figure(est, w)}
+
+
+def plot_fit(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData], out: str | Path,
+             w: np.ndarray | None = None) -> list[Path]:
+    """Write the figures of :func:`fit_figures` into a folder.
+
+    Parameters
+    ----------
+    est : TFEstimate
+        The fitted model.
+    estimation : list of FlightData
+        The experiments it was fitted to.
+    validation : list of FlightData
+        Held-out experiments (may be empty).
+    out : str or Path
+        Folder (created if missing); ``compare.png``, ``residuals.png`` and ``bode.png`` are
+        written into it, each atomically.
+    w : numpy.ndarray, optional
+        Frequencies of the Bode figure, rad/s (see :func:`fit_figures`).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, fig in fit_figures(est, estimation, validation, w).items():
+        savefig_atomic(fig, out / name, dpi=DPI)
+        paths.append(out / name)
     return paths

@@ -23,14 +23,44 @@ __all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent"
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
-    """MATLAB's fit: ``100 * (1 - ||y - yhat|| / ||y - mean(y)||)``, in %."""
+    """MATLAB's fit: ``100 * (1 - ||y - yhat|| / ||y - mean(y)||)``, in %.
+
+    Parameters
+    ----------
+    y : array_like
+        Measured output.
+    yhat : array_like
+        Model output, same length.
+
+    Returns
+    -------
+    float
+        The fit, % (100: exact; ``nan`` for a constant ``y``).
+    """
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     den = np.linalg.norm(y - np.mean(y))
     return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / den)) if den > 0 else float("nan")
 
 
 def free_response_basis(structure: ModelStructure, theta: np.ndarray, ts: float, n: int) -> np.ndarray:
-    """Columns: output from each unit initial state with zero input (n x states), by filtering."""
+    """Free responses of the model: the output from each unit initial state, zero input.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : numpy.ndarray
+        Its parameters.
+    ts : float
+        Sample time, s.
+    n : int
+        Number of samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``n x states``, one column per companion-form state, computed by filtering.
+    """
     d = discretise(structure, theta, ts, 0.0, derivatives=False)
     eye = np.eye(d.phi.shape[0])
     return np.column_stack([response(d.phi, d.c[0], d.sos, d.den, n, (), eye[i]) for i in range(eye.shape[0])])
@@ -43,6 +73,7 @@ class ResidualTest:
     Attributes
     ----------
     lags : array of int
+        Lags, samples.
     values : array
         Normalised correlation at each lag.
     bound : float
@@ -80,6 +111,7 @@ class TFEstimate:
     Attributes
     ----------
     structure : ModelStructure
+        The model's orders.
     theta : array
         Parameters (free denominator coefficients, then numerator), see ``structure``.
     num, den : array
@@ -89,6 +121,7 @@ class TFEstimate:
     covariance : array
         Covariance of ``theta`` (and of ``delay`` as last row/column when it was estimated).
     delay_estimated : bool
+        Whether the delay was estimated (then it has a row/column in ``covariance``).
     sigma2 : float
         Residual variance of the estimation data.
     ts : float
@@ -101,6 +134,8 @@ class TFEstimate:
         Residual autocorrelation, lags 1..25.
     input_correlation : ResidualTest
         Input-residual cross-correlation, lags -25..25.
+    input, output : str
+        Names of the input and output signals in the data.
     solver : dict
         Engine, status (``converged``, ``max_iter``, ``time_limit``), iterations, starts and
         wall time.
@@ -131,8 +166,43 @@ class TFEstimate:
     @classmethod
     def from_fit(cls, *, structure, theta, delay, covariance, delay_estimated, sigma2, experiments, ts,
                  validation, input, output, solver, trend=None, fitted=None) -> "TFEstimate":
-        """Assemble the result; ``fitted`` (the model output per experiment, when the fit has
-        it) spares recomputing the estimation data's compare."""
+        """Assemble the result of a fit: fits, residual tests and the validation fit.
+
+        Parameters
+        ----------
+        structure : ModelStructure
+            The model's orders.
+        theta : array_like
+            Fitted parameters.
+        delay : float
+            Input delay, s.
+        covariance : array_like
+            Covariance of ``theta`` (and of the delay, last, when estimated).
+        delay_estimated : bool
+            Whether the delay was estimated.
+        sigma2 : float
+            Residual variance.
+        experiments : list of (numpy.ndarray, numpy.ndarray)
+            The estimation data, ``(u, y)`` per experiment.
+        ts : float
+            Sample time, s.
+        validation : FlightData or list of FlightData or None
+            Held-out experiments (their fit is computed with :func:`compare`).
+        input, output : str
+            Signal names of the input and output.
+        solver : dict
+            Solver report (engine, status, iterations, starts, wall time).
+        trend : int or None
+            Degree of the per-experiment output trend.
+        fitted : list of numpy.ndarray, optional
+            The model output per experiment, when the fit has it (spares recomputing the
+            estimation data's :func:`compare`).
+
+        Returns
+        -------
+        TFEstimate
+            The result.
+        """
         den, num = structure.split(theta)
         ys, yhats, us = [], [], []
         for i, (u, y) in enumerate(experiments):
@@ -173,27 +243,88 @@ class TFEstimate:
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
     def predict(self, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        """Simulated output for input ``u``; with ``y``, the initial state (and the trend, when
-        one was estimated) is fitted to it."""
+        """Simulated output for an input.
+
+        Parameters
+        ----------
+        u : array_like
+            Input samples (sample time :attr:`ts`).
+        y : array_like, optional
+            Measured output: when given, the initial state (and the trend, when one was
+            estimated) is fitted to it (:func:`compare`); else the model starts at rest.
+
+        Returns
+        -------
+        numpy.ndarray
+            The model output, same length as ``u``.
+        """
         if y is None:
             return simulate_zoh(self.structure, self.theta, u, self.ts, self.delay)
         return compare(self.structure, self.theta, self.delay, self.ts, u, y, self.trend)
 
     def score(self, data: FlightData) -> float:
-        """Fit % on ``data`` (signals named as in the fit)."""
+        """Fit % on an experiment (MATLAB ``compare``).
+
+        Parameters
+        ----------
+        data : FlightData
+            The experiment, with signals named as in the fit (:attr:`input`, :attr:`output`).
+
+        Returns
+        -------
+        float
+            :func:`fit_percent` of the predicted output.
+        """
         return fit_percent(data[self.output], self.predict(data[self.input], data[self.output]))
 
     def frequency_response(self, w: np.ndarray) -> np.ndarray:
-        """``G(jw)`` including the delay, at ``w`` rad/s."""
+        """``G(jw)`` including the delay.
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex response.
+        """
         return frequency_response(self.structure, self.theta, self.delay, w)
 
     def uncertainty(self, w: np.ndarray, k: float = 3.0) -> np.ndarray:
-        """Multiplicative uncertainty ``|Delta(jw)|`` at ``k`` sigma (:func:`multiplicative_bound`)."""
+        """Multiplicative uncertainty ``|Delta(jw)|`` (:func:`~ilcdob.uncertainty.multiplicative_bound`).
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+        k : float
+            Number of standard deviations.
+
+        Returns
+        -------
+        numpy.ndarray
+            The bound per frequency.
+        """
         return multiplicative_bound(self.structure, self.theta, self.covariance, self.delay,
                                     self.delay_estimated, w, k)
 
     def sample(self, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, float]]:
-        """``n`` plausible models ``(num, den, delay)`` drawn from N(theta, covariance)."""
+        """Plausible models drawn from ``N(theta, covariance)``.
+
+        Parameters
+        ----------
+        n : int
+            Number of models.
+        rng : numpy.random.Generator
+            The random generator.
+
+        Returns
+        -------
+        list of (numpy.ndarray, numpy.ndarray, float)
+            ``(num, den, delay)`` per model (a drawn delay below 0 is taken as 0).
+        """
         mean = np.concatenate([self.theta, [self.delay]]) if self.delay_estimated else self.theta
         draws = rng.multivariate_normal(mean, self.covariance, size=n, method="svd")
         out = []
@@ -255,14 +386,49 @@ def _poly(c: np.ndarray) -> str:
 
 
 def trend_basis(n: int, degree: int) -> np.ndarray:
-    """Legendre polynomials of degree 0..``degree`` over a record of ``n`` samples (columns)."""
+    """Basis of a polynomial output trend: Legendre polynomials over the record.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    degree : int
+        Highest degree.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``n x (degree + 1)``, columns of degree 0..``degree`` on ``[-1, 1]``.
+    """
     return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, n), degree)
 
 
 def compare(structure: ModelStructure, theta: np.ndarray, delay: float, ts: float, u: np.ndarray, y: np.ndarray,
             trend: int | None = None) -> np.ndarray:
-    """Simulated output with the initial state (and a polynomial trend of degree ``trend``)
-    chosen by least squares (MATLAB compare)."""
+    """Simulated output with the initial state (and a trend) chosen by least squares (MATLAB ``compare``).
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : numpy.ndarray
+        Its parameters.
+    delay : float
+        Input delay, s.
+    ts : float
+        Sample time, s.
+    u : numpy.ndarray
+        Input samples.
+    y : numpy.ndarray
+        Measured output, same length.
+    trend : int, optional
+        Degree of a polynomial output trend fitted too (None: none).
+
+    Returns
+    -------
+    numpy.ndarray
+        The model output closest to ``y`` over initial states (and trends).
+    """
     forced = simulate_zoh(structure, theta, u, ts, delay)
     basis = free_response_basis(structure, theta, ts, u.size)
     if trend is not None:

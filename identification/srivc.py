@@ -26,7 +26,20 @@ __all__ = ["srivc", "delayed"]
 
 
 def delayed(u: np.ndarray, delay_samples: float) -> np.ndarray:
-    """``u`` delayed by a (fractional) number of samples, zeros before the start."""
+    """A signal delayed by a (fractional) number of samples, by linear interpolation.
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        The signal.
+    delay_samples : float
+        Delay, samples (may be fractional).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``u(k - delay_samples)``, zero before the start, same length.
+    """
     n = u.size
     k = np.arange(n) - delay_samples
     return np.interp(k, np.arange(n), u, left=0.0)

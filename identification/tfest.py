@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import functools
 import math
-import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -60,7 +59,14 @@ from .oe import Discretisation, delayed_input, discretise, response, zoh_inputs
 from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
-__all__ = ["FitOptions", "tfest"]
+__all__ = ["FitOptions", "tfest", "Progress"]
+
+#: ``progress(done, total, what)``: how :func:`tfest` reports as it advances.
+Progress = Callable[[int, int, str], None]
+
+
+def _silent(done: int, total: int, what: str) -> None:
+    """The default ``progress``: reports nothing."""
 
 
 @dataclass(frozen=True)
@@ -98,7 +104,8 @@ class FitOptions:
         initial conditions and trends are solved anyway) and the SRIVC/pole-grid search is
         skipped.
     verbose : bool
-        Print every LM iteration through ``progress``.
+        Report every LM iteration through ``progress`` (``done``: the iteration, ``total``:
+        the iteration limit).
     """
 
     delay: float | str = 0.0
@@ -351,7 +358,7 @@ class _LMResult:
 
 
 def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts: FitOptions, deadline: float,
-                         say: Callable[[str], None], max_iter: int | None = None) -> _LMResult:
+                         say: Progress, max_iter: int | None = None) -> _LMResult:
     """LM (Nielsen's damping update) in the nonlinear parameters on Jacobi-scaled normal
     equations; the delay, when estimated, is kept in ``[0, max_delay]`` by holding it while it
     sits on a bound that the step pushes against."""
@@ -401,7 +408,7 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
                 nu = 2.0
                 if opts.verbose:
-                    say(f"  LM {it:3d}: SSE {p.sse:.10g}, mu {mu:.3g}"
+                    say(it, limit, f"  LM {it:3d}: SSE {p.sse:.10g}, mu {mu:.3g}"
                         + (f", delay {p.delay:.5g} s" if model.estimate_delay else ""))
                 if converged:
                     return _LMResult(p, "converged", it)
@@ -467,7 +474,7 @@ def _ranking_model(model: _Model) -> _Model:
     return _Model(model.s, chunks, model.ts, model.opts, model.estimate_delay)
 
 
-def _candidates(model: _Model, delay: float, say) -> list[_Point]:
+def _candidates(model: _Model, delay: float, say: Progress) -> list[_Point]:
     """Initial estimates at ``delay``: SRIVC and the pole grid, each with its linear
     parameters solved, ranked on at most about :data:`RANKING_SAMPLES` samples; the best
     are re-solved on all the data (best first)."""
@@ -480,7 +487,7 @@ def _candidates(model: _Model, delay: float, say) -> list[_Point]:
         if np.all(np.isfinite(th)):
             dens.append(th[: s.n_free_poles])
     except (np.linalg.LinAlgError, ValueError):
-        say("SRIVC gave no estimate; starting from the pole grid only")
+        say(0, 0, "SRIVC gave no estimate; starting from the pole grid only")
     dens += _grid_denominators(s, model.ts)
     extra = [delay] if model.estimate_delay else []
     out = []
@@ -508,7 +515,7 @@ def _distinct(cands: list[_Point], k: int) -> list[_Point]:
 
 
 def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: FitOptions, start: _Point,
-                 deadline: float, say) -> list[_Point]:
+                 deadline: float, say: Progress) -> list[_Point]:
     """The criterion minimised over the model at each delay of a grid on ``[0, max_delay]``,
     each point a short LM warm-started from its neighbour's solution (never a fit from
     scratch per point). Returns the points at the local minima of this profile, best first,
@@ -517,18 +524,19 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
     count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
     prof = []
     a = start.alpha[: structure.n_free_poles]
-    for d in np.linspace(0.0, opts.max_delay, count):
+    for i, d in enumerate(np.linspace(0.0, opts.max_delay, count)):
         p0 = fixed.evaluate(a, float(d))
         if not math.isfinite(p0.sse):
+            say(i + 1, count, f"delay sweep: {d:.3g} s, model diverges")
             continue
         p = _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
         a = p.alpha
         p.cols = None                # keep the profile light: signals are recomputed for the starts
         prof.append(p)
+        say(i + 1, count, f"delay sweep: {p.delay:.3g} s, SSE {p.sse:.4g}")
     if not prof:
         return [start]
     sse = [p.sse for p in prof]
-    say("delay sweep (s: SSE): " + ", ".join(f"{p.delay:.3g}: {p.sse:.4g}" for p in prof))
     minima = [prof[i] for i in range(len(prof))
               if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
     return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.cols)
@@ -538,7 +546,7 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
 # ---------------------------------------------------------------- public entry
 
 def _experiments(data, input: str, output: str, structure: ModelStructure, opts: FitOptions,
-                 say) -> tuple[list[_Exp], float]:
+                 say: Progress) -> tuple[list[_Exp], float]:
     if isinstance(data, FlightData):
         data = [data]
     data = list(data)
@@ -556,7 +564,8 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
             u, y = piece[input], piece[output]
             if u.size < need:
                 if len(pieces) > 1:
-                    say(f"{piece.source}: piece of {u.size} samples between gaps skipped (fewer than {need})")
+                    say(0, 0, f"{piece.source}: piece of {u.size} samples between gaps skipped "
+                              f"(fewer than {need})")
                     continue
                 raise SignalError(f"{fd.source}: {u.size} samples are too few for a model with "
                                   f"{structure.n_params} parameters (need at least {need})")
@@ -580,7 +589,7 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
 
 def tfest(data: FlightData | list[FlightData], input: str, output: str, structure: ModelStructure,
           options: FitOptions | None = None, validation: FlightData | list[FlightData] | None = None,
-          progress: Callable[[str], None] | None = None) -> TFEstimate:
+          progress: Progress | None = None) -> TFEstimate:
     """Fit a continuous-time transfer function to one or several experiments.
 
     Parameters
@@ -594,12 +603,18 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
         (e.g. position, m).
     structure : ModelStructure
         Poles (incl. fixed integrators), zeros, integrators.
-    options : FitOptions
-    validation : FlightData or list, optional
+    options : FitOptions, optional
+        Fit settings (default ``FitOptions()``: no delay, offset trend, two starts).
+    validation : FlightData or list of FlightData, optional
         Held-out experiments: their fit percent is reported (initial condition and trend
         estimated there too, by linear least squares, as MATLAB's ``compare`` does).
     progress : callable, optional
-        Receives progress lines (default: stderr).
+        ``progress(done, total, what)``, called as the fit advances: after each point of the
+        delay sweep (``delay="auto"``; ``done`` of ``total`` sweep points), once the starts are
+        chosen (``0`` of the number of starts) and after the LM run from each start; with
+        ``FitOptions.verbose`` after every LM iteration too (``done`` of the iteration limit).
+        Remarks outside a counted stage (a piece between gaps skipped, SRIVC failing) come with
+        ``done = total = 0``. None (default): silent.
 
     Returns
     -------
@@ -613,7 +628,7 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
         When the iteration or time limit stopped the search (the best iterate is returned).
     """
     opts = options or FitOptions()
-    say = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    say: Progress = progress if progress is not None else _silent
     # every matrix here is tiny or tall-and-thin: BLAS threads only cost wake-ups (milliseconds
     # per call on a loaded machine), so the fit runs single-threaded
     _keep_freed_memory()
@@ -666,17 +681,18 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     starts = _distinct(cands, opts.starts)
     if estimate_delay:
         starts = _delay_sweep(structure, exps, ts, opts, starts[0], deadline, say)[: opts.starts]
-    say("initial estimate(s): " + ", ".join(f"SSE {p.sse:.6g}" + (f" at delay {p.delay:.4g} s" if estimate_delay
-                                                                   else "") for p in starts))
-    best: _LMResult | None = None
-    runs = []
     # further starts only where they compete: a start whose criterion is several times the
     # best start's lies in a region the first run never needed to search
-    starts = [p0 for p0 in starts if p0.sse <= SECONDARY_START_RATIO * starts[0].sse]
-    for p0 in starts:
+    runs_from = [p0 for p0 in starts if p0.sse <= SECONDARY_START_RATIO * starts[0].sse]
+    say(0, len(runs_from), "initial estimate(s): " + ", ".join(
+        f"SSE {p.sse:.6g}" + (f" at delay {p.delay:.4g} s" if estimate_delay else "") for p in starts))
+    best: _LMResult | None = None
+    runs = []
+    for i, p0 in enumerate(runs_from):
         res = _levenberg_marquardt(model, p0, delay0, opts, deadline, say)
         runs.append({"start_sse": p0.sse, "sse": res.point.sse, "status": res.status, "iterations": res.iterations})
-        say(f"LM: {res.status} after {res.iterations} iterations, SSE {p0.sse:.6g} -> {res.point.sse:.6g}")
+        say(i + 1, len(runs_from),
+            f"LM: {res.status} after {res.iterations} iterations, SSE {p0.sse:.6g} -> {res.point.sse:.6g}")
         if best is None or res.point.sse < best.point.sse:
             best = res
         if res.status == "time_limit":

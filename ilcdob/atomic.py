@@ -24,7 +24,20 @@ def _umask() -> int:
 
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success rename it to ``path``."""
+    """Context manager: a temporary path beside ``path``, renamed to ``path`` on success.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; its folder is created if missing.
+
+    Yields
+    ------
+    Path
+        A temporary file in the same folder (same suffix) to write to. When the ``with``
+        block ends normally it replaces ``path`` (with the usual file mode); when it raises,
+        the temporary file is removed and ``path`` is left as it was.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
@@ -40,18 +53,44 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    """Write ``text`` (UTF-8) to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (its folder is created if missing).
+    text : str
+        The whole content.
+    """
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
 
 def write_json_atomic(path: str | Path, data: Any) -> None:
-    """Write ``data`` as indented JSON to ``path`` atomically."""
+    """Write ``data`` as indented JSON to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (its folder is created if missing).
+    data : object
+        Anything :func:`json.dumps` accepts; written with an indent of 2 and a final newline.
+    """
     write_text_atomic(path, json.dumps(data, indent=2) + "\n")
 
 
 def savefig_atomic(fig: Any, path: str | Path, **kwargs: Any) -> None:
-    """``fig.savefig`` to ``path`` atomically (format from the suffix of ``path``)."""
+    """``fig.savefig`` to ``path`` atomically (format from the suffix of ``path``).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure (anything with a matplotlib-like ``savefig``).
+    path : str or Path
+        The file to write; its suffix gives the format (``png`` without one).
+    **kwargs
+        Passed to ``fig.savefig`` (e.g. ``dpi``).
+    """
     path = Path(path)
     fmt = path.suffix.lstrip(".") or "png"
     with atomic_path(path) as tmp:

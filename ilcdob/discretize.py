@@ -105,13 +105,40 @@ def zoh_with_delay(sys_c: ct.StateSpace, ts: float, delay: float = 0.0) -> ct.St
 
 
 def discretize_plant(plant: PlantSpec, ts: float) -> ct.StateSpace:
-    """ZOH discretisation of ``P(s) e^{-s delay}`` (state space, ``dt = ts``)."""
+    """ZOH discretisation of the plant ``P(s) e^{-s delay}`` (module docstring; paper Sec. II).
+
+    Parameters
+    ----------
+    plant : PlantSpec
+        Numerator, denominator and input delay of ``P`` (a true plant or a model ``P_hat``).
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    control.StateSpace
+        The sampled plant (delayed inputs as extra states), ``dt = ts``.
+    """
     sys_c = ct.tf2ss(ct.tf(list(plant.num), list(plant.den)))
     return zoh_with_delay(sys_c, ts, plant.delay)
 
 
 def discretize_pid(pid: PIDSpec, ts: float) -> ct.StateSpace:
-    """Tustin discretisation of ``C(s) = kp + ki/s + kd s/(Tf s + 1)``."""
+    """Tustin discretisation of the PID ``C(s) = kp + ki/s + kd s/(Tf s + 1)``.
+
+    Parameters
+    ----------
+    pid : PIDSpec
+        Gains ``kp``, ``ki``, ``kd`` and the derivative filter time constant ``Tf``; the
+        integral term is left out when ``ki`` is 0.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    control.StateSpace
+        The discrete controller (integrator pole exactly at z = 1), ``dt = ts``.
+    """
     s = ct.tf("s")
     c = pid.kp + pid.kd * s / (pid.derivative_filter * s + 1)
     if pid.ki > 0:
@@ -121,18 +148,66 @@ def discretize_pid(pid: PIDSpec, ts: float) -> ct.StateSpace:
 
 
 def q_filter(dob: DOBSpec) -> ct.TransferFunction:
-    """Continuous ``Q(s) = 1/(tau s + 1)^n`` (unit DC gain)."""
+    """The DOB's continuous low-pass ``Q(s) = 1/(tau s + 1)^n`` (unit DC gain).
+
+    Parameters
+    ----------
+    dob : DOBSpec
+        Order ``n`` (``q_order``) and time constant ``tau`` (``q_time_constant``, s).
+
+    Returns
+    -------
+    control.TransferFunction
+        ``Q(s)``, continuous time.
+    """
     den = np.poly(np.full(dob.q_order, -1.0 / dob.q_time_constant)) * dob.q_time_constant**dob.q_order
     return ct.tf([1.0], list(den))
 
 
 def discretize_q(dob: DOBSpec, model: PlantSpec, ts: float) -> ct.StateSpace:
-    """ZOH of the Q branch ``Q(s) e^{-s delay}``, delay taken from the plant model."""
+    """ZOH of the DOB's Q branch ``Q(s) e^{-s delay}`` (module docstring).
+
+    Parameters
+    ----------
+    dob : DOBSpec
+        The DOB's ``Q`` (:func:`q_filter`).
+    model : PlantSpec
+        The plant model ``P_hat``: its input delay is put on the Q branch so that
+        ``M P_hat = Q e^{-s delay}`` stays causal.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    control.StateSpace
+        The sampled Q branch (strictly proper), ``dt = ts``.
+    """
     return zoh_with_delay(ct.tf2ss(q_filter(dob)), ts, model.delay)
 
 
 def discretize_m(dob: DOBSpec, model: PlantSpec, ts: float) -> ct.StateSpace:
-    """Tustin discretisation of ``M(s) = Q(s)/P_hat(s)`` (rational part of the model)."""
+    """Tustin discretisation of the DOB's ``M(s) = Q(s)/P_hat(s)`` (module docstring).
+
+    Parameters
+    ----------
+    dob : DOBSpec
+        The DOB's ``Q`` (:func:`q_filter`).
+    model : PlantSpec
+        The plant model ``P_hat``; its rational part is inverted (the delay is on the Q
+        branch, :func:`discretize_q`).
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    control.StateSpace
+        The discrete ``M``, ``dt = ts``.
+
+    Raises
+    ------
+    SpecError
+        ``M`` is improper: ``q_order`` is below the model's relative degree.
+    """
     q = q_filter(dob)
     m = ct.tf(np.polymul(q.num[0][0], model.den), np.polymul(q.den[0][0], model.num))
     m = ct.minreal(m, verbose=False)

@@ -8,7 +8,8 @@ what is valid and, where there is one, the next step.
 
 from __future__ import annotations
 
-__all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError"]
+__all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError",
+           "NumericalError"]
 
 
 class IlcdobError(Exception):
@@ -34,3 +35,8 @@ class UnstableLoopError(IlcdobError, ValueError):
 
 class SignalError(IlcdobError, ValueError):
     """A signal has the wrong shape, length or contains non-finite values."""
+
+
+class NumericalError(IlcdobError, ArithmeticError):
+    """A computation produced no usable number: overflow, a non-finite result, a solver that
+    failed (the command exits with status 3, not as bad input)."""

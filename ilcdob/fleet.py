@@ -53,8 +53,8 @@ from .identified import IdentifiedModel, load_model
 from .loop import LoopSystem, build_loop
 from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
 
-__all__ = ["Fleet", "load_fleet", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict", "fleet_from_systems",
-           "MODEL_FILE_KEY"]
+__all__ = ["Fleet", "load_fleet", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict",
+           "fleet_from_systems", "MODEL_FILE_KEY"]
 
 DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_fleet.toml"))
 
@@ -101,10 +101,27 @@ class Fleet:
 
     @property
     def names(self) -> list[str]:
+        """Names of the systems, in file order."""
         return [s.name for s in self.systems]
 
     def loop(self, name: str) -> LoopSystem:
-        """The loop of system ``name``."""
+        """The loop of one system.
+
+        Parameters
+        ----------
+        name : str
+            The system's name.
+
+        Returns
+        -------
+        LoopSystem
+            Its built, stability-checked loop.
+
+        Raises
+        ------
+        FleetError
+            No system of that name (the message lists the names).
+        """
         for lp in self.loops:
             if lp.name == name:
                 return lp
@@ -267,6 +284,18 @@ def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source
 def load_fleet(path: str | Path) -> Fleet:
     """Load and validate a fleet TOML file.
 
+    Parameters
+    ----------
+    path : str or Path
+        The fleet file (schema: module docstring).
+
+    Returns
+    -------
+    Fleet
+        Every system with its built, stability-checked loop; ``source`` is ``path``.
+
+    Notes
+    -----
     Relative model-file paths (``plant = { model = "uav4.json" }``) are relative to the fleet
     file's folder.
 
@@ -284,6 +313,18 @@ def load_fleet(path: str | Path) -> Fleet:
 
 def read_fleet_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     """The text of a fleet file and its parsed TOML table (not yet validated).
+
+    Parameters
+    ----------
+    path : str or Path
+        The fleet file.
+
+    Returns
+    -------
+    text : str
+        The file's content.
+    data : dict
+        Its parsed TOML table.
 
     Raises
     ------

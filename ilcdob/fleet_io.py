@@ -49,6 +49,17 @@ def _toml_string(text: str) -> str:
 def toml_value(value: Any) -> str:
     """``value`` as a TOML value: bool, int, float (``repr``; ``nan``/``inf``), str, list, inline table.
 
+    Parameters
+    ----------
+    value : bool, int, float, str, sequence or mapping
+        NumPy scalars are accepted; lists and mappings are written recursively (a mapping as an
+        inline table).
+
+    Returns
+    -------
+    str
+        The TOML text of the value.
+
     Raises
     ------
     FleetError
@@ -132,7 +143,20 @@ def _table_to_toml(table: Mapping[str, Any]) -> str:
 
 
 def system_to_toml(spec: SystemSpec, model_file: str | None = None) -> str:
-    """The ``[[system]]`` block of ``spec`` (see :func:`system_table`), ending in a newline."""
+    """The ``[[system]]`` block of ``spec`` (see :func:`system_table`), ending in a newline.
+
+    Parameters
+    ----------
+    spec : SystemSpec
+        The system.
+    model_file : str, optional
+        Its ``model.json``, as it should appear in the file (see :func:`system_table`).
+
+    Returns
+    -------
+    str
+        The block's TOML text.
+    """
     return _table_to_toml(system_table(spec, model_file))
 
 
@@ -173,8 +197,18 @@ def fleet_to_toml(sample_time: float, systems: Sequence[SystemSpec], *,
 def model_reference(model: str | Path, fleet_path: str | Path) -> str:
     """How a fleet file at ``fleet_path`` refers to ``model``: relative to its folder, with ``/``.
 
-    Both paths are taken relative to the working directory when relative. Falls back to the
-    absolute path when no relative one exists (another drive on Windows).
+    Parameters
+    ----------
+    model : str or Path
+        The model file; relative to the working directory when relative.
+    fleet_path : str or Path
+        The fleet file; relative to the working directory when relative.
+
+    Returns
+    -------
+    str
+        The path of ``model`` relative to the fleet file's folder, with ``/`` separators, or
+        the absolute path when no relative one exists (another drive on Windows).
     """
     target = os.path.abspath(model)
     folder = os.path.dirname(os.path.abspath(fleet_path))

@@ -20,7 +20,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import control as ct
 import numpy as np
@@ -28,7 +28,7 @@ import numpy as np
 from .errors import ModelFileError, SpecError
 from .uncertainty import ModelStructure
 from .specs import (DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec,
-                    _poly)
+                    as_polynomial)
 
 
 __all__ = ["IdentifiedModel", "load_model", "model_from_dict", "REQUIRED_KEYS"]
@@ -129,7 +129,7 @@ class IdentifiedModel:
     source: str = "<memory>"
 
     def __post_init__(self) -> None:
-        num, den = _poly("num", self.num), _poly("den", self.den)
+        num, den = as_polynomial(self.num, "num"), as_polynomial(self.den, "den")
         if len(num) >= len(den):
             raise SpecError(f"`num`/`den`: the model must be strictly proper (deg num < deg den), got "
                             f"num = {list(num)}, den = {list(den)}")
@@ -244,6 +244,19 @@ class IdentifiedModel:
 
 def model_from_dict(data: Any, source: str = "<memory>") -> IdentifiedModel:
     """Validate the parsed content of a model file (see :func:`load_model`).
+
+    Parameters
+    ----------
+    data : dict
+        The parsed JSON object (keys: :data:`REQUIRED_KEYS`, optionally ``fit_percent``,
+        ``noise_variance`` and ``signals``).
+    source : str
+        Where it came from, for messages and the model's ``source``.
+
+    Returns
+    -------
+    IdentifiedModel
+        The checked model.
 
     Raises
     ------

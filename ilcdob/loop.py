@@ -37,7 +37,20 @@ STABILITY_MARGIN = 1.0 - 1e-9
 
 
 def freqresp(sys: ct.LTI, w: np.ndarray) -> np.ndarray:
-    """Complex frequency response of a discrete SISO system at ``w`` (rad/s)."""
+    """Complex frequency response of a discrete SISO system, ``sys(e^{j w Ts})``.
+
+    Parameters
+    ----------
+    sys : control.LTI
+        Discrete-time SISO system (``sys.dt`` is the sample time ``Ts``).
+    w : array_like
+        Frequencies, rad/s (up to Nyquist ``pi/Ts``).
+
+    Returns
+    -------
+    numpy.ndarray
+        Complex response, the shape of ``w``.
+    """
     w = np.asarray(w, dtype=float)
     return np.asarray(sys(np.exp(1j * w * sys.dt)), dtype=complex).reshape(w.shape)
 
@@ -68,6 +81,7 @@ class LoopSystem:
     Attributes
     ----------
     spec : SystemSpec
+        The system the loop was built from.
     ts : float
         Sample time, s.
     P, C, Q, M : control.StateSpace
@@ -90,6 +104,7 @@ class LoopSystem:
 
     @property
     def name(self) -> str:
+        """The system's name (``spec.name``)."""
         return self.spec.name
 
     def _map(self, sys: ct.StateSpace, inp: str, out: str) -> ct.StateSpace:
@@ -144,6 +159,22 @@ class LoopSystem:
 
 def build_loop(spec: SystemSpec, ts: float) -> LoopSystem:
     """Discretise the blocks of ``spec`` and interconnect them (see module docstring).
+
+    The plant is sampled with a zero-order hold, the PID and ``M`` with Tustin, the Q branch
+    with a zero-order hold (:mod:`ilcdob.discretize`); the DOB loop and the plain PID loop are
+    state-space interconnections (paper Sec. II, docs/theory.md section 1).
+
+    Parameters
+    ----------
+    spec : SystemSpec
+        Plant, model, PID and DOB of the system.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    LoopSystem
+        The blocks and both closed loops, checked for stability.
 
     Raises
     ------

@@ -30,7 +30,30 @@ GAP_FACTOR = 5.0
 
 
 def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
-    """Check the signal convention: 1-D finite float array (of length ``n`` if given)."""
+    """Check the signal convention: a 1-D finite float array (of length ``n`` if given).
+
+    The convention (stated once in :mod:`ilcdob`, checked at every entry): one sample per
+    sample time ``Ts`` on the grid ``t = k Ts``.
+
+    Parameters
+    ----------
+    x : array_like
+        The samples.
+    name : str
+        The argument's name, for the error message.
+    n : int, optional
+        Required number of samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``x`` as a 1-D float array.
+
+    Raises
+    ------
+    SignalError
+        Not 1-D, the wrong length, or a non-finite sample (the message names the first).
+    """
     arr = np.asarray(x, dtype=float)
     if arr.ndim != 1:
         raise SignalError(f"`{name}`: expected a 1-D array of samples, got shape {arr.shape}")
@@ -43,7 +66,26 @@ def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
 
 
 def extend_smoothly(x: np.ndarray, n_pad: int, n_fit: int = 16) -> np.ndarray:
-    """Append ``n_pad`` samples continuing ``x`` by a cubic fitted to its last ``n_fit``."""
+    """Continue a trial smoothly past its end: a cubic fitted to its last samples, extrapolated.
+
+    Used where a non-causal filter looks ahead of the recorded trial (docs/theory.md
+    section 2: the anti-causal part of a stable inversion runs backwards from beyond the end).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The trial (1-D).
+    n_pad : int
+        Number of samples to append (nothing is appended when ``<= 0``).
+    n_fit : int
+        Number of final samples the polynomial is fitted to (degree ``min(3, n_fit - 1)``;
+        fewer when ``x`` is shorter).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``x`` followed by ``n_pad`` extrapolated samples (``x`` itself when ``n_pad <= 0``).
+    """
     if n_pad <= 0:
         return x
     m = min(n_fit, x.size)
@@ -54,7 +96,28 @@ def extend_smoothly(x: np.ndarray, n_pad: int, n_fit: int = 16) -> np.ndarray:
 
 
 def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:
-    """Check time stamps: finite, strictly increasing (no duplicates); returns float array."""
+    """Check time stamps: at least two, finite, strictly increasing (no duplicates).
+
+    Parameters
+    ----------
+    t : array_like
+        Time stamps, s (not necessarily uniform).
+    source : str
+        File or description the stamps came from, for the error message.
+    signal : str
+        Name of the time column, for the error message.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``t`` as a 1-D float array.
+
+    Raises
+    ------
+    SignalError
+        Fewer than two stamps, a non-finite, duplicated or decreasing one (the message names
+        the first and its sample).
+    """
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 2:
         raise SignalError(f"{source}: `{signal}`: expected at least 2 time stamps, got shape {t.shape}")
@@ -73,7 +136,29 @@ def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:
 
 
 def check_signal(x: object, t: np.ndarray, source: str, name: str) -> np.ndarray:
-    """A signal as a float array with one finite value per time stamp in ``t``."""
+    """A signal as a float array with one finite value per time stamp in ``t``.
+
+    Parameters
+    ----------
+    x : array_like
+        The signal's samples.
+    t : numpy.ndarray
+        Its (checked) time stamps, s.
+    source : str
+        File or description the signal came from, for the error message.
+    name : str
+        The signal's name, for the error message.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``x`` as a float array of the shape of ``t``.
+
+    Raises
+    ------
+    SignalError
+        A different shape, or a non-finite value (the message names its time).
+    """
     arr = np.asarray(x, dtype=float)
     if arr.shape != t.shape:
         raise SignalError(f"{source}: signal `{name}`: expected {t.size} samples, got shape {arr.shape}")
@@ -95,7 +180,22 @@ def _merge_intervals(intervals: list[list[float]]) -> list[list[float]]:
 
 
 def resample_onto(t_src: np.ndarray, x: np.ndarray, t_new: np.ndarray) -> np.ndarray:
-    """Linear interpolation of ``x(t_src)`` onto ``t_new`` (inside the source span)."""
+    """Linear interpolation of ``x(t_src)`` onto ``t_new`` (inside the source span).
+
+    Parameters
+    ----------
+    t_src : numpy.ndarray
+        Time stamps of ``x``, s, increasing.
+    x : numpy.ndarray
+        The signal.
+    t_new : numpy.ndarray
+        Time stamps wanted, s; outside ``t_src``'s span the end values are held.
+
+    Returns
+    -------
+    numpy.ndarray
+        The signal at ``t_new``.
+    """
     return np.interp(t_new, t_src, x)
 
 
@@ -140,15 +240,34 @@ class FlightData:
                      source: str = "<memory>") -> "FlightData":
         """Build from signals with their own time stamps (mixed rates), resampled onto one grid.
 
+        The common grid spans the overlap of all signals; each signal is interpolated linearly
+        onto it. Steps longer than :data:`GAP_FACTOR` median steps of a signal are recorded as
+        gaps (``metadata["gaps"]``: ``[t_before, t_after]`` pairs, s).
+
         Parameters
         ----------
-        series : dict name -> (t, x)
-            Each signal with its own strictly increasing time stamps (s).
+        series : dict of str to (numpy.ndarray, numpy.ndarray)
+            Signal name -> ``(t, x)``: its own strictly increasing time stamps (s) and samples.
         ts : float, optional
             Sample time of the common grid; default: the finest median step among the signals.
-        The common grid spans the overlap of all signals. Steps longer than
-        :data:`GAP_FACTOR` median steps of a signal are recorded as gaps
-        (``metadata["gaps"]``: ``[t_before, t_after]`` pairs, s).
+        units : dict of str to str, optional
+            Unit of each signal.
+        metadata : dict, optional
+            Free-form; ``original_rates_hz`` (each signal's median rate) is added unless given,
+            and ``gaps`` when there are any.
+        source : str
+            File name or description, for messages.
+
+        Returns
+        -------
+        FlightData
+            The resampled flight.
+
+        Raises
+        ------
+        SignalError
+            No signals, bad time stamps or samples, a bad ``ts``, or signals that do not
+            overlap in time.
         """
         if not series:
             raise SignalError(f"{source}: no signals given")
@@ -193,7 +312,23 @@ class FlightData:
             raise SignalError(f"{self.source}: no signal `{name}`; available: {sorted(self.signals)}") from None
 
     def segment(self, start: float | None = None, stop: float | None = None) -> "FlightData":
-        """The samples with ``start <= t <= stop`` (s, same clock as ``t``)."""
+        """The samples with ``start <= t <= stop`` (s, same clock as ``t``).
+
+        Parameters
+        ----------
+        start, stop : float, optional
+            Bounds in s (default: the record's first and last time stamps).
+
+        Returns
+        -------
+        FlightData
+            The segment, with ``metadata["segment"] = [start, stop]``.
+
+        Raises
+        ------
+        SignalError
+            The segment holds fewer than 2 samples.
+        """
         lo = self.t[0] if start is None else float(start)
         hi = self.t[-1] if stop is None else float(stop)
         keep = (self.t >= lo - 1e-9) & (self.t <= hi + 1e-9)
@@ -220,9 +355,14 @@ class FlightData:
         return out
 
     def to_csv(self, path: str) -> None:
-        """Write ``time`` and every signal as columns (header row of names), atomically.
+        """Write ``time`` and every signal as CSV columns (header row of names), atomically.
 
         Units go into a comment line before the header: ``# units: time=s, x=m, ...``.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file to write.
         """
         names = list(self.signals)
         units = ", ".join(["time=s"] + [f"{n}={self.units.get(n, '')}" for n in names])
@@ -232,7 +372,15 @@ class FlightData:
             np.savetxt(fh, data, delimiter=",", fmt="%.10g")
 
     def to_parquet(self, path: str) -> None:
-        """Write ``time`` and every signal as Parquet columns (units in the schema metadata)."""
+        """Write ``time`` and every signal as Parquet columns, atomically.
+
+        Units are stored in the schema metadata (key ``ilcdob.units``, a JSON object).
+
+        Parameters
+        ----------
+        path : str or Path
+            The file to write.
+        """
         import json
 
         import pyarrow as pa

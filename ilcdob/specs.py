@@ -20,10 +20,29 @@ import numpy as np
 from .errors import SpecError
 
 __all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "SystemSpec",
-           "LTI_NUMERATOR_RTOL"]
+           "LTI_NUMERATOR_RTOL", "as_polynomial"]
 
 
-def _poly(name: str, values: object) -> tuple[float, ...]:
+def as_polynomial(values: object, name: str) -> tuple[float, ...]:
+    """Checked polynomial coefficients, highest power first, leading zeros dropped.
+
+    Parameters
+    ----------
+    values : array_like
+        The coefficients (a number or a 1-D list of numbers).
+    name : str
+        What they are (e.g. ``"plant.num"``), for the error message.
+
+    Returns
+    -------
+    tuple of float
+        The coefficients from the first non-zero one on (``-0.0`` written as ``0.0``).
+
+    Raises
+    ------
+    SpecError
+        Not numbers, not 1-D, empty, not finite, or all zero.
+    """
     try:
         arr = np.atleast_1d(np.asarray(values, dtype=float))
     except (TypeError, ValueError) as exc:
@@ -128,8 +147,8 @@ class PlantSpec:
         elif isinstance(self.den, tuple) and len(self.den) == 0:
             raise SpecError(f"`plant.den`: missing (num = {self.num!r}); give num and den polynomials, or a "
                             "python-control TransferFunction or StateSpace alone")
-        object.__setattr__(self, "num", _poly("plant.num", self.num))
-        object.__setattr__(self, "den", _poly("plant.den", self.den))
+        object.__setattr__(self, "num", as_polynomial(self.num, "plant.num"))
+        object.__setattr__(self, "den", as_polynomial(self.den, "plant.den"))
         object.__setattr__(self, "delay", float(self.delay))
         _positive("plant.delay", self.delay, allow_zero=True)
         if len(self.num) >= len(self.den):
@@ -245,7 +264,17 @@ class NoiseSpec:
     """The system's own small sinusoidal process noise, added to the disturbance.
 
     ``n(t) = amplitude * sin(2*pi*frequency*t + phase)`` in m/s^2 at the plant input
-    (docs/theory.md section 4: every system gets its own noise of higher frequency).
+    (paper Sec. IV, docs/theory.md section 4: every system gets its own noise of higher
+    frequency).
+
+    Attributes
+    ----------
+    amplitude : float
+        m/s^2, >= 0 (default 0: no noise).
+    frequency : float
+        Hz, > 0.
+    phase : float
+        rad.
     """
 
     amplitude: float = 0.0
@@ -261,7 +290,18 @@ class NoiseSpec:
             raise SpecError(f"`noise.phase`: got {self.phase!r}, expected a finite number (rad)")
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
-        """Noise samples at times ``t`` (s), m/s^2."""
+        """Noise samples at given times.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``n(t)``, m/s^2.
+        """
         return self.amplitude * np.sin(2.0 * np.pi * self.frequency * np.asarray(t) + self.phase)
 
 
@@ -270,7 +310,12 @@ class UncertaintySpec:
     """A multiplicative model-error bound stated in the fleet file: ``|Delta(jw)| <= bound``.
 
     It defines the system's Delta set (:func:`ilcdob.design.delta_set`) when given, ahead of
-    an identification's covariance; relative error, in (0, 1).
+    an identification's covariance (docs/theory.md section 3).
+
+    Attributes
+    ----------
+    bound : float
+        Relative model error, in (0, 1).
     """
 
     bound: float

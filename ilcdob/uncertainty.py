@@ -64,6 +64,7 @@ class ModelStructure:
 
     @property
     def n_free_poles(self) -> int:
+        """Number of estimated poles (``n_poles - n_integrators``)."""
         return self.n_poles - self.n_integrators
 
     @property
@@ -72,7 +73,21 @@ class ModelStructure:
         return self.n_free_poles + self.n_zeros + 1
 
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``theta`` -> (full denominator incl. integrators, numerator), s-polynomials highest first."""
+        """Parameters -> polynomials.
+
+        Parameters
+        ----------
+        theta : array_like
+            Free denominator coefficients ``a_{n-1}..a_0`` then numerator ``b_m..b_0``.
+
+        Returns
+        -------
+        den : numpy.ndarray
+            ``s^K A(s)``: monic, with the integrators' trailing zeros; s-polynomial, highest
+            power first.
+        num : numpy.ndarray
+            ``B(s)``, highest power first.
+        """
         theta = np.asarray(theta, dtype=float)
         a = np.concatenate([[1.0], theta[: self.n_free_poles]])
         den = np.concatenate([a, np.zeros(self.n_integrators)])
@@ -80,7 +95,27 @@ class ModelStructure:
         return den, num
 
     def join(self, num: np.ndarray, den: np.ndarray) -> np.ndarray:
-        """(numerator, denominator) -> ``theta`` (denominator normalised to monic)."""
+        """Polynomials -> parameters (the inverse of :meth:`split`).
+
+        Parameters
+        ----------
+        num : array_like
+            Numerator, s-polynomial, highest power first (leading zeros ignored; a shorter
+            one is padded).
+        den : array_like
+            Denominator of degree ``n_poles`` ending in ``n_integrators`` zeros; normalised to
+            monic (``num`` is scaled with it).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``theta``.
+
+        Raises
+        ------
+        SpecError
+            The degrees or the integrators do not fit the structure.
+        """
         den = np.trim_zeros(np.asarray(den, dtype=float), "f")
         num = np.trim_zeros(np.asarray(num, dtype=float), "f")
         lead = den[0]
@@ -96,13 +131,41 @@ class ModelStructure:
         return np.concatenate([den[1:1 + self.n_free_poles], num])
 
     def tf(self, theta: np.ndarray) -> ct.TransferFunction:
-        """python-control continuous-time transfer function (without the delay)."""
+        """The model as a python-control transfer function.
+
+        Parameters
+        ----------
+        theta : array_like
+            Parameters (see :meth:`split`).
+
+        Returns
+        -------
+        control.TransferFunction
+            ``B(s) / (s^K A(s))``, continuous time, without the delay.
+        """
         den, num = self.split(theta)
         return ct.tf(num, den)
 
 
 def companion(den: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Controllable companion form (A, B, C) of ``num/den`` (den monic, strictly proper)."""
+    """Controllable companion form of a strictly proper transfer function.
+
+    Parameters
+    ----------
+    den : numpy.ndarray
+        Monic denominator, s-polynomial, highest power first (degree ``n``).
+    num : numpy.ndarray
+        Numerator, highest power first, degree below ``n``.
+
+    Returns
+    -------
+    a : numpy.ndarray
+        ``n x n`` companion matrix (last row ``-den[1:]`` reversed).
+    b : numpy.ndarray
+        ``n x 1``, the last unit vector.
+    c : numpy.ndarray
+        ``1 x n``, the numerator coefficients, lowest power first.
+    """
     n = len(den) - 1
     a = np.zeros((n, n))
     a[:-1, 1:] = np.eye(n - 1)
@@ -115,7 +178,24 @@ def companion(den: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, np.ndarray,
 
 
 def frequency_response(structure: ModelStructure, theta: np.ndarray, delay: float, w: np.ndarray) -> np.ndarray:
-    """``G(jw)`` of the model ``theta`` (with its delay) at ``w`` rad/s."""
+    """``G(jw)`` of a model, its delay included.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : array_like
+        Its parameters (see :meth:`ModelStructure.split`).
+    delay : float
+        Input delay, s.
+    w : array_like
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray
+        Complex response, one value per frequency.
+    """
     den, num = structure.split(theta)
     s = 1j * np.asarray(w, float)
     return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay)
@@ -127,8 +207,31 @@ def multiplicative_bound(structure: ModelStructure, theta: np.ndarray, covarianc
 
     Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
     ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the linearised
-    relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate). ``covariance``
-    covers ``theta`` and, last, the delay when ``delay_estimated``.
+    relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate); the gradients
+    are forward differences. This bound defines the Delta set of an identified model
+    (docs/theory.md section 3, docs/identification.md).
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : array_like
+        Its parameters.
+    covariance : array_like
+        Covariance of ``theta`` and, last, of the delay when ``delay_estimated``.
+    delay : float
+        Input delay, s.
+    delay_estimated : bool
+        Whether the delay was estimated (then it is uncertain too).
+    w : array_like
+        Frequencies, rad/s.
+    k : float
+        Number of standard deviations.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``|Delta(jw)|``, one value per frequency.
     """
     w = np.asarray(w, float)
     cov = np.asarray(covariance, float)

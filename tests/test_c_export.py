@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from ilcdob.app.cli import main
-from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, reference_trial, write_design_folder
+from ilcdob.app.output import OutputFolder, Provenance
+from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
 from ilcdob.design.export import DIRECT_FORM_RTOL, apply_coefficients, direct_form_disagreement
 from ilcdob.design.pair import design_pair
 from ilcdob.errors import SpecError
@@ -113,6 +114,14 @@ def _run(exe: Path, x: np.ndarray) -> np.ndarray:
     res = subprocess.run([str(exe)], input="\n".join(f"{v:.17g}" for v in x), capture_output=True, text=True,
                          check=True)
     return np.loadtxt(res.stdout.splitlines(), ndmin=2)
+
+
+def write_design_folder(out, filters, float_variant=False):
+    """Write a design folder as ``ilcdob design`` does; returns the filters.json content."""
+    files, data = design_files(filters, float_variant=float_variant)
+    with OutputFolder(out, Provenance("design"), overwrite=True) as folder:
+        folder.add_all(files)
+    return data
 
 
 def _rel(y: np.ndarray, ref: np.ndarray) -> float:
@@ -224,7 +233,7 @@ def test_c_prefix_is_checked(tmp_path, capsys):
 def test_design_cli_writes_the_folder(lagged_file, tmp_path, capsys):
     out = tmp_path / "ab"
     assert main(["design", "--fleet", str(lagged_file), "--from", "A", "--to", "B", "--out", str(out)]) == 0
-    assert {p.name for p in out.iterdir()} == {"filters.json", "filters.h", "filters.c", "README.md"}
+    assert {p.name for p in out.iterdir()} == {"filters.json", "filters.h", "filters.c", "README.md", "manifest.json"}
     filters = json.loads((out / "filters.json").read_text())
     assert filters["c"]["prefix"] == "ilcdob_a_b_" and "float" not in filters["c"]
     assert "num_den_omitted" in filters["L1"]
@@ -244,7 +253,7 @@ def test_design_cli_writes_the_folder(lagged_file, tmp_path, capsys):
     out3 = tmp_path / "no"
     assert main(["design", "--fleet", str(lagged_file), "--from", "A", "--to", "B", "--method", "norm-optimal",
                  "--n", "40", "--out", str(out3)]) == 0
-    assert {p.name for p in out3.iterdir()} == {"filters.json", "lifted.npz", "README.md"}
+    assert {p.name for p in out3.iterdir()} == {"filters.json", "lifted.npz", "README.md", "manifest.json"}
     assert "lifted.npz" in (out3 / "README.md").read_text()
 
 

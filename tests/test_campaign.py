@@ -22,12 +22,22 @@ from ilcdob.app.cli import main
 from ilcdob.fleet import load_fleet
 from ilcdob.app.html import json_tables
 from ilcdob.validation.campaign import (SAMPLES_FILE, SETTINGS_FILE, CampaignError, CampaignOptions,
-                                        MethodStatistics, SampleStore, draw_true_loops, run_campaign)
+                                        MethodStatistics, SampleStore, campaign_settings, campaign_statistics,
+                                        draw_true_loops, run_campaign)
 
 # one scenario of 20 s (1000 samples), closed form + robust SOCP (1 + 1 models): ~0.3 s per sample
 KILL_ARGS = ["--samples", "12", "--scenarios", "2", "--methods", "closed-form,robust", "--duration", "20",
              "--robust-models", "1", "--workers", "1", "--seed", "3"]
 SMALL = CampaignOptions(samples=2, scenarios=(1,), methods=("closed-form",), duration=4.0)
+# the same campaign through the library: run_campaign in a child process, killed mid-run
+LIBRARY_KILL = dict(samples=10, scenarios=(2,), methods=("closed-form", "robust"), duration=20.0, robust_models=1,
+                    seed=3)
+_LIBRARY_CHILD = """
+import sys
+from ilcdob.fleet import default_fleet
+from ilcdob.validation.campaign import CampaignOptions, run_campaign
+run_campaign(default_fleet(), CampaignOptions(**{opts!r}), sys.argv[1], workers=1)
+"""
 
 
 def _campaign(out: Path, *, wait: bool = True) -> subprocess.Popen:
@@ -81,18 +91,72 @@ def test_killed_campaign_resumes_to_the_statistics_of_an_uninterrupted_run(tmp_p
     assert "methods" in paths and any(p.startswith("scenarios.") for p in paths)
 
 
+def test_killed_library_campaign_resumes_to_an_uninterrupted_run(fleet, tmp_path):
+    """``run_campaign`` keeps the sample store up to date: killed mid-run (client and workers), it resumes
+    with only the missing samples and gives the statistics and report of an uninterrupted run."""
+    killed, clean = tmp_path / "killed", tmp_path / "clean"
+    proc = subprocess.Popen([sys.executable, "-P", "-c", _LIBRARY_CHILD.format(opts=LIBRARY_KILL), str(killed)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    samples = killed / SAMPLES_FILE
+    deadline = time.monotonic() + 240
+    while len(_lines(samples)) < 3 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.communicate()
+    written = len(_lines(samples))
+    assert 3 <= written < 10, f"the kill came at {written} of 10 samples; expected mid-run"
+    with open(samples, "a") as f:  # a line torn by a kill during the write
+        f.write('{"sample": 9, "settings": "')
+
+    opts = CampaignOptions(**LIBRARY_KILL)
+    calls = []
+    resumed = run_campaign(fleet, opts, killed, workers=1, progress=lambda *call: calls.append(call))
+    assert calls[0][:2] == (written, 10) and [c[0] for c in calls[1:]] == list(range(written + 1, 11))
+    uninterrupted = run_campaign(fleet, opts, clean, workers=1)
+
+    recs = [json.loads(line) for line in _lines(samples)]
+    assert sorted(r["sample"] for r in recs) == list(range(10))  # none lost, none duplicated
+    ref = {r["sample"]: r for r in map(json.loads, _lines(clean / SAMPLES_FILE))}
+    assert all(_results(r) == _results(ref[r["sample"]]) for r in recs)
+    assert resumed.resumed == written and uninterrupted.resumed == 0
+    assert resumed.methods == uninterrupted.methods and resumed.scenarios == uninterrupted.scenarios
+    a, b = resumed.files(), uninterrupted.files()
+    assert a["campaign.txt"] == b["campaign.txt"]
+    assert a["campaign.json"]["methods"] == b["campaign.json"]["methods"]
+    assert a["campaign.json"]["methods"]["robust"]["runs"] == 10
+    assert not (killed / "campaign.json").exists()  # the report is the caller's to write
+
+
+def test_files_are_the_report_content(fleet):
+    """``CampaignResult.files()``: campaign.json (standard JSON), campaign.txt, campaign_ratios.png."""
+    from matplotlib.figure import Figure
+
+    settings = campaign_settings(fleet, SMALL)
+    rec = {"sample": 0, "settings": settings["id"], "rejected": 0, "time_s": 1.0, "cpu_s": 1.0,
+           "scenarios": {"1": {"source": "UAV1", "target": "UAV2", "rmse_without": 0.1,
+                               "ratios": {"closed-form": 0.02}, "errors": {}}}}
+    records = {0: rec, 1: {**rec, "sample": 1}}
+    result = campaign_statistics(records, SMALL, settings)  # wall time unknown: NaN
+    files = result.files()
+    assert list(files) == ["campaign.json", "campaign.txt", "campaign_ratios.png"]
+    data = files["campaign.json"]
+    assert data["wall_time_s"] is None and data["methods"]["closed-form"]["median"] == pytest.approx(0.02)
+    json.dumps(data, allow_nan=False)
+    assert files["campaign.txt"] == result.table()
+    assert isinstance(files["campaign_ratios.png"], Figure)
+
+
 def test_settings_guard_and_extension(fleet, tmp_path):
     out = tmp_path / "c"
-    first = run_campaign(fleet, SMALL, out, workers=1, progress=lambda m: None)
+    first = run_campaign(fleet, SMALL, out, workers=1)
     assert first.methods["closed-form"].runs == 2 and first.resumed == 0
     with pytest.raises(CampaignError, match=r"different settings \(seed: 0 there, 1 now\).*another --out"):
         run_campaign(fleet, replace(SMALL, seed=1), out, workers=1)
-    more = run_campaign(fleet, replace(SMALL, samples=3), out, workers=1,
-                        progress=lambda m: None)  # a larger N extends the campaign
+    more = run_campaign(fleet, replace(SMALL, samples=3), out, workers=1)  # a larger N extends the campaign
     assert more.resumed == 2 and more.methods["closed-form"].runs == 3
     assert len(_lines(out / SAMPLES_FILE)) == 3
     # a resumed run with nothing left to fly starts no cluster and reproduces the statistics
-    again = run_campaign(fleet, SMALL, out, progress=lambda m: None)
+    again = run_campaign(fleet, SMALL, out)
     assert again.workers == 0 and again.methods == first.methods
     (out / SETTINGS_FILE).unlink()
     with pytest.raises(CampaignError, match="settings are unknown"):
@@ -150,8 +214,8 @@ def test_bad_inputs(fleet, fleet_file, tmp_path, capsys):
         run_campaign(unidentified, SMALL, tmp_path / "u")
     assert main(["campaign", "--samples", "2", "--methods", "fir,bogus", "--out", str(tmp_path / "m")]) == 2
     assert "bogus" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        main(["campaign", "--samples", "0", "--out", str(tmp_path / "z")])
+    assert main(["campaign", "--samples", "0", "--out", str(tmp_path / "z")]) == 2  # a usage error
+    assert "--samples: got '0', expected an integer >= 1" in capsys.readouterr().err
 
 
 def test_runs_on_an_existing_cluster(fleet, tmp_path):
@@ -160,8 +224,7 @@ def test_runs_on_an_existing_cluster(fleet, tmp_path):
 
     with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
                       host="127.0.0.1", dashboard_address=None) as cluster:
-        res = run_campaign(fleet, SMALL, tmp_path / "ext", scheduler=cluster.scheduler_address,
-                           progress=lambda m: None)
+        res = run_campaign(fleet, SMALL, tmp_path / "ext", scheduler=cluster.scheduler_address)
     assert res.workers == 1 and res.methods["closed-form"].runs == 2
-    local = run_campaign(fleet, SMALL, tmp_path / "loc", workers=1, progress=lambda m: None)
+    local = run_campaign(fleet, SMALL, tmp_path / "loc", workers=1)
     assert local.methods == res.methods

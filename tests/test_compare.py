@@ -7,6 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from matplotlib.figure import Figure
+
 from ilcdob.app.cli import main
 from ilcdob.design.robust import RobustOptions
 from ilcdob.errors import SpecError
@@ -14,9 +16,36 @@ from ilcdob.validation.compare import CompareOptions, compare_designs
 
 
 @pytest.fixture(scope="module")
-def identified(fleet):
-    """Hover scenario (first 20 s), identified uncertainty, 4 samples: every design can be made."""
-    return compare_designs(fleet, 1, options=CompareOptions(samples=4, duration=20.0), progress=lambda m: None)
+def identified_run(fleet):
+    """Hover scenario (first 20 s), identified uncertainty, 4 samples: every design can be made.
+
+    Returns the comparison and its progress calls."""
+    calls = []
+    cmp = compare_designs(fleet, 1, options=CompareOptions(samples=4, duration=20.0),
+                          progress=lambda *call: calls.append(call))
+    return cmp, calls
+
+
+@pytest.fixture(scope="module")
+def identified(identified_run):
+    return identified_run[0]
+
+
+def test_progress_reports_every_design_and_every_case(identified_run):
+    _, calls = identified_run
+    # 4 designs built, then the nominal case and 4 Delta samples flown
+    assert [(d, t) for d, t, _ in calls] == [(k, 9) for k in range(1, 10)]
+    assert "closed-form" in calls[0][2] and "Delta sample 4" in calls[-1][2]
+
+
+def test_files_are_the_report_content(identified):
+    files = identified.files(rho=0.95)
+    assert list(files) == ["compare.json", "compare.txt", "compare_ratios.png"]
+    assert files["compare.json"] == identified.to_dict()
+    json.dumps(files["compare.json"], allow_nan=False)  # standard JSON
+    assert files["compare.txt"] == identified.table() and "ratio worst" in files["compare.txt"]
+    fig = files["compare_ratios.png"]
+    assert isinstance(fig, Figure) and "robust rho = 0.95" in fig.axes[0].get_legend_handles_labels()[1]
 
 
 def test_norm_optimal_equals_closed_form_in_its_limit(identified):
@@ -48,8 +77,7 @@ def test_robust_never_worse_than_its_bound_on_its_own_sample_set(fleet):
     improvement constraint is active (the minimax design alone reaches 0.139)."""
     rho = 0.13
     cmp = compare_designs(fleet, 1, ["closed-form", "norm-optimal", "robust"],
-                          CompareOptions(samples=6, bound=0.6, duration=20.0, robust=RobustOptions(rho=rho)),
-                          progress=lambda m: None)
+                          CompareOptions(samples=6, bound=0.6, duration=20.0, robust=RobustOptions(rho=rho)))
     cf, rb = cmp.row("closed-form"), cmp.row("robust")
     assert cf.ratio_worst > rho + 0.05  # measured 0.2295
     # the robust predictions hold exactly (<= rho); the flights differ from them only by the two

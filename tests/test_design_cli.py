@@ -106,9 +106,10 @@ def test_check_cli_reports_the_theorem_condition(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert data["order"] == ["UAV1", "UAV3", "UAV2"]
     assert all(p["holds_everywhere"] for p in data["pairs"])  # identified uncertainty is small
-    assert main(["check", "--bound", "0.9"]) == 0
-    text = capsys.readouterr().out
-    assert "NO" in text  # |Delta| = 0.9 > |1 + PC|/2 -> 0.5 at high frequency
+    assert main(["check", "--bound", "0.9"]) == 1  # a check that ran and does not hold
+    captured = capsys.readouterr()
+    assert "NO" in captured.out  # |Delta| = 0.9 > |1 + PC|/2 -> 0.5 at high frequency
+    assert "ilcdob: check: the Theorem's condition does not hold" in captured.err
     assert main(["check", "--order", "UAV1,UAV7"]) == 2
 
 

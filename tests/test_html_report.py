@@ -19,8 +19,9 @@ from pathlib import Path
 import pytest
 
 from ilcdob.app.cli import main
-from ilcdob.app.html import ReportError, ReportOptions, build_report, json_tables, write_report
-from ilcdob.app.output import write_reproduction
+from ilcdob.app.commands import report_to_html, reproduce_to_folder
+from ilcdob.app.html import ReportError, ReportOptions, build_report, json_tables
+from ilcdob.app.output import OutputError
 from ilcdob.validation.reproduce import reproduce
 
 CHROMIUM = "/usr/bin/chromium"
@@ -40,7 +41,7 @@ CAMPAIGN = {"samples": 200, "seed": 7, "statistics": [
 def paper_dir(tmp_path_factory, fleet) -> Path:
     """A tiny ``ilcdob reproduce`` output: scenario 4 (order UAV1 -> UAV3 -> UAV2), one iteration."""
     out = tmp_path_factory.mktemp("paper")
-    write_reproduction(reproduce(fleet, [4], 1, progress=lambda msg: None), out)
+    reproduce_to_folder(out, fleet=None, scenarios=[4], iterations=1)
     return out
 
 
@@ -93,10 +94,10 @@ def test_report_is_self_contained(full_report):
     assert not re.search(r"https?://", html)
     assert "<link" not in html and "<script" not in html
     # figures of the tiny run: identified models, 3 Bode, RMSE bars, error/disturbance of scenario 4,
-    # and the Theorem-check figure computed by the report
+    # and the Theorem-check figure written beside them by `reproduce`
     alts = [img["alt"] for img in parsed.images]
     assert alts == ["identified_models.png", "bode_loops.png", "bode_learning.png", "bode_te.png",
-                    "rmse_bars.png", "error_s4.png", "disturbance_s4.png", "theorem check"]
+                    "rmse_bars.png", "error_s4.png", "disturbance_s4.png", "theorem.png"]
     umask = os.umask(0)
     os.umask(umask)
     assert full_report.stat().st_mode & 0o777 == 0o666 & ~umask  # as any new file, not the private 0600 temp
@@ -172,26 +173,32 @@ def test_errors_name_the_folder_and_the_expected_files(tmp_path, paper_dir):
         build_report([wrong])
     with pytest.raises(ReportError, match="got no folder"):
         build_report([])
-    with pytest.raises(ReportError, match="is a folder"):
-        write_report([paper_dir], tmp_path)
-    with pytest.raises(ReportError, match="theorem_samples"):
-        ReportOptions(theorem_samples=0)
+    with pytest.raises(OutputError, match="is a folder"):
+        report_to_html([paper_dir], tmp_path)
+    with pytest.raises(ReportError, match="title"):
+        ReportOptions(title=" ")
     # the CLI turns them into exit status 2 and leaves no file behind
     assert main(["report", str(tmp_path / "nowhere"), "--out", str(tmp_path / "r.html")]) == 2
     assert not (tmp_path / "r.html").exists()
 
 
-def test_unknown_fleet_is_reported_not_guessed(tmp_path, paper_dir):
-    moved = tmp_path / "moved"
-    shutil.copytree(paper_dir, moved)
-    data = json.loads((moved / "results.json").read_text())
-    data["fleet"] = "/no/such/fleet.toml"
-    (moved / "results.json").write_text(json.dumps(data))
-    html = build_report([moved])
-    assert "/no/such/fleet.toml" in html and "pass --fleet FILE" in html
-    assert "|Delta| 3 sigma" not in html and "min margin" not in html
-    # the RMSE numbers and figures still come from the folder
-    assert "rmse_bars.png" in html
+def test_a_folder_mixing_runs_is_refused_and_old_folders_say_what_they_lack(tmp_path, paper_dir):
+    mixed = tmp_path / "mixed"
+    shutil.copytree(paper_dir, mixed)
+    data = json.loads((mixed / "results.json").read_text())
+    data["iterations"] = 7  # a results.json of another run beside these figures
+    (mixed / "results.json").write_text(json.dumps(data))
+    with pytest.raises(ReportError, match=r"results\.json differs from the file its run wrote.*ilcdob reproduce"):
+        build_report([mixed])
+    assert main(["report", str(mixed), "--out", str(tmp_path / "r.html")]) == 2
+    # a folder written before manifests, fleet.json and theorem.json existed: rendered, gaps named
+    old = tmp_path / "old"
+    shutil.copytree(paper_dir, old)
+    for name in ("manifest.json", "fleet.json", "theorem.json", "theorem.png"):
+        (old / name).unlink()
+    html = build_report([old])
+    assert "provenance unknown" in html and "has no fleet.json" in html and "has no theorem.json" in html
+    assert "min margin" not in html and "rmse_bars.png" in html  # the RMSE numbers and figures still render
 
 
 _PROBE = """<img id="control" alt="control" src="data:image/png;base64,AAAA"><script>

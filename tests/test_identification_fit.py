@@ -1,6 +1,6 @@
 """Round trips: data simulated from known transfer functions are identified back.
 
-Acceptance of the identification issue: noise-free, every parameter within 0.1 %; at 20 dB
+Acceptance criteria of the identification: noise-free, every parameter within 0.1 %; at 20 dB
 output SNR, held-out fit above 95 % and the true parameters inside the reported 3-sigma
 intervals in at least 9 of 10 seeded runs. Held-out fit is measured against the noiseless
 validation response (model quality); against a validation output that itself carries 20 dB
@@ -24,7 +24,7 @@ from ilcdob.specs import PIDSpec, PlantSpec
 TS = 0.02
 #: C(s) = 3 + 0.3/s + 0.12 s/(0.05 s + 1)
 PID = PIDSpec(kp=3.0, ki=0.3, kd=0.12, derivative_filter=0.05)
-QUIET = {"progress": lambda msg: None}
+QUIET = {"progress": None}   # silent (the default)
 
 
 def _excitation(n: int, seed: int, integrators: int = 0) -> np.ndarray:
@@ -155,3 +155,21 @@ def test_bad_input_is_reported():
         tfest(FlightData(t, {"u": np.ones(1000), "y": np.cos(t)}), "u", "y", ModelStructure(2), **QUIET)
     with pytest.raises(SpecError, match="n_zeros"):
         ModelStructure(2, 2, 0)
+
+
+def test_progress_is_a_callback_and_silent_by_default(capsys):
+    """``progress(done, total, what)`` per delay-sweep point and per LM start; None prints nothing."""
+    data, _ = _experiment("delay", 5, 20.0, n=1500)
+    calls = []
+    tfest(data, "u", "y", CASES["delay"][0], FitOptions(delay="auto", max_delay=0.1),
+          progress=lambda done, total, what: calls.append((done, total, what)))
+    assert all(isinstance(d, int) and isinstance(t, int) and isinstance(w, str) for d, t, w in calls)
+    sweep = [(d, t) for d, t, w in calls if w.startswith("delay sweep")]
+    assert sweep and [d for d, _ in sweep] == list(range(1, sweep[0][1] + 1))
+    runs = [(d, t) for d, t, w in calls if w.startswith("LM:")]
+    assert runs and runs[-1][0] == runs[-1][1]
+    assert any(w.startswith("initial estimate") and d == 0 for d, _, w in calls)
+    capsys.readouterr()
+    tfest(data, "u", "y", CASES["delay"][0], FitOptions(delay="auto", max_delay=0.1))
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""

@@ -25,7 +25,7 @@ from ilcdob.identification.tfest import FitOptions, tfest
 from ilcdob.specs import PIDSpec, PlantSpec
 
 TS = 0.01
-QUIET = {"progress": lambda msg: None}
+QUIET = {"progress": None}
 #: Acceptance margin: held-out fit of the model >= the true plant's fit - 0.5 %.
 MARGIN = 0.5
 

@@ -23,7 +23,7 @@ from ilcdob.errors import SpecError
 from ilcdob.app.html import build_report
 from ilcdob.signals import FlightData
 from ilcdob.identification.loaders import load_csv
-from ilcdob.app.output import write_reproduction
+from ilcdob.app.output import OutputFolder, Provenance
 from ilcdob.specs import NoiseSpec
 from ilcdob.validation.campaign import CampaignError, CampaignOptions, campaign_settings, run_sample
 from ilcdob.validation.compare import CompareOptions, compare_designs
@@ -53,7 +53,7 @@ def runs(request) -> dict[tuple[str, str], dict[tuple[int, str], float]]:
     for name in FLEETS:
         fleet = request.getfixturevalue(name)
         for law in ("paper", "exact-reference"):
-            out[(name, law)] = _ratios(reproduce(fleet, [1, 2, 3, 4], 1, progress=lambda m: None, law=law).to_dict())
+            out[(name, law)] = _ratios(reproduce(fleet, [1, 2, 3, 4], 1, law=law).to_dict())
     return out
 
 
@@ -112,11 +112,12 @@ def test_multi_source_first_flight_is_the_paper_law_then_uses_every_trial(unequa
 
 
 def test_results_record_the_law_and_paper_stays_the_default(fleet, tmp_path):
-    default = reproduce(fleet, [1], 1, progress=lambda m: None)
+    default = reproduce(fleet, [1], 1)
     assert default.law == "paper" and default.to_dict()["law"] == "paper"
-    multi = reproduce(fleet, [1], 1, progress=lambda m: None, law="multi-source")
+    multi = reproduce(fleet, [1], 1, law="multi-source")
     assert multi.to_dict()["law"] == "multi-source" and multi.filters == {}  # no single pair's filters
-    write_reproduction(multi, tmp_path, figures=False)
+    with OutputFolder(tmp_path, Provenance("reproduce"), overwrite=True) as folder:
+        folder.add_all(multi.files(figures=False))
     assert "Learning law: **multi-source**" in (tmp_path / "README.md").read_text()
     html = build_report([tmp_path])
     assert "learning law <strong>multi-source</strong>" in html
@@ -185,10 +186,8 @@ def test_design_cli_exact_reference_from_a_trial_with_the_reference(fleet, tmp_p
 
 def test_compare_with_the_exact_reference_law(fleet):
     opts = dict(samples=1, duration=20.0)
-    paper = compare_designs(fleet, 2, ["closed-form", "norm-optimal"], CompareOptions(**opts),
-                            progress=lambda m: None)
-    exact = compare_designs(fleet, 2, ["closed-form", "norm-optimal"], CompareOptions(**opts, law="exact-reference"),
-                            progress=lambda m: None)
+    paper = compare_designs(fleet, 2, ["closed-form", "norm-optimal"], CompareOptions(**opts),)
+    exact = compare_designs(fleet, 2, ["closed-form", "norm-optimal"], CompareOptions(**opts, law="exact-reference"),)
     assert exact.to_dict()["law"] == "exact-reference" and paper.to_dict()["law"] == "paper"
     assert "law exact-reference" in exact.table()
     for m in ("closed-form", "norm-optimal"):

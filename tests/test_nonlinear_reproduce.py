@@ -1,8 +1,10 @@
-"""The paper's validation on the nonlinear quadrotors (ilcdob.validation.nonlinear).
+"""The paper's validation on the nonlinear quadrotors (ilcdob.validation.nonlinear); the learning
+law it flies is tested in test_flown.py.
 
-The reproduction's acceptance (``NonlinearReproduction.acceptance``) is checked on a shortened run (two scenarios of 30 s, the built-in
-fleet whose plants were identified from these vehicles) in the default suite, and on the
-full run (identification included, four scenarios) behind the ``slow`` marker.
+The reproduction's acceptance (``NonlinearReproduction.acceptance``) is checked on a shortened
+run (two scenarios of 30 s, the built-in fleet whose plants were identified from these
+vehicles) in the default suite, and on the full run (identification included, four
+scenarios) behind the ``slow`` marker.
 """
 
 from __future__ import annotations
@@ -15,12 +17,10 @@ import pytest
 
 import ilcdob
 from ilcdob.app.cli import main
-from ilcdob.design import closed_form_filters
 from ilcdob.errors import SpecError
 from ilcdob.vehicles.quadrotor import table_i_vehicles
-from ilcdob.validation.nonlinear import (NonlinearReproduction, NonlinearSettings, VehicleLearning,
-                                         airframe_path_filter, fly_loop, learning_horizon, model_attitude,
-                                         reproduce_nonlinear, robustness_filter, run_nonlinear_scenario)
+from ilcdob.validation.nonlinear import (NonlinearReproduction, NonlinearSettings, fly_loop, reproduce_nonlinear,
+                                         run_nonlinear_scenario)
 from ilcdob.validation.reproduce import reproduce
 from ilcdob.validation.scenarios import scenario
 from ilcdob.validation.simulate import simulate_flight
@@ -32,12 +32,17 @@ def _acceptance_failures(res: NonlinearReproduction) -> list[str]:
             for row in res.acceptance() if not row["passed"]]
 
 
+_PROGRESS: list[tuple[int, int, str]] = []
+
+
 @pytest.fixture(scope="module")
 def short_run() -> NonlinearReproduction:
     """Scenarios 1 (order 1-2-3) and 4 (order 1-3-2) shortened to 30 s, fleet models as given."""
     scs = [dataclasses.replace(scenario(1), duration=30.0), dataclasses.replace(scenario(4), duration=30.0)]
+    _PROGRESS.clear()
     return reproduce_nonlinear(ilcdob.default_fleet(), iterations=3, settings=NonlinearSettings(identify=False),
-                               progress=lambda msg: None, scenarios=scs)
+                               progress=lambda done, total, what: _PROGRESS.append((done, total, what)),
+                               scenarios=scs)
 
 
 def test_short_run_meets_the_acceptance(short_run):
@@ -49,11 +54,35 @@ def test_short_run_chain_and_schema(short_run, fleet):
     assert short_run.scenarios[1].chain[:3] == [("UAV1", "UAV3"), ("UAV3", "UAV2"), ("UAV2", "UAV1")]
     data = short_run.to_dict()
     assert data["plant"] == "nonlinear"
-    linear = reproduce(fleet, [1], 1, progress=lambda msg: None).to_dict()
+    linear = reproduce(fleet, [1], 1, progress=lambda *args: None).to_dict()
     assert set(data) == set(linear)
     assert set(data["scenarios"][0]) == set(linear["scenarios"][0])
     assert set(data["scenarios"][0]["systems"]["UAV1"]) == set(linear["scenarios"][0]["systems"]["UAV1"])
     json.dumps(data)  # plain JSON types only
+
+
+def test_short_run_reports_progress_per_scenario_and_writes_nothing(short_run, tmp_path, monkeypatch, capsys):
+    assert [(d, n) for d, n, _ in _PROGRESS] == [(1, 2), (2, 2)]
+    assert _PROGRESS[0][2].startswith("scenario 1 (") and _PROGRESS[1][2].startswith("scenario 4 (")
+    # the fleet file of the models is returned, not written: it loads back to the fleet flown
+    path = tmp_path / "identified_fleet.toml"
+    path.write_text(short_run.identified_toml)
+    assert ilcdob.load_fleet(path).systems == short_run.fleet.systems
+    # default: silent, and nothing appears in the working directory
+    monkeypatch.chdir(tmp_path)
+    sc = dataclasses.replace(scenario(3), duration=2.0)
+    reproduce_nonlinear(ilcdob.default_fleet(), iterations=1, settings=NonlinearSettings(identify=False),
+                        scenarios=[sc])
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["identified_fleet.toml"]
+
+
+def test_files_add_the_fleet_file_of_the_models(short_run):
+    files = short_run.files(figures=False)
+    assert list(files)[-2:] == ["identified_fleet.toml", "results.json"]  # results.json stays last
+    assert files["identified_fleet.toml"] == short_run.identified_toml
+    assert "README.md" in files and "ilcdob.design.flown" in files["README.md"]
 
 
 def test_learning_flights_keep_the_true_and_measured_signals_apart(short_run):
@@ -67,7 +96,10 @@ def test_learning_flights_keep_the_true_and_measured_signals_apart(short_run):
 
 @pytest.mark.slow
 def test_full_run_with_identification_meets_the_acceptance():
-    res = reproduce_nonlinear(progress=lambda msg: None)
+    calls = []
+    res = reproduce_nonlinear(progress=lambda done, total, what: calls.append((done, total, what)))
+    assert [(d, n) for d, n, _ in calls] == [(i, 7) for i in range(1, 8)]  # 3 vehicles, then 4 scenarios
+    assert calls[0][2].startswith("identified UAV1: fit")
     assert set(res.identification) == {"UAV1", "UAV2", "UAV3"}
     assert all(v.estimate.fit_validation > 95.0 for v in res.identification.values())
     assert _acceptance_failures(res) == []
@@ -92,61 +124,12 @@ def test_dob_flight_is_close_to_the_linear_loop_of_its_model(fleet):
     assert np.sqrt(np.mean((nl.y - lin.y) ** 2)) < 0.15 * lin.rmse
 
 
-def test_model_attitude_has_the_model_dc_gain(fleet):
-    lp = fleet.loop("UAV2")
-    b, a, delay = model_attitude(lp)
-    num, den = lp.spec.nominal_plant.num, lp.spec.nominal_plant.den
-    assert np.sum(b) / np.sum(a) == pytest.approx(num[-1] / den[-3])
-    assert delay == 0
-
-
-def test_airframe_correction_is_one_around_a_cycle_and_for_equal_models(fleet):
-    w = np.array([0.3, 1.0, 5.0, 20.0])
-    z = np.exp(-1j * w * fleet.sample_time)
-
-    def resp(src: str, tgt: str) -> np.ndarray:
-        b, a = airframe_path_filter(fleet.loop(src), fleet.loop(tgt))
-        return np.polyval(b[::-1], z) / np.polyval(a[::-1], z)
-
-    cycle = resp("UAV1", "UAV2") * resp("UAV2", "UAV3") * resp("UAV3", "UAV1")
-    np.testing.assert_allclose(cycle, 1.0, atol=1e-9)
-    np.testing.assert_allclose(resp("UAV1", "UAV1"), 1.0, atol=1e-12)
-    assert abs(resp("UAV1", "UAV3")[0]) == pytest.approx(1.0, abs=0.02)  # DC: both ~unit gain
-
-
-def test_robustness_filter_is_zero_phase_in_band_and_cuts_noise():
-    ts = 0.02
-    t = np.arange(3000) * ts
-    slow = np.sin(0.9425 * t)
-    fast = np.sin(60.0 * t)
-    pad = 200
-    y = robustness_filter(learning_horizon(slow + fast, ts, pad), ts, 10.0)[pad:-pad]
-    core = slice(300, -300)
-    np.testing.assert_allclose(y[core], slow[core], atol=1e-3)
-
-
-def test_learning_horizon_rest_before_and_line_after():
-    x = 1.0 + 0.5 * np.arange(100)
-    ext = learning_horizon(x, 0.02, 10)
-    np.testing.assert_array_equal(ext[:10], 0.0)
-    np.testing.assert_allclose(ext[-10:], 1.0 + 0.5 * np.arange(100, 110))
-
-
-def test_vehicle_learning_without_extras_is_the_theorem(fleet):
-    lf = closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2"))
-    t = np.arange(600) * fleet.sample_time
-    e = 0.01 * np.sin(0.9425 * t) * (1 - np.exp(-t))
-    df = 0.2 * np.sin(0.9425 * t + 0.3) * (1 - np.exp(-t))
-    plain = VehicleLearning(lf, None, None, gain=1.0)
-    np.testing.assert_allclose(plain.apply(e, df), lf.apply(e, df), atol=1e-12)
-
-
 def test_scenario_run_rejects_fleets_without_vehicles(fleet_file):
     fleet = ilcdob.load_fleet(fleet_file())  # systems "A" and "B"
     with pytest.raises(SpecError, match=r"system\(s\) \['A', 'B'\] have no nonlinear vehicle"):
         run_nonlinear_scenario(fleet, None, scenario(1))
     with pytest.raises(SpecError, match="no nonlinear vehicle"):
-        reproduce_nonlinear(fleet, [1], progress=lambda msg: None)
+        reproduce_nonlinear(fleet, [1])
 
 
 # ------------------------------------------------------------------ bad inputs
@@ -195,13 +178,11 @@ def test_fly_loop_rejects_bad_inputs(fleet):
 
 def test_reproduce_rejects_bad_arguments():
     with pytest.raises(SpecError, match="`iterations`"):
-        reproduce_nonlinear(iterations=0, progress=lambda msg: None)
+        reproduce_nonlinear(iterations=0)
     with pytest.raises(SpecError, match="`settings`"):
-        reproduce_nonlinear(settings={"seed": 1}, progress=lambda msg: None)
+        reproduce_nonlinear(settings={"seed": 1})
     with pytest.raises(SpecError, match="`fleet`"):
-        reproduce_nonlinear(fleet="fleet.toml", progress=lambda msg: None)
-    with pytest.raises(SpecError, match="`cutoff`"):
-        robustness_filter(np.zeros(10), 0.02, 200.0)
+        reproduce_nonlinear(fleet="fleet.toml")
 
 
 def test_cli_reproduce_nonlinear_writes_the_schema(tmp_path):
@@ -216,8 +197,7 @@ def test_cli_reproduce_nonlinear_writes_the_schema(tmp_path):
 
 
 def test_cli_plant_option(tmp_path, capsys):
-    with pytest.raises(SystemExit):
-        main(["reproduce", "--plant", "quadrotor", "--out", str(tmp_path)])
+    assert main(["reproduce", "--plant", "quadrotor", "--out", str(tmp_path)]) == 2
     assert "invalid choice: 'quadrotor'" in capsys.readouterr().err
     assert main(["reproduce", "--plant", "nonlinear", "--seed", "-3", "--out", str(tmp_path)]) == 2
     assert "`seed`: got -3" in capsys.readouterr().err

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from ilcdob.app.cli import main
 from ilcdob.validation.reproduce import reproduce, run_scenario
@@ -14,9 +17,32 @@ from ilcdob.validation.scenarios import SCENARIOS, parse_scenarios, scenario
 from ilcdob.errors import SpecError
 
 
+COMMITTED = Path(__file__).parents[1] / "reports" / "paper"
+
+
 @pytest.fixture(scope="module")
-def result(fleet):
-    return reproduce(fleet, [1, 2, 3, 4], 3, progress=lambda msg: None).to_dict()
+def run(fleet):
+    """The reproduction with the ``reproduce`` command's defaults, and its progress calls."""
+    calls = []
+    res = reproduce(fleet, [1, 2, 3, 4], 3, progress=lambda *call: calls.append(call))
+    return res, calls
+
+
+@pytest.fixture(scope="module")
+def result(run):
+    return run[0].to_dict()
+
+
+def _write(files: dict, out: Path) -> None:
+    """Write a content map as the application does: text, indented JSON, PNG at 110 dpi."""
+    out.mkdir(parents=True, exist_ok=True)
+    for name, content in files.items():
+        if isinstance(content, str):
+            (out / name).write_text(content, encoding="utf-8")
+        elif isinstance(content, (dict, list)):
+            (out / name).write_text(json.dumps(content, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        else:
+            content.savefig(out / name, format="png", dpi=110)
 
 
 def _rows(result):
@@ -47,7 +73,7 @@ def test_default_law_reproduces_the_committed_results(result):
     """``reproduce`` with the default law is the paper's law and gives ``reports/paper/results.json``:
     measured max absolute difference 6.4e-12 (m, m/s^2; the committed file comes from another machine,
     this one reproduces itself bit for bit), bound 1e-9."""
-    committed = json.loads((Path(__file__).parents[1] / "reports" / "paper" / "results.json").read_text())
+    committed = json.loads((COMMITTED / "results.json").read_text())
     assert result["law"] == "paper" and committed["law"] == "paper"
 
     def walk(got, want, where):
@@ -66,6 +92,55 @@ def test_default_law_reproduces_the_committed_results(result):
             assert got == want, where
 
     walk(result, committed, "")
+
+
+def test_files_regenerate_the_committed_report(run):
+    """``files()`` is the content of ``reports/paper``: results.json to 1e-9 (relative), README.md
+    identical once the run time is the committed one, and the figures in the committed order."""
+    res, _ = run
+    readme = (COMMITTED / "README.md").read_text()
+    elapsed = float(re.search(r"Run time ([0-9.]+) s for the simulations", readme).group(1))
+    files = dataclasses.replace(res, elapsed_s=elapsed).files()
+    figures = ["rmse_bars.png"] + [f"{k}_s{i}.png" for i in range(1, 5) for k in ("error", "disturbance")] + [
+        "bode_loops.png", "identified_models.png", "bode_learning.png", "bode_te.png"]
+    assert list(files) == [*figures, "README.md", "results.json"]  # results.json last
+    assert all(isinstance(files[f], Figure) for f in figures)
+    assert files["README.md"] == readme
+    want = json.loads((COMMITTED / "results.json").read_text())
+    got = json.loads(json.dumps(files["results.json"], allow_nan=False))
+
+    def walk(g, w, where):
+        if isinstance(w, dict):
+            assert set(g) == set(w), where
+            for k in w:
+                walk(g[k], w[k], f"{where}/{k}")
+        elif isinstance(w, list):
+            assert len(g) == len(w), where
+            for i, (a, b) in enumerate(zip(g, w)):
+                walk(a, b, f"{where}[{i}]")
+        elif isinstance(w, float):
+            assert abs(g - w) <= 1e-9 * abs(w), (where, g, w)
+        else:
+            assert g == w, where
+
+    walk(got, want, "")
+
+
+def test_files_without_figures_and_progress(run):
+    res, calls = run
+    files = res.files(figures=False)
+    assert list(files) == ["README.md", "results.json"] and "![" not in files["README.md"]
+    assert [c[:2] for c in calls] == [(1, 4), (2, 4), (3, 4), (4, 4)]
+    assert calls[0][2].startswith("scenario 1 (Hover, sinusoidal wind, law paper)")
+
+
+def test_files_write_a_report_folder(fleet, tmp_path):
+    res = reproduce(fleet, [1], 2)  # no progress: silent
+    _write(res.files(), tmp_path)
+    for name in ["rmse_bars.png", "error_s1.png", "disturbance_s1.png", "bode_loops.png",
+                 "bode_learning.png", "bode_te.png", "README.md", "results.json"]:
+        assert (tmp_path / name).stat().st_size > 1000, name
+    assert json.loads((tmp_path / "results.json").read_text())["iterations"] == 2
 
 
 def test_orders_follow_the_paper(result):

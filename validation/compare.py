@@ -18,15 +18,16 @@ j-1's model reference error before the design's filter and adds system j's refer
 correction after it.
 
 Design time is the time to build the design plus its mean time per trial.
+
+The report of a comparison is :meth:`Comparison.files` (``compare.json``, ``compare.txt``,
+``compare_ratios.png``), as content to be written by the caller.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -39,11 +40,15 @@ from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
 
+from .reproduce import json_document
 from .scenarios import scenario
 from .simulate import rmse, simulate_flight
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 __all__ = ["CompareOptions", "MethodComparison", "Comparison", "PairScenario", "CaseResult", "pair_scenario",
-           "evaluate_case", "compare_designs", "write_comparison"]
+           "evaluate_case", "compare_designs"]
 
 
 @dataclass(frozen=True)
@@ -62,7 +67,12 @@ class CompareOptions:
         Seed of the Delta-set draw.
     duration : float, optional
         Fly only the first ``duration`` seconds of the scenario (default: all of it).
-    robust, fir, norm_optimal : options of the designs (defaults: their own).
+    robust : RobustOptions
+        Options of the robust design.
+    fir : FIROptions, optional
+        Options of the FIR design (default: its own).
+    norm_optimal : NormOptimalOptions, optional
+        Options of the norm-optimal design (default: its own).
     law : {"paper", "exact-reference"}
         Learning law (:mod:`ilcdob.design.laws`) applied around every design. ``multi-source``
         is refused: a comparison flies one pair from one DOB-only trial, where it is the paper's law.
@@ -93,7 +103,27 @@ class CompareOptions:
 
 @dataclass(frozen=True)
 class MethodComparison:
-    """One design's row of the comparison (ratios ``||e_j|| / ||e'_j||``, RMSE in m)."""
+    """One design's row of the comparison (ratios ``||e_j|| / ||e'_j||``, RMSE in m).
+
+    Attributes
+    ----------
+    method : str
+        The design (:data:`ilcdob.design.pair.METHODS`).
+    order : str
+        Orders of its filters, as text ("-" for a failed design).
+    design_time_s : float
+        Time to build the design plus its mean time per trial, s.
+    rmse_nominal, ratio_nominal : float
+        RMSE and ratio of the nominal case (true plants = models).
+    rmse_worst, ratio_worst, ratio_median : float
+        Largest RMSE, largest and median ratio over the Delta samples.
+    improved_share : float
+        Share of the Delta samples with ratio < 1.
+    ratios : list of float
+        Ratio of every case: the nominal one first, then each Delta sample.
+    error : str, optional
+        Why the design could not be made or could not learn (its figures are NaN then).
+    """
 
     method: str
     order: str
@@ -113,14 +143,42 @@ class MethodComparison:
 
     @classmethod
     def failed(cls, method: str, error: str, design_time_s: float) -> "MethodComparison":
-        """A design that could not be made (e.g. FIR convergence constraint not met): no figures."""
+        """A design that could not be made (e.g. FIR convergence constraint not met): no figures.
+
+        Parameters
+        ----------
+        method : str
+            The design.
+        error : str
+            Why it failed.
+        design_time_s : float
+            Time spent on it, s.
+        """
         nan = float("nan")
         return cls(method, "-", design_time_s, nan, nan, nan, nan, nan, nan, [], error)
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """All designs on one scenario (see module docstring)."""
+    """All designs on one scenario (see module docstring).
+
+    Attributes
+    ----------
+    scenario : int
+        Scenario id.
+    source, target : str
+        Systems j-1 and j of the pair flown.
+    samples : int
+        Delta samples per system.
+    delta_set : str
+        Where the Delta set comes from (identification or a bound).
+    rmse_without_nominal, rmse_without_worst : float
+        RMSE of system j's DOB-only flight, nominal and worst over the samples, m.
+    methods : list of MethodComparison
+        One row per design.
+    law : str
+        The learning law (:mod:`ilcdob.design.laws`).
+    """
 
     scenario: int
     source: str
@@ -133,9 +191,17 @@ class Comparison:
     law: str = DEFAULT_LAW
 
     def row(self, method: str) -> MethodComparison:
+        """The row of design ``method``.
+
+        Parameters
+        ----------
+        method : str
+            A design of the comparison.
+        """
         return next(m for m in self.methods if m.method == method)
 
     def to_dict(self) -> dict[str, object]:
+        """The content of ``compare.json`` (RMSE in m, design time in s)."""
         return {"scenario": self.scenario, "source": self.source, "target": self.target, "samples": self.samples,
                 "delta_set": self.delta_set, "law": self.law, "units": {"rmse": "m", "ratio": "||e_j|| / ||e'_j||",
                                                         "design_time": "s"},
@@ -156,6 +222,52 @@ class Comparison:
                        f"{1e3 * m.rmse_worst:>12.3f}{m.ratio_worst:>12.4f}{m.ratio_median:>9.4f}"
                        f"{100 * m.improved_share:>9.0f}%{m.design_time_s:>10.2f}  {m.order}\n" for m in self.methods)
         return head + cols + rows
+
+    def figure(self, rho: float | None = None) -> Figure:
+        """``compare_ratios.png``: the ratio of every case per design (log scale).
+
+        Parameters
+        ----------
+        rho : float, optional
+            The robust design's guaranteed factor, drawn as a line when given.
+        """
+        from matplotlib.figure import Figure  # matplotlib only when the figure is made
+
+        fig = Figure(figsize=(7, 3.8))
+        ax = fig.subplots()
+        rows = [m for m in self.methods if m.error is None]
+        for i, m in enumerate(rows):
+            ax.scatter(np.full(len(m.ratios) - 1, i) + np.linspace(-0.15, 0.15, len(m.ratios) - 1), m.ratios[1:],
+                       s=14, color="0.4", label="Delta samples" if i == 0 else None)
+            ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if i == 0 else None)
+        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        if rho is not None:
+            ax.axhline(rho, color="C0", lw=0.8, ls=":", label=f"robust rho = {rho:g}")
+        ax.set_xticks(range(len(rows)), [m.method for m in rows])
+        ax.set_yscale("log")
+        ax.set_ylabel("||e_j|| / ||e'_j||")
+        ax.set_title(f"Scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law})")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        return fig
+
+    def files(self, rho: float | None = None) -> dict[str, object]:
+        """The report of the comparison: file name -> content.
+
+        Parameters
+        ----------
+        rho : float, optional
+            The robust design's guaranteed factor, drawn in the figure when given.
+
+        Returns
+        -------
+        dict of str to object
+            ``compare.json`` (JSON document, :meth:`to_dict` with non-finite numbers as null),
+            ``compare.txt`` (:meth:`table`) and ``compare_ratios.png`` (a
+            ``matplotlib.figure.Figure`` for PNG at 110 dpi, :meth:`figure`).
+        """
+        return {"compare.json": json_document(self.to_dict()), "compare.txt": self.table(),
+                "compare_ratios.png": self.figure(rho)}
 
 
 def _parse_methods(methods: Sequence[str]) -> list[str]:
@@ -284,23 +396,31 @@ def evaluate_case(pair: PairScenario, source_loop: LoopSystem, target_loop: Loop
 
 def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEFAULT_METHODS,
                     options: CompareOptions | None = None,
-                    progress: Callable[[str], None] | None = None) -> Comparison:
+                    progress: Callable[[int, int, str], None] | None = None) -> Comparison:
     """Fly every design of ``methods`` through scenario ``scenario_id`` (see module docstring).
 
     Parameters
     ----------
     fleet : Fleet
+        Needs at least two systems.
     scenario_id : int
         1-4 (:mod:`ilcdob.validation.scenarios`); its learning order's first pair is used.
     methods : sequence of str
         Subset of :data:`ilcdob.design.pair.METHODS` (default :data:`~ilcdob.design.pair.DEFAULT_METHODS`).
     options : CompareOptions, optional
+        Samples, uncertainty, duration, design options and law (default: ``CompareOptions()``).
     progress : callable, optional
-        Receives one line per design (default: printed to stderr).
+        Called as ``progress(done, total, what)`` after each design is built and after each
+        case is flown (``total``: designs + 1 + samples); ``what`` says which. None: silent.
+
+    Returns
+    -------
+    Comparison
+        One row per design; :meth:`Comparison.files` makes its report.
     """
     opts = options or CompareOptions()
     methods = _parse_methods(methods)
-    say = progress if progress is not None else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    say = progress if progress is not None else (lambda done, total, what: None)
     pair = pair_scenario(fleet, scenario_id, opts.duration)
     source, target = pair.source, pair.target
     deltas = fleet_delta_sets(fleet, [source, target], k=opts.samples, bound=opts.bound, scale=opts.scale,
@@ -310,6 +430,7 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEF
     designs: dict[str, PairDesign] = {}
     build: dict[str, float] = {}
     failed: dict[str, MethodComparison] = {}
+    total, done = len(methods) + len(cases), 0
     for method in methods:
         t0 = time.perf_counter()
         try:
@@ -321,7 +442,17 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEF
         except IlcdobError as exc:  # a design that cannot be made is a result of the comparison
             failed[method] = MethodComparison.failed(method, str(exc), time.perf_counter() - t0)
         build[method] = time.perf_counter() - t0
-    results = [evaluate_case(pair, src, tgt, designs) for src, tgt in cases]
+        done += 1
+        say(done, total, f"scenario {scenario_id} {method}: " + (f"design failed: {failed[method].error}"
+                                                                 if method in failed else
+                                                                 f"designed ({build[method]:.1f} s)"))
+    results = []
+    for k, (src, tgt) in enumerate(cases):
+        t0 = time.perf_counter()
+        results.append(evaluate_case(pair, src, tgt, designs))
+        done += 1
+        say(done, total, f"scenario {scenario_id}: " + ("nominal case" if k == 0 else f"Delta sample {k}")
+            + f" flown ({time.perf_counter() - t0:.1f} s)")
     rows = []
     for method in methods:
         error = failed[method].error if method in failed else next(
@@ -329,7 +460,6 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEF
         if error is not None:
             spent = build[method] + sum(r.learn_times.get(method, 0.0) for r in results)
             rows.append(failed.get(method) or MethodComparison.failed(method, error, spent))
-            say(f"scenario {scenario_id} {method}: design failed: {error}")
             continue
         ratios = [r.ratios[method] for r in results]
         rmses = [r.rmses[method] for r in results]
@@ -340,43 +470,7 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEF
             rmse_nominal=rmses[0], ratio_nominal=ratios[0], rmse_worst=float(max(rmses[1:])),
             ratio_worst=float(sample_ratios.max()), ratio_median=float(np.median(sample_ratios)),
             improved_share=float(np.mean(sample_ratios < 1.0)), ratios=ratios))
-        say(f"scenario {scenario_id} {method}: nominal ratio {ratios[0]:.4f}, worst {sample_ratios.max():.4f} "
-            f"({build[method] + sum(per_trial):.1f} s)")
     return Comparison(scenario=scenario_id, source=source, target=target, samples=opts.samples,
                       delta_set=deltas[source].source, rmse_without_nominal=results[0].rmse_without,
                       rmse_without_worst=float(max(r.rmse_without for r in results[1:])), methods=rows,
                       law=opts.law)
-
-
-def write_comparison(cmp: Comparison, out: str | Path, rho: float | None = None) -> list[Path]:
-    """Write ``compare.json``, ``compare.txt`` and ``compare_ratios.png`` (ratio per case and design)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ilcdob.atomic import atomic_path, write_json_atomic, write_text_atomic
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "compare.json", cmp.to_dict())
-    write_text_atomic(out / "compare.txt", cmp.table())
-    fig, ax = plt.subplots(figsize=(7, 3.8))
-    rows = [m for m in cmp.methods if m.error is None]
-    for i, m in enumerate(rows):
-        ax.scatter(np.full(len(m.ratios) - 1, i) + np.linspace(-0.15, 0.15, len(m.ratios) - 1), m.ratios[1:],
-                   s=14, color="0.4", label="Delta samples" if i == 0 else None)
-        ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if i == 0 else None)
-    ax.axhline(1.0, color="k", lw=0.8, ls="--")
-    if rho is not None:
-        ax.axhline(rho, color="C0", lw=0.8, ls=":", label=f"robust rho = {rho:g}")
-    ax.set_xticks(range(len(rows)), [m.method for m in rows])
-    ax.set_yscale("log")
-    ax.set_ylabel("||e_j|| / ||e'_j||")
-    ax.set_title(f"Scenario {cmp.scenario}: {cmp.target} learning from {cmp.source} (law {cmp.law})")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    with atomic_path(out / "compare_ratios.png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return [out / "compare.json", out / "compare.txt", out / "compare_ratios.png"]

@@ -1,4 +1,4 @@
-"""Figures of the reproduction, in the paper's layout (PNG, matplotlib Agg backend).
+"""Figures of the reproduction, in the paper's layout, as :class:`matplotlib.figure.Figure` objects.
 
 * ``rmse_bars.png`` - RMSE per scenario and system: no DOB, only DOB, learning 1..n;
 * ``error_s<N>.png`` - tracking error against time per system;
@@ -7,38 +7,47 @@
 * ``bode_learning.png`` - L1 and L2 of every learning pair flown;
 * ``bode_te.png`` - Te1, Te2 (error propagation with learning, under a stated model error)
   and Omega (disturbance -> DOB estimate).
+
+:func:`reproduction_figures` returns them by file name; nothing here writes a file (the
+figures are laid out for PNG at 110 dpi, :data:`FIGURE_DPI`).
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from ilcdob.design import LearningFilters
+from ilcdob.fleet import Fleet
+from ilcdob.loop import LoopSystem, build_loop, freqresp
+from ilcdob.specs import PlantSpec
+from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
-from ilcdob.atomic import savefig_atomic  # noqa: E402
-from ilcdob.design import LearningFilters  # noqa: E402
-from ilcdob.fleet import Fleet  # noqa: E402
-from ilcdob.loop import LoopSystem, build_loop, freqresp  # noqa: E402
-from ilcdob.specs import PlantSpec  # noqa: E402
-from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound  # noqa: E402
+if TYPE_CHECKING:
+    from .reproduce import ReproductionResult
 
-from .reproduce import ReproductionResult  # noqa: E402
-
-__all__ = ["write_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR"]
+__all__ = ["reproduction_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR", "FIGURE_DPI"]
 
 #: Model error used for the Te figure: every true plant 10 % stronger than its model.
 TE_GAIN_ERROR = 0.10
-_DPI = 110
+#: Resolution the figures are made for (dots per inch of the PNG files).
+FIGURE_DPI = 110
 _COLORS = ["#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860"]
 
 
 def frequency_grid(ts: float, n: int = 400) -> np.ndarray:
-    """Log-spaced frequencies from 0.01 rad/s to just below Nyquist (pi/ts)."""
+    """Log-spaced frequencies from 0.01 rad/s to just below Nyquist (pi/ts).
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+    n : int
+        Number of frequencies.
+    """
     return np.logspace(-2, np.log10(0.999 * np.pi / ts), n)
 
 
@@ -50,17 +59,20 @@ def _phase(x: np.ndarray) -> np.ndarray:
     return np.degrees(np.unwrap(np.angle(x)))
 
 
-def _save(fig, out: Path, name: str) -> Path:
-    path = out / name
+def _subplots(nrows: int, ncols: int, figsize: tuple[float, float], **kwargs) -> tuple[Figure, object]:
+    """A new :class:`Figure` (no pyplot, no backend) and its grid of axes."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
+def _done(fig: Figure) -> Figure:
     fig.tight_layout()
-    savefig_atomic(fig, path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _rmse_bars(res: ReproductionResult, out: Path) -> Path:
+def _rmse_bars(res: ReproductionResult) -> Figure:
     n = len(res.scenarios)
-    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.6), squeeze=False)
+    fig, axes = _subplots(1, n, (4.2 * n, 3.6), squeeze=False)
     labels = ["no DOB", "only DOB"] + [f"learning {i + 1}" for i in range(res.iterations)]
     for ax, sr in zip(axes[0], res.scenarios):
         names = sr.order
@@ -78,13 +90,13 @@ def _rmse_bars(res: ReproductionResult, out: Path) -> Path:
         ax.set_ylabel("tracking RMSE (m)")
         ax.grid(True, axis="y", which="both", alpha=0.3)
     axes[0][0].legend(fontsize=7)
-    return _save(fig, out, "rmse_bars.png")
+    return _done(fig)
 
 
-def _per_system(sr, out: Path, name: str, title: str, ylabel: str, draw) -> Path:
+def _per_system(sr, title: str, ylabel: str, draw) -> Figure:
     """One row per system of scenario ``sr``; ``draw(ax, system_result)`` fills a row."""
     names = sr.order
-    fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True, squeeze=False)
+    fig, axes = _subplots(len(names), 1, (9, 2.2 * len(names)), sharex=True, squeeze=False)
     for ax, system in zip(axes[:, 0], names):
         draw(ax, sr.systems[system])
         ax.set_ylabel(f"{system}\n{ylabel}")
@@ -92,7 +104,7 @@ def _per_system(sr, out: Path, name: str, title: str, ylabel: str, draw) -> Path
     axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
     axes[0, 0].set_title(f"Scenario {sr.scenario.id}: {title}")
     axes[-1, 0].set_xlabel("time (s)")
-    return _save(fig, out, name)
+    return _done(fig)
 
 
 def _draw_error(ax, s) -> None:
@@ -108,14 +120,14 @@ def _draw_disturbance(ax, s) -> None:
     ax.plot(lf.t, lf.d_hat + lf.d_f, color=_COLORS[2], lw=0.9, ls="--", label="d_hat + d_f (learning 1)")
 
 
-def _time_series(res: ReproductionResult, out: Path) -> list[Path]:
-    paths = []
+def _time_series(res: ReproductionResult) -> dict[str, Figure]:
+    figs = {}
     for sr in res.scenarios:
         sid = sr.scenario.id
-        paths.append(_per_system(sr, out, f"error_s{sid}.png", "tracking error", "error e (m)", _draw_error))
-        paths.append(_per_system(sr, out, f"disturbance_s{sid}.png", "disturbance estimates",
-                                 "d (m/s$^2$)", _draw_disturbance))
-    return paths
+        figs[f"error_s{sid}.png"] = _per_system(sr, "tracking error", "error e (m)", _draw_error)
+        figs[f"disturbance_s{sid}.png"] = _per_system(sr, "disturbance estimates", "d (m/s$^2$)",
+                                                      _draw_disturbance)
+    return figs
 
 
 def _bode_pair(axes, w, resp, label, color, ls="-"):
@@ -145,27 +157,27 @@ def _finish_bode(axes, titles, ts):
         axes[0, col].legend(fontsize=7)
 
 
-def _bode_loops(fleet: Fleet, out: Path) -> Path:
+def _bode_loops(fleet: Fleet) -> Figure:
     w = frequency_grid(fleet.sample_time)
-    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), sharex=True)
+    fig, axes = _subplots(2, 2, (11, 6.5), sharex=True)
     for i, lp in enumerate(fleet.loops):
         c = _COLORS[i % len(_COLORS)]
         _bode_pair(axes[:, 0], w, freqresp(lp.G_r, w), lp.name, c)
         _bode_pair(axes[:, 1], w, freqresp(lp.G_d, w), f"{lp.name} (DOB)", c)
         _bode_pair(axes[:, 1], w, freqresp(lp.G_d_no_dob, w), f"{lp.name} (no DOB)", c, ls=":")
     _finish_bode(axes, ["G_r: reference -> position", "G_d: disturbance -> position"], fleet.sample_time)
-    return _save(fig, out, "bode_loops.png")
+    return _done(fig)
 
 
-def _bode_learning(filters: dict[tuple[str, str], LearningFilters], ts: float, out: Path) -> Path:
+def _bode_learning(filters: dict[tuple[str, str], LearningFilters], ts: float) -> Figure:
     w = frequency_grid(ts)
-    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), sharex=True)
+    fig, axes = _subplots(2, 2, (11, 6.5), sharex=True)
     for i, ((src, tgt), lf) in enumerate(sorted(filters.items())):
         c = _COLORS[i % len(_COLORS)]
         _bode_pair(axes[:, 0], w, lf.l1_response(w), f"{src} -> {tgt}", c)
         _bode_pair(axes[:, 1], w, lf.l2_response(w), f"{src} -> {tgt}", c)
     _finish_bode(axes, ["L1 (applied to e_{j-1})", "L2 (applied to d_f,{j-1})"], ts)
-    return _save(fig, out, "bode_learning.png")
+    return _done(fig)
 
 
 def _with_gain_error(lp: LoopSystem, gain: float) -> LoopSystem:
@@ -174,10 +186,10 @@ def _with_gain_error(lp: LoopSystem, gain: float) -> LoopSystem:
     return build_loop(replace(lp.spec, plant=true, model=model), lp.ts)
 
 
-def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters], out: Path) -> Path:
+def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters]) -> Figure:
     ts = fleet.sample_time
     w = frequency_grid(ts)
-    fig, axes = plt.subplots(2, 3, figsize=(14, 6.5), sharex=True)
+    fig, axes = _subplots(2, 3, (14, 6.5), sharex=True)
     true = {lp.name: _with_gain_error(lp, 1 + TE_GAIN_ERROR) for lp in fleet.loops}
     for i, ((src, tgt), lf) in enumerate(sorted(filters.items())):
         c = _COLORS[i % len(_COLORS)]
@@ -190,11 +202,19 @@ def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters], out:
     _finish_bode(axes, [f"Te1 (true plants {pct} stronger than models)",
                         f"Te2 (true plants {pct} stronger than models)",
                         "Omega: disturbance -> DOB estimate"], ts)
-    return _save(fig, out, "bode_te.png")
+    return _done(fig)
 
 
 def identified_bounds(fleet: Fleet, w: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """``name -> (G(jw), |Delta(jw)| at 3 sigma)`` for every system with an identified plant."""
+    """``name -> (G(jw), |Delta(jw)| at 3 sigma)`` for every system with an identified plant.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        Systems without an identification are left out.
+    w : array
+        Frequencies, rad/s.
+    """
     out = {}
     for spec in fleet.systems:
         ident = spec.identification
@@ -209,12 +229,12 @@ def identified_bounds(fleet: Fleet, w: np.ndarray) -> dict[str, tuple[np.ndarray
     return out
 
 
-def _identified_models(fleet: Fleet, out: Path) -> Path | None:
+def _identified_models(fleet: Fleet) -> Figure | None:
     w = np.logspace(-2, np.log10(0.999 * np.pi / fleet.sample_time), 300)
     models = identified_bounds(fleet, w)
     if not models:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    fig, axes = _subplots(1, 2, (11, 3.8))
     for i, (name, (g, bound)) in enumerate(models.items()):
         c = _COLORS[i % len(_COLORS)]
         mag = _db(g)
@@ -228,20 +248,32 @@ def _identified_models(fleet: Fleet, out: Path) -> Path | None:
         ax.set_xlabel("frequency (rad/s)")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    return _save(fig, out, "identified_models.png")
+    return _done(fig)
 
 
-def write_figures(res: ReproductionResult, out: str | Path) -> list[Path]:
-    """Write every figure of the reproduction into ``out``; returns the paths written."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [_rmse_bars(res, out)]
-    paths += _time_series(res, out)
-    paths.append(_bode_loops(res.fleet, out))
-    ident = _identified_models(res.fleet, out)
+def reproduction_figures(res: ReproductionResult) -> dict[str, Figure]:
+    """Every figure of a reproduction, by PNG file name, in the order of the report.
+
+    Parameters
+    ----------
+    res : ReproductionResult
+        The reproduction (linear or nonlinear plant).
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure
+        ``rmse_bars.png``, ``error_s<N>.png`` and ``disturbance_s<N>.png`` per scenario,
+        ``bode_loops.png``, ``identified_models.png`` (systems with an identified plant only),
+        ``bode_learning.png`` and ``bode_te.png`` (when ``res.filters`` holds pairs). Laid
+        out; save each at :data:`FIGURE_DPI`.
+    """
+    figs = {"rmse_bars.png": _rmse_bars(res)}
+    figs.update(_time_series(res))
+    figs["bode_loops.png"] = _bode_loops(res.fleet)
+    ident = _identified_models(res.fleet)
     if ident is not None:
-        paths.append(ident)
+        figs["identified_models.png"] = ident
     if res.filters:
-        paths.append(_bode_learning(res.filters, res.fleet.sample_time, out))
-        paths.append(_bode_te(res.fleet, res.filters, out))
-    return paths
+        figs["bode_learning.png"] = _bode_learning(res.filters, res.fleet.sample_time)
+        figs["bode_te.png"] = _bode_te(res.fleet, res.filters)
+    return figs

@@ -33,39 +33,10 @@ each scenario starts with ``r = 0``, ``dr/dt = 0`` and ``d = 0``.
 Tracking error and RMSE are those of the *true* position (``e = r - x``); the controller,
 the DOB and the learning only see the measured position ``x_m``, as on a real vehicle.
 
-What the real vehicles change, and how the learning law handles it
-------------------------------------------------------------------
-Flown as is on these vehicles, the Theorem's law diverges within three iterations. Four
-causes, each fixed at its root (numbers from the development runs, 0.5 mm sensor noise):
-
-* **Sensor noise through the plant inverse.** ``L1 = -(1 - Q_j) Gd_{j-1}^{-1}`` contains
-  ``1/P_hat ~ s^2 (tau s + 1)``, gain ~1e5 at the Nyquist frequency: 0.5 mm of white
-  position noise became tens of m/s^2 of learning signal and the tilt limit saturated. The
-  learning passes a zero-phase low-pass *robustness filter* F before and after the plant
-  inverse (:func:`robustness_filter`, 10 rad/s: above the winds' content, below where
-  the identified models' error reaches the Theorem's bound ``|1 + P C|/2``).
-* **Trial boundaries.** Whatever the extension of the trial, the inverse turns a jump in a
-  derivative into a spike, and iterating made spikes at the start and end of the trial
-  grow (trial-domain instability that the frequency check cannot show). The filters run
-  over a horizon extended as the flight is flown (:func:`learning_horizon`): at rest
-  before ``t = 0``, a line fitted to the last 0.25 s after the end.
-* **Where the wind acts.** The wind pushes the airframe, the command first passes the
-  attitude loop ``A = s^2 P``: each vehicle's command-side equivalent of the same wind is
-  ``A_j^{-1}{d}``. The Theorem with these wind maps gains the factor
-  ``W = A_hat_{j-1}/A_hat_j`` (:func:`airframe_path_filter`); without it UAV3, learning
-  from UAV1 (tau 0.139 vs 0.100 s), kept ~5 mm of error at the fixed point (noise-free,
-  scenario 1), and the full run leaves 1-6 % of the DOB-only RMSE instead of 0.5-3 %.
-* **One-pass convergence.** With exact models the law reaches its fixed point in one
-  flight (as the paper reports) and from then on copies the previous vehicle's sensor
-  noise and residual every flight. A learning gain ``gamma < 1`` (``learning_gain``,
-  default 1: the Theorem's law) averages them over the chain: the error falls by
-  ``1 - gamma`` per flight to the same floor.
-
-So the law flown is (:class:`VehicleLearning`)::
-
-    d_f,j = F{ W{ L1_j{ F{gamma e_{j-1} + Gf_{j-1}{d_f,{j-1}}} } } }
-
-which with ``F = W = gamma = 1`` is the Theorem's ``L1_j{e_{j-1}} + L2_j{d_f,{j-1}}``.
+Each learning flight flies the signal :class:`~ilcdob.design.flown.VehicleLearning` computes
+from the previous flight's *measured* error: the Theorem's law as flown on a vehicle with
+wrong models (robustness filter, trial horizon, airframe correction, learning gain;
+:mod:`ilcdob.design.flown` explains and measures each).
 
 Disturbance estimate against the truth: ``d_hat + d_f`` is a command-side signal (what
 the vehicle must be commanded to cancel the wind), the true disturbance is the airframe's
@@ -77,7 +48,6 @@ through the model's attitude chain: ``rmse(A_hat{d_hat + d_f} - d)``
 from __future__ import annotations
 
 import math
-import sys
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -86,27 +56,23 @@ from typing import Callable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.design import LearningFilters, closed_form_filters
-from ilcdob.design.closed_form import simulate_map
-from ilcdob.signals import as_signal
+from ilcdob.design import closed_form_filters
+from ilcdob.design.flown import (LEARNING_CUTOFF, LEARNING_FILTER_ORDER, VehicleLearning, model_attitude,
+                                 vehicle_learning)
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
-from ilcdob.identification.fleet_id import VehicleIdentification, fleet_toml, identify_vehicle
-from ilcdob.vehicles.quadrotor import (DiscretePID, QuadrotorParams, limit_tilt, make_advance,
-                                             table_i_vehicles)
+from ilcdob.fleet_io import fleet_to_toml
+from ilcdob.identification.fleet_id import VehicleIdentification, identified_systems, identify_vehicle
 from ilcdob.loop import LoopSystem
-from ilcdob.specs import PlantSpec
+from ilcdob.signals import as_signal
+from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
 
 from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain
 from .scenarios import Scenario, scenario
 from .simulate import Flight, rmse
 
-#: Length of the trial end fitted by the line that extends it (:func:`learning_horizon`), s.
-END_FIT_S = 0.25
-
-__all__ = ["NonlinearSettings", "NonlinearFlight", "NonlinearReproduction", "VehicleLearning", "fly_loop",
-           "model_attitude", "airframe_path_filter", "learning_horizon", "robustness_filter",
-           "identify_vehicles", "run_nonlinear_scenario", "reproduce_nonlinear"]
+__all__ = ["NonlinearSettings", "NonlinearFlight", "NonlinearReproduction", "fly_loop", "identify_vehicles",
+           "run_nonlinear_scenario", "reproduce_nonlinear"]
 
 
 @dataclass(frozen=True)
@@ -128,26 +94,21 @@ class NonlinearSettings:
         ``False`` keeps the fleet file's plants as the models.
     learning_cutoff : float or None
         Corner frequency ``w_c`` of the zero-phase robustness filter F on the learning
-        signal, rad/s (> 0; ``None`` disables it). Default 10 rad/s: above every
-        disturbance of the scenarios (0.94 and 1.41 rad/s, half-wave harmonics up to
-        ~8.5 rad/s) and below the band where ``1/P_hat`` amplifies sensor noise.
+        signal, rad/s (> 0; ``None`` disables it). Default
+        :data:`~ilcdob.design.flown.LEARNING_CUTOFF` (10 rad/s; :mod:`ilcdob.design.flown`
+        explains the choice).
     learning_filter_order : int
         Order ``n`` of the Butterworth prototype (1..8); applied forwards and backwards.
     airframe_disturbance : bool
         Learn with the wind's true path (it acts on the airframe): the correction
-        ``W = P_hat_{j-1}/P_hat_j`` of :func:`airframe_path_filter` (default). ``False``
-        flies the paper's law as is, which assumes the wind at the command input.
+        ``W = P_hat_{j-1}/P_hat_j`` of :func:`~ilcdob.design.flown.airframe_path_filter`
+        (default). ``False`` flies the paper's law as is, which assumes the wind at the
+        command input.
     learning_gain : float
         ``gamma`` in (0, 1]: the share of the newly reconstructed error learned per flight
-        (:class:`VehicleLearning`). 1 (default) is the Theorem's law, which reaches its
-        fixed point in one pass (the paper, Section IV: learning converges in the first
-        iteration) and then copies the previous vehicle's sensor noise and own residual every
-        flight, so iterations 1-3 stay on that floor, a few percent apart in either direction.
-        A smaller gain averages them over the chain: the error falls geometrically (factor
-        ``1 - gamma`` per flight) to the same floor instead of jumping there; the path
-        changes, the final accuracy does not. Measured on the full run (seed 0), learning
-        1 / 2 / 3 over the DOB-only RMSE: gain 1, 0.44-3.33 % / 0.38-3.33 % / 0.36-3.35 %;
-        gain 0.5, 12-50 % / 1.5-7.2 % / 0.46-2.97 %.
+        (:class:`~ilcdob.design.flown.VehicleLearning`). 1 (default) is the Theorem's law,
+        which reaches its fixed point in one pass; a smaller gain changes the path to the
+        same floor, not the floor (measured in :mod:`ilcdob.design.flown`).
     inner_rate_hz : float
         Integration and inner-loop rate of the vehicles, Hz (a multiple of ``1/Ts``).
     """
@@ -155,8 +116,8 @@ class NonlinearSettings:
     sensor_noise_std: float = 0.0005
     seed: int = 0
     identify: bool = True
-    learning_cutoff: float | None = 10.0
-    learning_filter_order: int = 4
+    learning_cutoff: float | None = LEARNING_CUTOFF
+    learning_filter_order: int = LEARNING_FILTER_ORDER
     airframe_disturbance: bool = True
     learning_gain: float = 1.0
     inner_rate_hz: float = 500.0
@@ -189,6 +150,7 @@ class NonlinearSettings:
             raise SpecError(f"`inner_rate_hz`: got {r!r}, expected a rate >= 50 Hz")
 
     def to_dict(self) -> dict[str, object]:
+        """The settings as plain JSON types (the ``settings`` of a report)."""
         return {"sensor_noise_std_m": self.sensor_noise_std, "seed": int(self.seed),
                 "identify": self.identify, "learning_cutoff_rad_s": self.learning_cutoff,
                 "learning_filter_order": int(self.learning_filter_order),
@@ -204,6 +166,13 @@ class NonlinearFlight(Flight):
 
     Attributes
     ----------
+    system, mode, t, r, d_hat, d_f, u2
+        As in :class:`~ilcdob.validation.simulate.Flight` (``u2``: the command sent, after
+        the tilt limit).
+    y, e : array, m
+        *True* position and tracking error ``r - y``.
+    d : array, m/s^2
+        The disturbance acting on the airframe at ``t_k`` (wind + the vehicle's noise).
     y_meas : array, m
         Measured position ``x_m`` (true position + sensor noise).
     e_meas : array, m
@@ -211,7 +180,7 @@ class NonlinearFlight(Flight):
     d_est : array, m/s^2
         The total estimate ``d_hat + d_f`` (command side) expressed as the acceleration it
         stands for on the airframe: ``A_hat{d_hat + d_f}`` with the model's attitude chain
-        ``A_hat = s^2 P_hat`` under zero-order hold (:func:`model_attitude`).
+        ``A_hat = s^2 P_hat`` under zero-order hold (:func:`~ilcdob.design.flown.model_attitude`).
     saturated : int
         Samples at which the tilt limit cut the commanded acceleration (``u2`` is the
         command actually sent).
@@ -227,34 +196,6 @@ class NonlinearFlight(Flight):
         """RMSE of the disturbance estimate against the true disturbance, m/s^2:
         ``rmse(A_hat{d_hat + d_f} - d)`` (both as accelerations of the airframe)."""
         return rmse(self.d_est - self.d)
-
-
-def _rigid_body_split(plant: PlantSpec, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """``(num, den)`` of the attitude chain ``A_hat = s^2 P_hat`` of a model ``A_hat/s^2``."""
-    num = np.trim_zeros(np.asarray(plant.num, float), "f")
-    den = np.trim_zeros(np.asarray(plant.den, float), "f")
-    k = 0
-    while den.size > 1 and den[-1] == 0.0:
-        den, k = den[:-1], k + 1
-    if k != 2 or num[-1] == 0.0:
-        raise SpecError(f"model of {name!r}: got P_hat = {list(plant.num)}/{list(plant.den)} with {k} "
-                        "integrator(s); the nonlinear vehicles need models A(s)/s^2 (attitude chain times "
-                        "the rigid body's two integrators), e.g. b0/(s^2 (s + a0))")
-    return num, den
-
-
-def model_attitude(loop: LoopSystem) -> tuple[np.ndarray, np.ndarray, int]:
-    """The model's attitude chain ``A_hat = s^2 P_hat`` under zero-order hold.
-
-    Returns
-    -------
-    (b, a, delay) : (numpy.ndarray, numpy.ndarray, int)
-        ``z^-1`` coefficients for :func:`scipy.signal.lfilter` and the model's input delay
-        in whole samples (rounded).
-    """
-    num, den = _rigid_body_split(loop.spec.nominal_plant, loop.name)
-    b, a, _ = sps.cont2discrete((num, den), loop.ts, method="zoh")
-    return np.atleast_1d(np.squeeze(b)), np.atleast_1d(a), int(round(loop.spec.nominal_plant.delay / loop.ts))
 
 
 def _mats(sys_) -> tuple[list[list[float]], list[float], list[float], float]:
@@ -390,176 +331,8 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
                            saturated=saturated)
 
 
-def _linear_tail(x: np.ndarray, n_fit: int, n_pad: int) -> np.ndarray:
-    """``n_pad`` samples continuing ``x`` along the least-squares line through its last
-    ``n_fit`` samples (robust to noise, keeps the slope)."""
-    m = min(n_fit, x.size)
-    k = np.arange(m, dtype=float)
-    coef = np.polyfit(k, x[-m:], 1) if m > 1 else np.array([0.0, x[-1]])
-    return np.polyval(coef, np.arange(m, m + n_pad, dtype=float))
-
-
-def learning_horizon(x: object, ts: float, pad: int) -> np.ndarray:
-    """Extend one trial by ``pad`` samples at each end, as it is flown: before ``t = 0`` the
-    vehicle hovers at rest (zeros), after the end the signal continues along the
-    least-squares line through its last ``END_FIT_S`` seconds (0.25 s: long enough to
-    average the sensor noise, short enough to follow the trend at the end; with 1 s the
-    end of scenario 4, where the half-wave wind has a kink at 59.99 s, was learned badly).
-
-    A mirror image at the end would bend the signal flat there, a point reflection about the
-    last (noisy) sample adds a step; an end-to-end zero-phase filter whose start is cut at
-    ``t = 0`` hands the plant inverse a jump in the derivatives. Each of these, fed through
-    ``1/P_hat``, grew from one learning iteration to the next on the nonlinear vehicles.
-    """
-    x = as_signal(x, "x")
-    if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or pad < 0:
-        raise SpecError(f"`pad`: got {pad!r}, expected an integer number of samples >= 0")
-    if pad == 0:
-        return x
-    return np.concatenate([np.zeros(pad), x, _linear_tail(x, max(2, int(round(END_FIT_S / ts))), pad)])
-
-
-def robustness_filter(x: object, ts: float, cutoff: float, order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass ``F`` (forward-backward, ``|F| = 1/(1 + (w/w_c)^(2n))``).
-
-    Parameters
-    ----------
-    x : array
-        Signal, already extended (:func:`learning_horizon`); run without further padding.
-    ts : float
-        Sample time, s.
-    cutoff : float
-        Corner ``w_c`` of the prototype, rad/s, below the Nyquist frequency ``pi/ts``.
-    order : int
-        Prototype order ``n`` (1..8).
-    """
-    x = as_signal(x, "x")
-    nyq = math.pi / ts
-    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not 0.0 < cutoff < nyq:
-        raise SpecError(f"`cutoff`: got {cutoff!r} rad/s, expected a frequency in (0, {nyq:.4g}) rad/s "
-                        f"(the Nyquist frequency at Ts = {ts:g} s)")
-    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= order <= 8:
-        raise SpecError(f"`order`: got {order!r}, expected an integer in 1..8")
-    sos = sps.butter(order, cutoff / nyq, output="sos")
-    return sps.sosfiltfilt(sos, x, padtype=None)
-
-
-def airframe_path_filter(source: LoopSystem, target: LoopSystem) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete ``W = A_hat_{j-1} / A_hat_j = P_hat_{j-1} / P_hat_j`` (Tustin): the
-    airframe-wind correction of the learning filter.
-
-    The wind acts on the rigid body (``x'' = A{u2} + d``), not at the command input that
-    the paper's loop ``y = P{u2 + d}`` (Sec. II) assumes. Its command-side equivalent
-    differs per vehicle, ``A_j^{-1}{d}``, so vehicle j-1's data reconstruct *its* equivalent
-    and vehicle j needs its own. With the wind maps ``Gd_j = P_j (1 - Q_j)/D_j * A_j^{-1}``
-    in the Theorem's ``L1_j = (Gf_j Gd_{j-1})^{-1} Gd_j`` (paper Sec. III) the paper's L1
-    gains exactly the factor ``A_{j-1}/A_j``, built here from the models
-    (``A_hat = s^2 P_hat``). Around a cycle of the fleet the factors multiply to 1.
-
-    Returns
-    -------
-    (b, a) : numpy.ndarray
-        ``z^-1`` coefficients of W for :func:`scipy.signal.lfilter`.
-
-    Raises
-    ------
-    SpecError
-        A model is not ``A(s)/s^2``, the model delays differ, or ``A_hat_j`` has a zero in
-        the closed right half plane (W would be unstable).
-    """
-    ns, ds = _rigid_body_split(source.spec.nominal_plant, source.name)
-    nt, dt_ = _rigid_body_split(target.spec.nominal_plant, target.name)
-    ps, pt = source.spec.nominal_plant, target.spec.nominal_plant
-    if abs(ps.delay - pt.delay) > 1e-9:
-        raise SpecError(f"models of {source.name!r} and {target.name!r}: delays {ps.delay:g} s and "
-                        f"{pt.delay:g} s differ; the airframe correction needs equal model delays")
-    zt = np.roots(nt) if nt.size > 1 else np.zeros(0)
-    if np.any(zt.real >= 0):
-        raise SpecError(f"model of {target.name!r}: zeros {zt} in the closed right half plane; "
-                        "A_hat_j-1/A_hat_j would be unstable")
-    b, a = sps.bilinear(np.polymul(ns, dt_), np.polymul(ds, nt), fs=1.0 / source.ts)
-    return np.atleast_1d(b), np.atleast_1d(a)
-
-
-@dataclass(frozen=True)
-class VehicleLearning:
-    """The learning law flown on the vehicles (module docstring)::
-
-        d_f,j = F{ W{ L1_j{ F{gamma e_{j-1} + Gf_{j-1}{d_f,{j-1}}} } } }
-
-    which with ``F = W = gamma = 1`` is the Theorem's ``L1_j{e_{j-1}} + L2_j{d_f,{j-1}}``
-    (the Theorem, paper Sec. III), evaluated as in
-    :meth:`ilcdob.design.LearningFilters.apply`
-    (``L2 = L1 Gf_{j-1}``).
-
-    Attributes
-    ----------
-    filters : LearningFilters
-        The closed-form filters of the Theorem from the identified models.
-    path : tuple of numpy.ndarray or None
-        ``(b, a)`` of the airframe correction W (:func:`airframe_path_filter`), or ``None``
-        for the paper's law as is (wind assumed at the command input).
-    cutoff : float or None
-        Corner of the robustness filter F, rad/s (:func:`robustness_filter`); ``None``:
-        ``F = 1`` and no horizon extension.
-    order : int
-        Butterworth order of F.
-    gain : float
-        Learning gain ``gamma`` in (0, 1] on the new error: ``gamma L1{e_{j-1}} +
-        L2{d_f,{j-1}}`` (1: the Theorem's law).
-    """
-
-    filters: LearningFilters
-    path: tuple[np.ndarray, np.ndarray] | None
-    cutoff: float | None
-    order: int = 4
-    gain: float = 1.0
-
-    @property
-    def pad(self) -> int:
-        """Samples added at each end of the trial (:func:`learning_horizon`): six periods of
-        the corner frequency, where F's impulse response has decayed."""
-        if self.cutoff is None:
-            return 0
-        return int(6 * math.ceil(2 * math.pi / self.cutoff / self.filters.source.ts))
-
-    def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
-        """Learning signal of vehicle j from vehicle j-1's trial.
-
-        Parameters
-        ----------
-        e_prev : array, m
-            Vehicle j-1's *measured* tracking error.
-        df_prev : array, m/s^2
-            The learning signal vehicle j-1 flew with (zeros if none).
-
-        Returns
-        -------
-        numpy.ndarray
-            ``d_f,j``, m/s^2, same length.
-        """
-        lf = self.filters
-        ts = lf.source.ts
-        e = as_signal(e_prev, "e_prev")
-        df_prev = as_signal(df_prev, "df_prev", e.size)
-        e_virtual = self.gain * e
-        if np.any(df_prev):
-            e_virtual = e_virtual + simulate_map(lf.source.G_f, df_prev)
-        pad = self.pad
-        x = learning_horizon(e_virtual, ts, pad)
-        if self.cutoff is not None:
-            x = robustness_filter(x, ts, self.cutoff, self.order)
-        df = lf.L1.apply(x, "e_prev")
-        if self.path is not None:
-            df = sps.lfilter(self.path[0], self.path[1], df)
-        if self.cutoff is not None:
-            df = robustness_filter(df, ts, self.cutoff, self.order)
-        return df[pad:pad + e.size]
-
-
-def identify_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams],
-                      settings: NonlinearSettings,
-                      progress: Callable[[str], None] | None = None
+def identify_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams], settings: NonlinearSettings,
+                      progress: Callable[[int, int, str], None] | None = None
                       ) -> tuple[Fleet, dict[str, VehicleIdentification], str]:
     """Identify every vehicle from step and chirp flights and build the fleet of the models.
 
@@ -567,25 +340,36 @@ def identify_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams],
     loop's ``M = Q/P_hat`` and its learning filters use the model); controllers, DOBs and
     noises are ``fleet``'s. Source: ``"identified_fleet.toml"``.
 
+    Parameters
+    ----------
+    fleet : Fleet
+        Controllers, DOBs and noises of the systems.
+    vehicles : dict
+        Fleet name -> the nonlinear vehicle flown in the experiments.
+    settings : NonlinearSettings
+        ``seed`` (vehicle ``i`` flies with seed ``seed + 10 i``) and ``sensor_noise_std``.
+    progress : callable, optional
+        ``progress(done, total, what)`` after each vehicle (``total``: the number of
+        vehicles); None: silent.
+
     Returns
     -------
     (Fleet, dict, str)
         The fleet of the models, the identification of every vehicle, and the fleet file
-        of the models (TOML text).
+        of the models (TOML text, :func:`ilcdob.fleet_io.fleet_to_toml`).
     """
-    say = progress or (lambda msg: None)
     results = {}
     for i, name in enumerate(fleet.names):
         results[name] = identify_vehicle(name, fleet, seed=int(settings.seed) + 10 * i,
-                                         noise_std=settings.sensor_noise_std, progress=None,
-                                         vehicle=vehicles[name])
-        est = results[name].estimate
-        say(f"identified {name}: fit {est.fit_estimation:.2f} % (estimation), "
-            f"{est.fit_validation:.2f} % (held out)")
+                                         noise_std=settings.sensor_noise_std, vehicle=vehicles[name])
+        if progress is not None:
+            est = results[name].estimate
+            progress(i + 1, len(fleet.names), f"identified {name}: fit {est.fit_estimation:.2f} % (estimation), "
+                                              f"{est.fit_validation:.2f} % (held out)")
     header = (f"# Identified from synthetic step + chirp flights of the nonlinear vehicles "
               f"(ilcdob.validation.nonlinear, seed {settings.seed}, sensor noise "
               f"{settings.sensor_noise_std:g} m); controllers, DOBs and noises from {fleet.source}")
-    text = fleet_toml(fleet, results, header)
+    text = fleet_to_toml(fleet.sample_time, identified_systems(fleet, results), header=header)
     return fleet_from_dict(tomllib.loads(text), "identified_fleet.toml"), results, text
 
 
@@ -611,9 +395,9 @@ def _learning_for(fleet: Fleet, cache: dict, src: str, tgt: str, settings: Nonli
     """The learning law of the pair; ``cache`` holds the closed-form filters (for figures)."""
     if (src, tgt) not in cache:
         cache[(src, tgt)] = closed_form_filters(fleet.loop(src), fleet.loop(tgt))
-    path = airframe_path_filter(fleet.loop(src), fleet.loop(tgt)) if settings.airframe_disturbance else None
-    return VehicleLearning(cache[(src, tgt)], path, settings.learning_cutoff, settings.learning_filter_order,
-                           settings.learning_gain)
+    return vehicle_learning(fleet.loop(src), fleet.loop(tgt), cutoff=settings.learning_cutoff,
+                            order=settings.learning_filter_order, airframe_disturbance=settings.airframe_disturbance,
+                            gain=settings.learning_gain, filters=cache[(src, tgt)])
 
 
 def _rng(settings: NonlinearSettings, sid: int, index: int, trial: int) -> np.random.Generator:
@@ -626,20 +410,27 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
     """Fly one scenario with every nonlinear vehicle: no DOB, only DOB, ``iterations``
     learning trials passed around the fleet in ``sc``'s order (the chain of
     :mod:`ilcdob.validation.reproduce`), each learning signal from the previous flight's
-    *measured* error by :class:`VehicleLearning`.
+    *measured* error by :class:`~ilcdob.design.flown.VehicleLearning`.
 
     Parameters
     ----------
     fleet : Fleet
         Loops built from the models (identified plants).
-    vehicles : dict
-        Fleet name -> nonlinear vehicle.
+    vehicles : dict or None
+        Fleet name -> nonlinear vehicle (None: :func:`~ilcdob.vehicles.quadrotor.table_i_vehicles`).
     sc : Scenario
+        The scenario flown (reference, wind, learning order).
     iterations : int
         Learning trials per system (>= 1).
     filters : dict, optional
         Cache of closed-form filters keyed by (source, target), filled as needed.
     settings : NonlinearSettings, optional
+        Default: ``NonlinearSettings()``.
+
+    Returns
+    -------
+    ScenarioResult
+        Every system's no-DOB, DOB-only and learning flights (:class:`NonlinearFlight`).
     """
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
         raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
@@ -684,20 +475,47 @@ class NonlinearReproduction(ReproductionResult):
 
     Attributes
     ----------
+    fleet, scenarios, iterations, filters, elapsed_s, law
+        As in :class:`~ilcdob.validation.reproduce.ReproductionResult`; ``fleet`` holds the
+        models flown, ``law`` is always ``"paper"`` (flown as :mod:`ilcdob.design.flown`).
     settings : NonlinearSettings
+        The settings of the run.
     vehicles : dict
         Fleet name -> the nonlinear vehicle flown.
     identification : dict
         Fleet name -> :class:`~ilcdob.identification.fleet_id.VehicleIdentification`
         (empty when ``settings.identify`` is False).
     identified_toml : str
-        The fleet file of the models (written as ``identified_fleet.toml``).
+        The fleet file of the models (TOML text; the reports store it as
+        ``identified_fleet.toml``).
     """
 
     settings: NonlinearSettings = field(default_factory=NonlinearSettings)
     vehicles: dict = field(default_factory=dict)
     identification: dict = field(default_factory=dict)
     identified_toml: str = ""
+
+    def files(self, figures: bool = True) -> dict[str, object]:
+        """The report of :meth:`ReproductionResult.files` with ``identified_fleet.toml``.
+
+        Parameters
+        ----------
+        figures : bool
+            Include the figures.
+
+        Returns
+        -------
+        dict of str to object
+            File name -> content, nothing written: the reproduction's report with
+            ``identified_fleet.toml`` (str, :attr:`identified_toml`, the fleet file of the
+            models) inserted before ``results.json``, which stays last.
+        """
+        out = dict(super().files(figures=figures))
+        results = out.pop("results.json", None)
+        out["identified_fleet.toml"] = self.identified_toml
+        if results is not None:
+            out["results.json"] = results
+        return out
 
     def to_dict(self) -> dict[str, object]:
         """The schema of :meth:`ReproductionResult.to_dict` with ``"plant": "nonlinear"``."""
@@ -745,7 +563,7 @@ class NonlinearReproduction(ReproductionResult):
             + f"filters designed from the models; {self.iterations} learning iterations. Learning law: the "
             "Theorem's closed-form filters with the airframe-wind correction, a zero-phase robustness filter "
             f"at {s.learning_cutoff} rad/s and learning gain {s.learning_gain:g} "
-            "(`ilcdob.validation.nonlinear` explains each). Tracking RMSE: true position; disturbance "
+            "(`ilcdob.design.flown` explains each). Tracking RMSE: true position; disturbance "
             "estimate: A_hat{d_hat + d_f} against the wind + noise acceleration on the airframe. Regenerate "
             "with `ilcdob reproduce --plant nonlinear --out <dir>`; numbers are in `results.json`.",
         ]
@@ -764,9 +582,12 @@ class NonlinearReproduction(ReproductionResult):
 def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1, 2, 3, 4),
                         iterations: int = 3, settings: NonlinearSettings | None = None,
                         vehicles: dict[str, QuadrotorParams] | None = None,
-                        progress: Callable[[str], None] | None = None,
+                        progress: Callable[[int, int, str], None] | None = None,
                         scenarios: list[Scenario] | None = None) -> NonlinearReproduction:
     """Identify the vehicles, design the filters and fly the scenarios (module docstring).
+
+    Nothing is written: the fleet file of the models is returned as
+    :attr:`NonlinearReproduction.identified_toml`.
 
     Parameters
     ----------
@@ -778,14 +599,21 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     iterations : int
         Learning iterations (>= 1).
     settings : NonlinearSettings, optional
+        Default: ``NonlinearSettings()``.
     vehicles : dict, optional
-        Fleet name -> :class:`QuadrotorParams` (default: :func:`table_i_vehicles`).
+        Fleet name -> :class:`~ilcdob.vehicles.quadrotor.QuadrotorParams` (default:
+        :func:`~ilcdob.vehicles.quadrotor.table_i_vehicles`).
     progress : callable, optional
-        Receives one line per step (default: printed to stderr).
+        ``progress(done, total, what)`` after each step: every identified vehicle (when
+        ``settings.identify``), then every scenario flown; ``what`` describes the step.
+        None (default): silent.
     scenarios : list of Scenario, optional
         Fly these instead of ``scenario_ids`` (e.g. shortened copies, for tests).
+
+    Returns
+    -------
+    NonlinearReproduction
     """
-    say = progress if progress is not None else (lambda msg: print(msg, file=sys.stderr, flush=True))
     settings = settings if settings is not None else NonlinearSettings()
     if not isinstance(settings, NonlinearSettings):
         raise SpecError(f"`settings`: got {type(settings).__name__}, expected a NonlinearSettings")
@@ -796,18 +624,22 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
         raise SpecError(f"`fleet`: got {type(base).__name__}, expected a Fleet or None")
     vehicles = _check_vehicles(base, vehicles, settings.inner_rate_hz)
     scs = list(scenarios) if scenarios is not None else [scenario(sid) for sid in scenario_ids]
+    n_ident = len(base.names) if settings.identify else 0
+    total = n_ident + len(scs)
+    say = progress if progress is not None else (lambda done, total_, what: None)
     start = time.perf_counter()
     if settings.identify:
-        models, ident, toml_text = identify_vehicles(base, vehicles, settings, say)
+        models, ident, toml_text = identify_vehicles(base, vehicles, settings,
+                                                     lambda done, _, what: say(done, total, what))
     else:
-        models, ident, toml_text = base, {}, fleet_toml(base, {})
-    say(f"identification: {time.perf_counter() - start:.1f} s")
+        models, ident = base, {}
+        toml_text = fleet_to_toml(base.sample_time, identified_systems(base, {}))
     filters: dict = {}
     results = []
     for i, sc in enumerate(scs, 1):
         t0 = time.perf_counter()
         results.append(run_nonlinear_scenario(models, vehicles, sc, iterations, filters, settings))
-        say(f"[{i}/{len(scs)}] scenario {sc.id} ({sc.title}, nonlinear): {time.perf_counter() - t0:.1f} s")
+        say(n_ident + i, total, f"scenario {sc.id} ({sc.title}, nonlinear): {time.perf_counter() - t0:.1f} s")
     return NonlinearReproduction(fleet=models, scenarios=results, iterations=iterations, filters=filters,
                                  elapsed_s=time.perf_counter() - start, settings=settings, vehicles=vehicles,
                                  identification=ident, identified_toml=toml_text)

@@ -21,21 +21,24 @@ system's (i+1)-th learning trial. Each learning signal comes from the learning l
 
 With one earlier flight (each scenario's first learning flight) ``multi-source`` is the
 paper's law; with a hover (no reference motion) ``exact-reference`` is.
+
+The report of a reproduction is :meth:`ReproductionResult.files`: ``results.json``, the
+figures (:mod:`ilcdob.validation.figures`) and a ``README.md`` (:func:`markdown_index`), as
+content to be written by the caller.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import PurePath
 from typing import Callable
-
 
 import numpy as np
 
 from ilcdob.design import LearningFilters, closed_form_filters
 from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.design.laws import DEFAULT_LAW, check_law, reference_terms
+from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law, reference_terms
 from ilcdob.design.multi_source import SourceTrial, multi_source_learning
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
@@ -44,12 +47,35 @@ from .scenarios import Scenario, scenario
 from .simulate import Flight, simulate_flight
 
 __all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "learning_chain", "law_delta_sets", "run_scenario",
-           "reproduce"]
+           "reproduce", "markdown_index", "json_document", "FIGURE_TEXT"]
+
+#: Caption of each figure in the report's README.md (``error_s<N>`` and ``disturbance_s<N>``
+#: are captioned per scenario by :func:`markdown_index`).
+FIGURE_TEXT = {
+    "rmse_bars.png": "Tracking RMSE per scenario and system (log scale): no DOB, only DOB, learning iterations.",
+    "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB).",
+    "identified_models.png": "Identified plant models with their 3-sigma multiplicative uncertainty band "
+                             "(from the parameter covariance of the fit).",
+    "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown (with equal "
+                         "Q filters L2 = (1 - Q_j)/(1 - Q_{j-1}) = 1 exactly).",
+    "bode_te.png": "Te1, Te2 (error propagation with learning when every true plant is 10 % stronger "
+                   "than its model; with exact models both vanish) and Omega (disturbance -> DOB estimate).",
+}
 
 
 @dataclass(frozen=True)
 class SystemResult:
-    """Flights of one system in one scenario."""
+    """Flights of one system in one scenario.
+
+    Attributes
+    ----------
+    no_dob : Flight
+        The flight without DOB.
+    dob : Flight
+        The flight with the DOB only.
+    learning : tuple of Flight
+        The learning flights, in chain order.
+    """
 
     no_dob: Flight
     dob: Flight
@@ -68,7 +94,18 @@ class SystemResult:
 
 @dataclass(frozen=True)
 class ScenarioResult:
-    """All flights of one scenario; ``chain`` lists (source, target) of each learning flight."""
+    """All flights of one scenario.
+
+    Attributes
+    ----------
+    scenario : Scenario
+    order : list of str
+        The scenario's learning order of the systems.
+    systems : dict of str to SystemResult
+        Flights per system.
+    chain : list of (str, str)
+        (source, target) of each learning flight, in the order flown.
+    """
 
     scenario: Scenario
     order: list[str]
@@ -76,6 +113,7 @@ class ScenarioResult:
     chain: list[tuple[str, str]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, object]:
+        """The scenario's entry of ``results.json`` (RMSE in m, and m/s^2 for ``rmse_dhat_*``)."""
         return {
             "id": self.scenario.id,
             "title": self.scenario.title,
@@ -90,8 +128,25 @@ class ScenarioResult:
 class ReproductionResult:
     """Every scenario run, plus the fleet, the filters used and the learning law.
 
-    ``filters`` holds the Theorem's pair (L1, L2) of every pair flown with the ``paper`` or
-    ``exact-reference`` law; it is empty for ``multi-source`` (no single pair's filters).
+    Subclasses (the nonlinear reproduction, :mod:`ilcdob.validation.nonlinear`) change the
+    report through :meth:`to_dict` (``results.json``) and :meth:`markdown_plant` (the
+    description at the top of ``README.md``).
+
+    Attributes
+    ----------
+    fleet : Fleet
+        The fleet flown (its models).
+    scenarios : list of ScenarioResult
+        One per scenario, in the order run.
+    iterations : int
+        Learning trials per system.
+    filters : dict of (str, str) to LearningFilters
+        The Theorem's pair (L1, L2) of every pair flown with the ``paper`` or
+        ``exact-reference`` law; empty for ``multi-source`` (no single pair's filters).
+    elapsed_s : float
+        Run time of the simulations, s.
+    law : str
+        The learning law (:mod:`ilcdob.design.laws`).
     """
 
     fleet: Fleet
@@ -102,6 +157,7 @@ class ReproductionResult:
     law: str = DEFAULT_LAW
 
     def to_dict(self) -> dict[str, object]:
+        """The content of ``results.json`` (RMSE in m, and m/s^2 for ``rmse_dhat_*``)."""
         return {
             "plant": "linear",
             "law": self.law,
@@ -111,6 +167,130 @@ class ReproductionResult:
             "units": {"rmse": "m", "rmse_dhat": "m/s^2"},
             "scenarios": [s.to_dict() for s in self.scenarios],
         }
+
+    def markdown_plant(self) -> list[str]:
+        """The description of the run at the top of ``README.md``, as Markdown lines."""
+        return [
+            f"Fleet: `{PurePath(self.fleet.source).name}` ({', '.join(self.fleet.names)}), sample time "
+            f"{self.fleet.sample_time} s, exact models (Case I of the Theorem: each simulated plant is its "
+            f"model), {self.iterations} learning "
+            "iterations. Regenerate with `ilcdob reproduce"
+            + ("" if self.law == "paper" else f" --law {self.law}")
+            + " --out <dir>`; numbers are in `results.json`."]
+
+    def files(self, figures: bool = True) -> dict[str, object]:
+        """The report of the reproduction: file name -> content.
+
+        Parameters
+        ----------
+        figures : bool
+            Include the figures (:func:`ilcdob.validation.figures.reproduction_figures`).
+
+        Returns
+        -------
+        dict of str to object
+            The figures (``matplotlib.figure.Figure``, PNG at
+            :data:`ilcdob.validation.figures.FIGURE_DPI`) when ``figures``, then ``README.md``
+            (str, :func:`markdown_index`), then ``results.json`` (a JSON document,
+            :meth:`to_dict` with non-finite numbers as null). ``results.json`` comes last: written
+            in this order, its presence means the files beside it are complete.
+        """
+        out: dict[str, object] = {}
+        if figures:
+            from .figures import reproduction_figures  # matplotlib only when figures are made
+
+            out.update(reproduction_figures(self))
+        out["README.md"] = markdown_index(self, list(out))
+        out["results.json"] = json_document(self.to_dict())
+        return out
+
+
+def json_document(data: object) -> object:
+    """``data`` as standard JSON content: every non-finite float replaced by None.
+
+    Parameters
+    ----------
+    data : object
+        Nested dicts, lists and tuples (tuples become lists) of JSON values; floats may be
+        NaN or infinite (numpy floats and integers are converted to Python numbers).
+
+    Returns
+    -------
+    object
+        The same structure, with ``None`` where a number was not finite.
+    """
+    if isinstance(data, dict):
+        return {k: json_document(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [json_document(v) for v in data]
+    if isinstance(data, (bool, np.bool_)):
+        return bool(data)
+    if isinstance(data, np.integer):
+        return int(data)
+    if isinstance(data, (float, np.floating)):
+        return float(data) if np.isfinite(data) else None
+    return data
+
+
+def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
+    """The ``README.md`` of a reproduction report: description, RMSE table, fits, figures.
+
+    Parameters
+    ----------
+    res : ReproductionResult
+        The reproduction; its :meth:`~ReproductionResult.markdown_plant` opens the text.
+    figures : list of str
+        File names of the figures shown, in order (captions from :data:`FIGURE_TEXT`).
+
+    Returns
+    -------
+    str
+        The Markdown text.
+    """
+    lines = [
+        "# Reproduction of Modi et al. (2024), Section IV",
+        "",
+        *res.markdown_plant(),
+        "",
+        f"Learning law: **{res.law}**, {LAW_DESCRIPTIONS[res.law]} (`ilcdob.design.laws`; choose with `--law`).",
+        "",
+        "Tracking RMSE in mm (no DOB / only DOB / learning 1..n) and RMSE of the total disturbance "
+        "estimate d_hat + d_f against the true disturbance in m/s^2 (only DOB / learning 1):",
+        "",
+        "| scenario | system | no DOB | only DOB | " + " | ".join(
+            f"learning {i + 1}" for i in range(res.iterations)) + " | learning 1 / DOB | d est. DOB | d est. learning 1 |",
+        "|---|---|---|---|" + "---|" * res.iterations + "---|---|---|",
+    ]
+    for sr in res.scenarios:
+        for name in sr.order:
+            m = sr.systems[name].metrics()
+            learn = " | ".join(f"{1e3 * v:.3f}" for v in m["rmse_learning"])
+            lines.append(
+                f"| {sr.scenario.id} | {name} | {1e3 * m['rmse_no_dob']:.1f} | {1e3 * m['rmse_dob']:.1f} | "
+                f"{learn} | {m['rmse_learning'][0] / m['rmse_dob']:.4f} | {m['rmse_dhat_dob']:.3f} | "
+                f"{m['rmse_dhat_learning'][0]:.3f} |")
+    idents = [(s.name, s.identification, s.nominal_plant) for s in res.fleet.systems if s.identification]
+    if idents:
+        lines += ["", "## Identified plant models", "",
+                  "Identified from synthetic step and chirp flights of the nonlinear vehicles "
+                  "(`ilcdob identify-fleet`); fit in % (MATLAB definition) on estimation and held-out flights, "
+                  "1-sigma parameter uncertainty from the fit's covariance.", "",
+                  "| system | model P(s) | parameters (1 sigma) | fit estimation | fit validation |",
+                  "|---|---|---|---|---|"]
+        for name, ident, plant in idents:
+            sd = np.sqrt(np.diag(np.asarray(ident.covariance)))
+            pars = ", ".join(f"{v:.4g} +- {e:.2g}" for v, e in zip(ident.parameters, sd))
+            model = f"({' '.join(f'{v:.4g}' for v in plant.num)}) / ({' '.join(f'{v:.4g}' for v in plant.den)})"
+            lines.append(f"| {name} | {model} | {pars} | {ident.fit_estimation:.2f} % | {ident.fit_validation:.2f} % |")
+    lines += ["", f"Run time {res.elapsed_s:.1f} s for the simulations.", "", "## Figures", ""]
+    for fig in figures:
+        text = FIGURE_TEXT.get(fig)
+        if text is None and fig.startswith("error_s"):
+            text = f"Scenario {fig[7:-4]}: tracking error against time."
+        elif text is None and fig.startswith("disturbance_s"):
+            text = f"Scenario {fig[13:-4]}: disturbance estimates against the true disturbance."
+        lines += [f"{text}", "", f"![{fig}]({fig})", ""]
+    return "\n".join(lines)
 
 
 def _filters_for(fleet: Fleet, cache: dict, src: str, tgt: str) -> LearningFilters:
@@ -123,9 +303,24 @@ def learning_chain(order: list[str], iterations: int, first: Flight,
                    step: Callable[[str, str, Flight], Flight]) -> tuple[dict[str, list[Flight]], list[tuple[str, str]]]:
     """Pass learning around ``order`` cyclically (module docstring), starting from ``first``.
 
-    ``step(source, target, previous_flight)`` designs the target's learning signal from the
-    previous flight and flies it; returns each system's learning flights and the (source,
-    target) of every step.
+    Parameters
+    ----------
+    order : list of str
+        The systems in learning order.
+    iterations : int
+        Learning flights per system.
+    first : Flight
+        The flight that starts the chain (the first system's DOB-only trial).
+    step : callable
+        ``step(source, target, previous_flight)`` designs the target's learning signal from
+        the previous flight and flies it; returns the new flight.
+
+    Returns
+    -------
+    learning : dict of str to list of Flight
+        Each system's learning flights, in order.
+    chain : list of (str, str)
+        (source, target) of every step.
     """
     learning: dict[str, list[Flight]] = {name: [] for name in order}
     chain = []
@@ -145,6 +340,15 @@ def law_delta_sets(fleet: Fleet, k: int = 8, seed: int = 0) -> dict[str, DeltaSe
     """Delta sets of the ``multi-source`` law: every system with an identification or a fleet bound.
 
     Systems with neither are left out (their models count as exact: the error-power floor).
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet.
+    k : int
+        Samples per Delta set.
+    seed : int
+        Seed of the draw (one generator for the whole fleet, in fleet order).
     """
     rng = np.random.default_rng(seed)
     return {s.name: delta_set(s, fleet.sample_time, k, rng) for s in fleet.systems
@@ -218,20 +422,27 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
 
 
 def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: int = 3,
-              progress: Callable[[str], None] | None = None, law: str = DEFAULT_LAW) -> ReproductionResult:
+              progress: Callable[[int, int, str], None] | None = None, law: str = DEFAULT_LAW) -> ReproductionResult:
     """Run the listed scenarios on ``fleet`` (see module docstring).
 
     Parameters
     ----------
     fleet : Fleet
+        The fleet; its systems' models are the simulated plants (Case I of the Theorem).
     scenario_ids : list of int
         Scenarios 1-4 (:mod:`ilcdob.validation.scenarios`).
     iterations : int
         Learning trials per system (>= 1).
     progress : callable, optional
-        Receives one line per scenario (default: printed to stderr).
+        Called as ``progress(done, total, what)`` after each scenario: scenarios done, of
+        ``total``, and a line saying which one finished and its run time. None: silent.
     law : {"paper", "exact-reference", "multi-source"}
         Learning law (module docstring); recorded in the result.
+
+    Returns
+    -------
+    ReproductionResult
+        Every flight; :meth:`ReproductionResult.files` makes its report.
 
     Raises
     ------
@@ -239,7 +450,6 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
         Bad scenario id, ``iterations`` or ``law``.
     """
     law = check_law(law)
-    say = progress if progress is not None else (lambda msg: print(msg, file=sys.stderr, flush=True))
     start = time.perf_counter()
     filters: dict = {}
     deltas = law_delta_sets(fleet) if law == "multi-source" else None
@@ -248,7 +458,8 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
         sc = scenario(sid)
         t0 = time.perf_counter()
         results.append(run_scenario(fleet, sc, iterations, filters, law, deltas))
-        say(f"[{i}/{len(scenario_ids)}] scenario {sid} ({sc.title}, law {law}): "
-            f"{time.perf_counter() - t0:.1f} s")
+        if progress is not None:
+            progress(i, len(scenario_ids), f"scenario {sid} ({sc.title}, law {law}): "
+                                           f"{time.perf_counter() - t0:.1f} s")
     return ReproductionResult(fleet=fleet, scenarios=results, iterations=iterations,
                               filters=filters, elapsed_s=time.perf_counter() - start, law=law)

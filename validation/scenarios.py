@@ -74,11 +74,24 @@ class Scenario:
     order3: tuple[int, ...] = (0, 1, 2)
 
     def time(self, ts: float) -> np.ndarray:
-        """Sample times ``k*ts`` over the scenario, s."""
+        """Sample times ``k*ts`` over the scenario, s.
+
+        Parameters
+        ----------
+        ts : float
+            Sample time, s.
+        """
         return np.arange(int(round(self.duration / ts))) * ts
 
     def order(self, names: list[str]) -> list[str]:
-        """Learning order for a fleet with these system names."""
+        """Learning order for a fleet with these system names.
+
+        Parameters
+        ----------
+        names : list of str
+            The fleet's system names, in fleet order; with three systems they are reordered
+            by ``order3``, otherwise kept.
+        """
         if len(names) == 3:
             return [names[i] for i in self.order3]
         return list(names)
@@ -157,14 +170,36 @@ SCENARIOS: dict[int, Scenario] = {
 
 
 def scenario(sid: int) -> Scenario:
-    """The scenario with id ``sid`` (1-4)."""
+    """The scenario with id ``sid`` (1-4).
+
+    Parameters
+    ----------
+    sid : int
+        Scenario id, 1-4.
+
+    Raises
+    ------
+    SpecError
+        Unknown id.
+    """
     if sid not in SCENARIOS:
         raise SpecError(f"`scenario`: got {sid!r}, valid ids are {sorted(SCENARIOS)}")
     return SCENARIOS[sid]
 
 
 def parse_scenarios(text: str) -> list[int]:
-    """Parse ``"1,2,4"`` into ``[1, 2, 4]``; errors name the bad item and the valid ids."""
+    """Parse ``"1,2,4"`` into ``[1, 2, 4]`` (duplicates dropped, order kept).
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated scenario ids.
+
+    Raises
+    ------
+    SpecError
+        An item that is not a valid id; the message names it and the valid ids.
+    """
     ids = []
     for item in text.split(","):
         item = item.strip()

@@ -29,7 +29,13 @@ __all__ = ["Flight", "simulate_flight", "rmse"]
 
 
 def rmse(x: np.ndarray) -> float:
-    """Root-mean-square value of a signal."""
+    """Root-mean-square value of a signal.
+
+    Parameters
+    ----------
+    x : array
+        The signal.
+    """
     return float(np.sqrt(np.mean(np.square(x))))
 
 

@@ -38,12 +38,12 @@ Inputs, detected by file name in each folder
     numeric field is shown. Lists of numbers (frequency grids, samples) are not tabulated;
     the report says how many values it left out.
 
-The fleet of a ``results.json`` is found as: ``identified_fleet.toml`` in its folder (the
-models a nonlinear run identified); else the file its ``"fleet"`` key names (absolute, or
-relative to the folder); else, when that key names the packaged
-``ilcdob/data/default_fleet.toml`` of another checkout, the installed built-in fleet (the
-report says so); else the ``fleet`` option of :class:`ReportOptions` (``--fleet``). Without
-a fleet the fleet table and Theorem check of that folder say why they are missing.
+Beside ``results.json``, ``ilcdob reproduce`` writes the report's other inputs
+(:func:`report_files`): ``fleet.json`` (the fleet table with its identified models and
+uncertainty) and ``theorem.json`` + ``theorem.png`` (the Theorem check). The report reads
+these files and computes nothing. A folder's ``manifest.json`` lists the SHA-256 of every
+file of its run; a folder whose files do not match it (files from different runs) is
+refused.
 """
 
 from __future__ import annotations
@@ -59,12 +59,16 @@ from typing import Any
 
 import numpy as np
 
-from ilcdob.atomic import write_text_atomic
 from ilcdob.errors import IlcdobError
-from ilcdob.fleet import DEFAULT_FLEET_PATH, DEFAULT_FLEET_SOURCE, Fleet, default_fleet, load_fleet
+from ilcdob.fleet import Fleet
+
+from .output import MANIFEST, read_manifest
 
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
-           "discover_inputs", "json_tables", "build_report", "write_report"]
+           "discover_inputs", "json_tables", "build_report", "report_files", "THEOREM_SAMPLES"]
+
+#: Sampled plants per Delta set of the Theorem check written by :func:`report_files` (as ``ilcdob check``).
+THEOREM_SAMPLES = 8
 
 #: File name -> the command that writes it.
 KNOWN_FILES: dict[str, str] = {
@@ -78,7 +82,6 @@ _PLANT_TITLE = {"linear": "Linear plant (exact models, simulation)",
 _LABEL_KEYS = ("method", "name", "label", "id", "key")
 _PAIR_KEYS = (("source", "target"), ("from", "to"))
 _MAX_TEXT = 60
-_DPI = 110
 
 _BODE_FIGURES = {
     "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB).",
@@ -100,28 +103,13 @@ class ReportOptions:
     ----------
     title : str
         Page title and top heading.
-    fleet : str or Path or None
-        Fleet TOML used for a ``results.json`` whose own fleet cannot be found (see the
-        module docstring); None: such folders get no fleet table or Theorem check.
-    theorem_samples : int
-        Sampled plants per Delta set of the Theorem check (``ilcdob check`` uses 8).
-    seed : int
-        Seed of the Delta-set sampling.
     """
 
     title: str = "ilcdob report: learning among systems with mismatched dynamics"
-    fleet: str | Path | None = None
-    theorem_samples: int = 8
-    seed: int = 0
 
     def __post_init__(self) -> None:
         if not isinstance(self.title, str) or not self.title.strip():
             raise ReportError(f"`title`: got {self.title!r}, expected a non-empty string")
-        if isinstance(self.theorem_samples, bool) or not isinstance(self.theorem_samples, int) \
-                or self.theorem_samples < 1:
-            raise ReportError(f"`theorem_samples`: got {self.theorem_samples!r}, expected an integer >= 1")
-        if self.fleet is not None and not Path(self.fleet).is_file():
-            raise ReportError(f"`fleet`: {self.fleet} is not a file; pass a fleet TOML file or leave it unset")
 
 
 @dataclass(frozen=True)
@@ -251,27 +239,37 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
                         tuple(found["campaign.json"]))
 
 
-def _resolve_fleet(res: JsonInput, fallback: str | Path | None) -> tuple[Fleet | None, str]:
-    """The fleet of a results.json and a sentence saying where it came from (or why none)."""
-    src = res.data.get("fleet")
-    ident = res.folder / "identified_fleet.toml"
-    if ident.is_file():  # the models a nonlinear run identified and flew with
-        return load_fleet(ident), f"fleet file {ident}"
-    tried = [str(ident)]
-    if isinstance(src, str) and src and not src.startswith("<"):
-        p = Path(src)
-        p = p if p.is_absolute() else res.folder / p
-        if p.is_file():
-            return load_fleet(p), f"fleet file {p}"
-        if str(p) not in tried:
-            tried.append(str(p))
-    if isinstance(src, str) and Path(src).name == DEFAULT_FLEET_PATH.name \
-            and Path(src).parent.parts[-2:] == ("ilcdob", "data"):
-        return default_fleet(), f"the built-in fleet ({DEFAULT_FLEET_SOURCE})"
-    if fallback is not None:
-        return load_fleet(fallback), f"fleet file {fallback} (given as fallback; {res.path} names {src!r})"
-    return None, (f"{res.path} names fleet {src!r}, which was not found (tried {', '.join(tried)}); "
-                  "pass --fleet FILE")
+def check_folder(folder: Path) -> str:
+    """Check that the files of an output folder come from one run; returns a provenance sentence.
+
+    Parameters
+    ----------
+    folder : Path
+        An output folder.
+
+    Raises
+    ------
+    ReportError
+        A file listed in the folder's ``manifest.json`` is missing or differs from what that
+        run wrote (a file of another run, or edited since).
+    """
+    import hashlib
+
+    manifest = read_manifest(folder)
+    if manifest is None:
+        return f"{folder}: no {MANIFEST} (written by an earlier version of ilcdob): provenance unknown"
+    for name, digest in (manifest.get("files") or {}).items():
+        path = folder / name
+        if not path.is_file():
+            raise ReportError(f"{folder}: {name} is listed in {MANIFEST} but missing; the folder is incomplete. "
+                              "Regenerate it with the command in its manifest")
+        if hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+            raise ReportError(f"{folder}: {name} differs from the file its run wrote ({MANIFEST}); the folder mixes "
+                              f"files of different runs or was edited. Regenerate it: "
+                              f"ilcdob {manifest.get('command', '')} {' '.join(manifest.get('arguments', []))}")
+    args = " ".join(manifest.get("arguments") or [])
+    return (f"{folder}: `ilcdob {args or manifest.get('command', '')}`, ilcdob {manifest.get('version')}, "
+            f"{manifest.get('created_utc')}, run {str(manifest.get('run_id'))[:8]}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -436,16 +434,6 @@ def _file_figure(folder: Path, name: str, caption: str) -> str:
     return _figure(data, name, f"{caption} ({path})")
 
 
-def _matplotlib_png(fig: Any) -> bytes:
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buf, format="png", dpi=_DPI)
-    plt.close(fig)
-    return buf.getvalue()
-
-
 def _missing(what: str, expected: str) -> str:
     return f'<p class="missing"><strong>No input:</strong> {escape(what)} Expected {escape(expected)}.</p>'
 
@@ -476,7 +464,8 @@ class _Section:
     expected: str = ""
 
 
-def _fleet_html(fleet: Fleet, origin: str) -> str:
+def _fleet_table(fleet: Fleet) -> dict[str, Any]:
+    """The fleet table of the report (``fleet.json``): models, controllers, identification, |Delta|."""
     from ilcdob.validation.figures import identified_bounds
 
     ts = fleet.sample_time
@@ -502,11 +491,16 @@ def _fleet_html(fleet: Fleet, origin: str) -> str:
     header = ["system", "model P_hat(s)", "delay (s)", "PID kp / ki / kd", "Q order, time constant (s)",
               "model vs plant", "fit estimation (%)", "fit held-out (%)", "parameters (1 sigma)",
               "|Delta| 3 sigma at 1 rad/s (%)", "at 10 rad/s (%)", f"max to Nyquist {np.pi / ts:.3g} rad/s (%)"]
-    return (f"<p>Fleet from {escape(origin)}: {len(fleet.systems)} systems, sample time {ts:g} s. Fit in % "
+    return {"source": fleet.source, "sample_time": ts, "header": header, "rows": rows}
+
+
+def _fleet_html(table: dict[str, Any]) -> str:
+    return (f"<p>Fleet {escape(str(table['source']))}: {len(table['rows'])} systems, sample time "
+            f"{table['sample_time']:g} s. Fit in % "
             "(MATLAB definition) on estimation and held-out flights; parameters as in "
             "<code>IdentificationSpec</code> (free denominator then numerator coefficients) with 1-sigma "
             "uncertainty; |Delta| is the 3-sigma multiplicative uncertainty of the identified model from its "
-            "parameter covariance.</p>\n" + _table(header, rows, "wide"))
+            "parameter covariance.</p>\n" + _table(table["header"], table["rows"], "wide"))
 
 
 def _rmse_table(data: dict) -> str:
@@ -555,60 +549,91 @@ def _plant_section(res: JsonInput) -> str:
     return "\n".join(parts)
 
 
-def _orders(data: dict) -> list[list[str]]:
-    out: list[list[str]] = []
-    for sc in data["scenarios"]:
-        order = list(sc.get("order") or sc["systems"])
-        if order not in out:
-            out.append(order)
-    return out
+def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any], Any]:
+    """The Theorem check of every learning order (``theorem.json``) and its figure (None: no check)."""
+    from matplotlib.figure import Figure
 
-
-def _theorem_html(fleet: Fleet, origin: str, orders: list[list[str]], options: ReportOptions) -> str:
     from ilcdob.design.pair import fleet_delta_sets
     from ilcdob.design.theorem import format_theorem_table, theorem_check
 
     missing = [s.name for s in fleet.systems if s.identification is None]
     if missing:
-        return _missing(f"the fleet from {origin} has no identified covariance for {missing}, so no Delta set "
-                        "and no Theorem check.",
-                        "a fleet identified with `ilcdob identify-fleet` (or run `ilcdob check --bound B`)")
-    parts = [f"<p>Fleet from {escape(origin)}. Learning helps at frequencies where |Delta_(j-1)| &lt; "
-             "|1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III; docs/theory.md section 2); |Delta| is the 3-sigma bound of the "
-             f"identification ({options.theorem_samples} sampled plants per Delta set, seed {options.seed}); margin "
-             "= rhs / |Delta| (&gt; 1: holds).</p>"]
+        return {"missing": f"the fleet {fleet.source} has no identified covariance for {missing}, so no Delta set "
+                           "and no Theorem check"}, None
+    data: dict[str, Any] = {"samples": THEOREM_SAMPLES, "seed": 0, "orders": []}
     first = None
     for order in orders:
-        deltas = fleet_delta_sets(fleet, order, k=options.theorem_samples, seed=options.seed)
-        checks = theorem_check(fleet, order, deltas)
+        checks = theorem_check(fleet, order, fleet_delta_sets(fleet, order, k=THEOREM_SAMPLES, seed=0))
         first = first or checks
-        rows = []
-        for c in checks:
-            band = c.failing_band
-            rows.append([f"{c.source} -> {c.target}", "yes" if c.holds_everywhere else "NO", _fmt(c.min_margin),
-                         f"{c.worst_w:.4g}", "-" if band is None else f"{band[0]:.4g} .. {band[1]:.4g}"])
-        parts.append(f"<h3>Order {escape(' -> '.join(order))}</h3>")
+        data["orders"].append({"order": order, "table": format_theorem_table(checks),
+                               "pairs": [{k: v for k, v in c.to_dict().items() if k in _THEOREM_KEYS}
+                                         for c in checks]})
+    fig = Figure(figsize=(4.0 * len(first), 3.2))
+    for ax, c in zip(fig.subplots(1, len(first), squeeze=False)[0], first):
+        ax.loglog(c.w, c.delta, label="|Delta_(j-1)| (3 sigma)")
+        ax.loglog(c.w, c.rhs, label="|1 + P C|_(j-1) / 2")
+        ax.set_title(f"source {c.source}", fontsize=9)
+        ax.set_xlabel("frequency (rad/s)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    return data, fig
+
+
+_THEOREM_KEYS = ("source", "target", "min_margin", "worst_w", "holds_everywhere", "failing_band", "delta_source")
+
+
+def _theorem_html(folder: Path) -> str:
+    path = folder / "theorem.json"
+    if not path.is_file():
+        return _missing(f"{folder} has no theorem.json (written by `ilcdob reproduce`).", "theorem.json")
+    data = _read_json(path)
+    if "missing" in data:
+        return _missing(str(data["missing"]) + ".", "a fleet identified with `ilcdob identify-fleet` "
+                        "(or run `ilcdob check --bound B`)")
+    parts = ["<p>Learning helps at frequencies where |Delta_(j-1)| &lt; "
+             "|1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III); |Delta| is the 3-sigma bound of the "
+             f"identification ({data['samples']} sampled plants per Delta set, seed {data['seed']}); margin "
+             "= rhs / |Delta| (&gt; 1: holds).</p>"]
+    for o in data["orders"]:
+        rows = [[f"{c['source']} -> {c['target']}", "yes" if c["holds_everywhere"] else "NO", _fmt(c["min_margin"]),
+                 f"{c['worst_w']:.4g}", "-" if c["failing_band"] is None else
+                 f"{c['failing_band'][0]:.4g} .. {c['failing_band'][1]:.4g}"] for c in o["pairs"]]
+        parts.append(f"<h3>Order {escape(' -> '.join(o['order']))}</h3>")
         parts.append(_table(["pair", "holds", "min margin", "worst w (rad/s)", "failing band (rad/s)"], rows))
         parts.append("<details><summary>as printed by <code>ilcdob check</code></summary>"
-                     f'<pre class="plain">{escape(format_theorem_table(checks))}</pre></details>')
-    if first:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(1, len(first), figsize=(4.0 * len(first), 3.2), squeeze=False)
-        for ax, c in zip(axes[0], first):
-            ax.loglog(c.w, c.delta, label="|Delta_(j-1)| (3 sigma)")
-            ax.loglog(c.w, c.rhs, label="|1 + P C|_(j-1) / 2")
-            ax.set_title(f"source {c.source}", fontsize=9)
-            ax.set_xlabel("frequency (rad/s)")
-            ax.grid(True, which="both", alpha=0.3)
-        axes[0][0].legend(fontsize=7)
-        parts.append(_figure(_matplotlib_png(fig), "theorem check",
-                             "The Theorem's condition per source system: the uncertainty must stay below the "
-                             "right-hand side (computed for this report from the fleet)."))
+                     f'<pre class="plain">{escape(o["table"])}</pre></details>')
+    parts.append(_file_figure(folder, "theorem.png", "The Theorem's condition per source system: the uncertainty "
+                              "must stay below the right-hand side"))
     return "\n".join(parts)
+
+
+def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True) -> dict[str, Any]:
+    """The report's inputs besides ``results.json``: ``fleet.json``, ``theorem.json`` (+ ``theorem.png``).
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet the reproduction flew (its identified models, when it has them).
+    orders : list of list of str
+        The learning orders of the scenarios.
+    figures : bool
+        Include ``theorem.png``.
+
+    Returns
+    -------
+    dict of str to content
+        A content map for :class:`ilcdob.app.output.OutputFolder`.
+    """
+    unique: list[list[str]] = []
+    for o in orders:
+        if list(o) not in unique:
+            unique.append(list(o))
+    theorem, fig = _theorem_data(fleet, unique)
+    files: dict[str, Any] = {"fleet.json": _fleet_table(fleet), "theorem.json": theorem}
+    if figures and fig is not None:
+        files["theorem.png"] = fig
+    return files
 
 
 def _json_section(j: JsonInput, what: str) -> str:
@@ -672,10 +697,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     if not isinstance(options, ReportOptions):
         raise ReportError(f"`options`: got {type(options).__name__}, expected a ReportOptions")
     inputs = discover_inputs(list(dirs))
-    fleets = []  # (res, fleet or None, origin)
-    for res in inputs.results:
-        fleet, origin = _resolve_fleet(res, options.fleet)
-        fleets.append((res, fleet, origin))
+    provenance = [check_folder(f) for f in inputs.folders]
 
     def plant_name(res: JsonInput) -> str:
         return _PLANT_TITLE[res.data["plant"]].split(" (")[0].lower()
@@ -685,19 +707,17 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
 
     # fleet and identified models
     body, srcs = [], []
-    for res, fleet, origin in fleets:
+    for res in inputs.results:
         body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
-        if fleet is None:
-            body.append(_missing(f"the fleet of {res.path} could not be loaded: {origin}.", "its fleet file"))
+        table = res.folder / "fleet.json"
+        if table.is_file():
+            body.append(_fleet_html(_read_json(table)))
+            srcs.append(str(table))
         else:
-            body.append(_fleet_html(fleet, origin))
-        if fleet is not None or (res.folder / "identified_models.png").is_file():
-            srcs.append(str(res.path))
-        body.append(_file_figure(res.folder, "identified_models.png",
-                                 "Identified plant models with their 3-sigma multiplicative uncertainty band")
-                    if (res.folder / "identified_models.png").is_file() or
-                    (fleet is not None and any(s.identification for s in fleet.systems)) else
-                    "<p>No identified models in this fleet, so no uncertainty-band figure.</p>")
+            body.append(_missing(f"{res.folder} has no fleet.json (written by `ilcdob reproduce`).", "fleet.json"))
+        if (res.folder / "identified_models.png").is_file():
+            body.append(_file_figure(res.folder, "identified_models.png",
+                                     "Identified plant models with their 3-sigma multiplicative uncertainty band"))
     sections.append(_Section("fleet", "Fleet and identified models", "\n".join(body), srcs, reproduce_cmd))
 
     # Bode figures
@@ -720,14 +740,12 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
 
     # Theorem check
     body, srcs = [], []
-    for res, fleet, origin in fleets:
+    for res in inputs.results:
         body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
-        if fleet is None:
-            body.append(_missing(f"the fleet of {res.path} could not be loaded: {origin}.", "its fleet file"))
-            continue
-        body.append(_theorem_html(fleet, origin, _orders(res.data), options))
-        if all(s.identification for s in fleet.systems):
-            srcs.append(str(res.path))
+        body.append(_theorem_html(res.folder))
+        theorem = res.folder / "theorem.json"
+        if theorem.is_file() and "missing" not in _read_json(theorem):
+            srcs.append(str(theorem))
     sections.append(_Section("theorem", "Theorem check", "\n".join(body), srcs,
                              f"{reproduce_cmd}, naming a fleet with identified models"))
 
@@ -758,7 +776,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
            "<p>Modi, Chen, Liang, Zheng (2024), <em>Improving Disturbance Estimation and Suppression via "
            "Learning among Systems with Mismatched Dynamics</em>: quadrotors with PID + disturbance observer "
            "learn a repetitive task in wind from each other through the learning filters L1, L2. Generated by "
-           "<code>ilcdob report</code> from: " + escape(", ".join(str(f) for f in inputs.folders)) + ".</p>",
+           "<code>ilcdob report</code> from:</p><ul>" + "".join(f"<li>{escape(p)}</li>" for p in provenance) + "</ul>",
            '<h2 id="contents">Sections and their inputs</h2>',
            '<table class="wide"><thead><tr><th>section</th><th>input</th></tr></thead><tbody>',
            *status_rows, "</tbody></table>"]
@@ -772,16 +790,3 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
                                 s.expected))
     out.append("</body></html>")
     return "\n".join(out) + "\n"
-
-
-def write_report(dirs: list[str | Path], out: str | Path, options: ReportOptions | None = None) -> Path:
-    """Build the report of ``dirs`` (:func:`build_report`) and write it atomically to ``out``.
-
-    Returns the path written.
-    """
-    out = Path(out)
-    if out.is_dir():
-        raise ReportError(f"`out`: {out} is a folder; expected the path of an HTML file, e.g. {out / 'report.html'}")
-    html = build_report(dirs, options)
-    write_text_atomic(out, html)
-    return out

@@ -1,9 +1,9 @@
 """A small nonlinear 6-DOF quadrotor: the "real vehicle" of the identification experiments.
 
-The identification issue needs flight data from something other than the linear model it
-fits. This module flies a rigid-body quadrotor with rotor dynamics, a flight-stack-like
-inner loop (acceleration -> thrust + attitude -> body rates -> rotor speeds) and the
-fleet's outer x-position PID, and records what a flight log would hold.
+Identification needs flight data from something other than the linear model it fits. This
+module flies a rigid-body quadrotor with rotor dynamics, a flight-stack-like inner loop
+(acceleration -> thrust + attitude -> body rates -> rotor speeds) and the fleet's outer
+x-position PID, and records what a flight log would hold.
 
 Frames and units
 ----------------
@@ -336,6 +336,16 @@ def table_i_vehicles(inner_rate_hz: float = 500.0) -> dict[str, QuadrotorParams]
     F450 0.921 kg / 0.228 m / tau 0.100 s; S500 1.001 kg / 0.240 m / 0.1053 s; Tarot 650
     1.234 kg / 0.318 m / 0.1395 s (tau from default_fleet.toml). See
     :meth:`QuadrotorParams.from_table` for the assumed numbers.
+
+    Parameters
+    ----------
+    inner_rate_hz : float
+        Rate of the simulated attitude and rate loops, Hz.
+
+    Returns
+    -------
+    dict of str to QuadrotorParams
+        ``UAV1`` (F450), ``UAV2`` (S500), ``UAV3`` (Tarot 650).
     """
     return {name: QuadrotorParams.from_table(name, m, l, tau, frame=frame, inner_rate_hz=inner_rate_hz)
             for name, (frame, m, l, tau) in TABLE_I.items()}
@@ -373,7 +383,22 @@ class TauFit:
 
 
 def fit_first_order(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """Least-squares ``tau`` of ``y(t) ~ 1 - exp(-t/tau)``; returns ``(tau s, fit %)``."""
+    """Least-squares time constant of a normalised step response, ``y(t) ~ 1 - exp(-t/tau)``.
+
+    Parameters
+    ----------
+    t : array_like
+        Time from the step, s.
+    y : array_like
+        Normalised response (1 in steady state).
+
+    Returns
+    -------
+    tau : float
+        Fitted time constant, s (searched between 1e-3 and 1 times the span of ``t``).
+    fit : float
+        MATLAB fit percent of the first-order response to ``y``.
+    """
     t = np.asarray(t, float)
     y = np.asarray(y, float)
     span = float(t[-1] - t[0])
@@ -418,6 +443,26 @@ def linear_equivalent_tau(att_gain: float, rate_gain: float, rate_d_gain: float,
 
     The step response of ``theta/theta_d`` (equal to achieved/commanded x acceleration at
     hover) at the inner-loop samples over ``horizon`` s, fitted by :func:`fit_first_order`.
+
+    Parameters
+    ----------
+    att_gain : float
+        Attitude P gain, 1/s.
+    rate_gain : float
+        Rate P gain, 1/s.
+    rate_d_gain : float
+        Rate D gain (dimensionless).
+    motor_time_constant : float
+        First-order motor lag, s.
+    inner_dt : float
+        Inner-loop step, s.
+    horizon : float
+        Length of the step response fitted, s.
+
+    Returns
+    -------
+    float
+        The equivalent first-order time constant, s.
     """
     n = int(round(horizon / inner_dt)) + 1
     y = _linear_pitch_step(att_gain, rate_gain, rate_d_gain, motor_time_constant, inner_dt, n)
@@ -443,12 +488,23 @@ def _tune_att_gain(tau: float, rate_gain: float, rate_d_gain: float, tau_m: floa
 
 # ---------------------------------------------------------------------- the simulator
 def make_advance(p: QuadrotorParams) -> Callable[..., Any]:
-    """Build the hot loop: ``advance(s, ax, ay, az, d_list, j0, m, wprev, rec)``.
+    """Build the hot loop: ``advance(s, ax, ay, az, d_list, j0, nstep, wprev, rec)``.
 
-    Runs ``m`` inner steps from state list ``s`` with the acceleration command held, the
-    external disturbance acceleration ``d_list[j0 + i]`` held over step ``i``; returns
-    ``(s, wprev)``. With ``rec`` a list, appends the x specific thrust (m/s^2) before each
-    step. Pure-Python scalar code: faster than NumPy for a 17-state system.
+    The returned function runs ``nstep`` inner steps from state list ``s`` with the
+    acceleration command held, the external disturbance acceleration ``d_list[j0 + i]`` held
+    over step ``i``; it returns ``(s, wprev)``. With ``rec`` a list, it appends the x specific
+    thrust (m/s^2) before each step. Pure-Python scalar code: faster than NumPy for a
+    17-state system.
+
+    Parameters
+    ----------
+    p : QuadrotorParams
+        The vehicle (its constants are bound into the closure).
+
+    Returns
+    -------
+    callable
+        ``advance``, as above.
     """
     m = p.mass
     inv_m = 1.0 / m
@@ -566,8 +622,21 @@ def limit_tilt(ax: float, ay: float, az: float, tan_max: float) -> tuple[float, 
     """Commanded accelerations (m/s^2) within the vehicle's limits, as a flight controller does.
 
     ``az`` is clipped to ``[-G/2, G]``; the horizontal command is scaled down (direction kept)
-    to ``(G + az) tan(max_tilt)``, the most a tilt of ``max_tilt`` gives. Returns the limited
-    ``(ax, ay, az)`` and whether the horizontal command was scaled.
+    to ``(G + az) tan(max_tilt)``, the most a tilt of ``max_tilt`` gives.
+
+    Parameters
+    ----------
+    ax, ay, az : float
+        Commanded accelerations, m/s^2 (``az`` on top of gravity compensation).
+    tan_max : float
+        ``tan(max_tilt)``.
+
+    Returns
+    -------
+    ax, ay, az : float
+        The limited command, m/s^2.
+    scaled : bool
+        Whether the horizontal command was scaled down.
     """
     az = min(max(az, -0.5 * G), G)
     amax = (G + az) * tan_max
@@ -578,7 +647,17 @@ def limit_tilt(ax: float, ay: float, az: float, tan_max: float) -> tuple[float, 
 
 
 class DiscretePID:
-    """Tustin PID stepped by hand: ``u[k] = C x[k] + D e[k]``, ``x[k+1] = A x[k] + B e[k]``."""
+    """Tustin PID stepped by hand: ``u[k] = C x[k] + D e[k]``, ``x[k+1] = A x[k] + B e[k]``.
+
+    Calling it with the error ``e[k]`` returns ``u[k]`` and advances the state.
+
+    Parameters
+    ----------
+    spec : PIDSpec
+        The controller, discretised with :func:`ilcdob.discretize.discretize_pid`.
+    ts : float
+        Sample time, s.
+    """
 
     def __init__(self, spec: PIDSpec, ts: float) -> None:
         ss = discretize_pid(spec, ts)

@@ -1,0 +1,170 @@
+"""PX4 ULog loader (:func:`load_ulog`, via pyulog).
+
+Signals are addressed as ``"topic.field"`` (``"topic:instance.field"`` for a topic
+logged in several instances). Time is in s since boot (the ULog ``timestamp`` clock, µs /
+1e6); it is **not** shifted to start at zero, so ``start`` and ``stop`` are read on that
+same clock. Topics logged at different rates are linearly interpolated onto one grid whose
+step is the finest median step among them (or ``ts`` when given) and which spans the time
+all of them overlap; with ``start`` the grid starts exactly there when every selected
+signal has data at that time (``t = start + k ts``). Units come from a small table of
+common PX4 fields, as ULog files carry none of their own.
+
+Every error is a :class:`~ilcdob.errors.SignalError` whose message names the file, the
+signal and its topic and field, the value received and what is valid.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ilcdob.errors import SignalError
+from ilcdob.signals import FlightData
+
+from .common import (check_file, check_ts, check_units, check_window, from_series, listing, signal_mapping,
+                     source_of)
+
+
+__all__ = ["load_ulog"]
+
+#: Units of common PX4 uORB fields (index suffixes such as ``[0]`` are stripped first);
+#: ULog files carry no units of their own.
+_PX4_UNITS: dict[str, dict[str, str]] = {
+    "vehicle_local_position": {
+        "x": "m", "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s", "z_deriv": "m/s",
+        "ax": "m/s^2", "ay": "m/s^2", "az": "m/s^2", "heading": "rad", "dist_bottom": "m",
+    },
+    "vehicle_local_position_setpoint": {
+        "x": "m", "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s",
+        "acceleration": "m/s^2", "jerk": "m/s^3", "thrust": "", "yaw": "rad", "yawspeed": "rad/s",
+    },
+    "trajectory_setpoint": {
+        "position": "m", "velocity": "m/s", "acceleration": "m/s^2", "jerk": "m/s^3",
+        "yaw": "rad", "yawspeed": "rad/s",
+    },
+    "vehicle_acceleration": {"xyz": "m/s^2"},
+    "vehicle_angular_velocity": {"xyz": "rad/s"},
+    "vehicle_angular_acceleration": {"xyz": "rad/s^2"},
+    "sensor_combined": {"gyro_rad": "rad/s", "accelerometer_m_s2": "m/s^2"},
+    "vehicle_attitude": {"q": ""},
+    "vehicle_attitude_setpoint": {"roll_body": "rad", "pitch_body": "rad", "yaw_body": "rad",
+                                  "q_d": "", "thrust_body": ""},
+}
+
+
+_ULOG_SPEC = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?::(\d+))?\.(\S+)$")
+
+
+def _parse_ulog_spec(spec: str, name: str, source: str) -> tuple[str, int, str]:
+    m = _ULOG_SPEC.match(spec.strip())
+    if not m:
+        raise SignalError(f"{source}: signal `{name}`: field {spec!r} not of the form 'topic.field' or "
+                          f"'topic:instance.field' (e.g. 'vehicle_local_position.x')")
+    return m.group(1), int(m.group(2) or 0), m.group(3)
+
+
+def _ulog_topics(source: str) -> list[str]:
+    """Every topic (with instance when > 0) that has data in the file; for error messages."""
+    from pyulog import ULog
+
+    try:
+        ulog = ULog(source)
+    except Exception:
+        return []
+    return sorted({d.name if d.multi_id == 0 else f"{d.name}:{d.multi_id}" for d in ulog.data_list})
+
+
+def _px4_unit(topic: str, field: str) -> str:
+    base = re.sub(r"\[\d+\]$", "", field)
+    return _PX4_UNITS.get(topic, {}).get(base, "")
+
+
+def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str],
+              units: Mapping[str, str] | None = None, ts: float | None = None,
+              start: float | None = None, stop: float | None = None) -> FlightData:
+    """Load signals from a PX4 ULog file (pyulog).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.ulg`` file.
+    fields : dict of str -> str, or list of str
+        Output signal name -> ``"topic.field"``, e.g.
+        ``{"y": "vehicle_local_position.x",
+        "u": "vehicle_local_position_setpoint.acceleration[0]"}``. A topic logged in several
+        instances is addressed as ``"topic:1.field"`` (instance 0 when omitted).
+    units : dict of str -> str, optional
+        Unit of each output signal. Default: a small table of common PX4 fields (positions
+        m, velocities m/s, accelerations m/s^2, angles rad), else "".
+    ts : float, optional
+        Sample time of the common grid, s; default the finest median step of the topics.
+    start, stop : float, optional
+        Keep ``start <= t <= stop``, s since boot (the ULog ``timestamp`` clock).
+
+    Returns
+    -------
+    FlightData
+        Time in s since boot (``timestamp`` in µs / 1e6). ``metadata`` holds ``format``,
+        ``fields``, the original topic rates, the vehicle/software info strings, the
+        ``dropouts`` (count, total ms) and pyulog's ``file_corruption`` flag.
+
+    Raises
+    ------
+    SignalError
+        Missing or unreadable file, a topic, instance or field not in the log (the message
+        lists what is there), non-finite values, duplicated or decreasing time stamps, or an
+        empty selection.
+    """
+    from pyulog import ULog
+
+    source = source_of(path)
+    spec = signal_mapping(fields, "fields", source)
+    parsed = {n: _parse_ulog_spec(s, n, source) for n, s in spec.items()}
+    units_arg = check_units(units, list(spec), source)
+    ts = check_ts(ts, source)
+    start, stop = check_window(start, stop, source)
+    check_file(source)
+    topics = sorted({topic for topic, _, _ in parsed.values()})
+    try:
+        ulog = ULog(source, topics, disable_str_exceptions=True)
+    except Exception as exc:  # pyulog raises ULogException, struct.error, ... on a bad file
+        raise SignalError(f"{source}: cannot read as a PX4 ULog file ({type(exc).__name__}: {exc})") from None
+    datasets = {(d.name, d.multi_id): d for d in ulog.data_list}
+    series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    what: dict[str, str] = {}
+    sig_units: dict[str, str] = {}
+    for name, (topic, inst, field) in parsed.items():
+        label = f"{topic}:{inst}" if inst else topic
+        d = datasets.get((topic, inst))
+        if d is None:
+            insts = sorted(k[1] for k in datasets if k[0] == topic)
+            if insts:
+                raise SignalError(f"{source}: signal `{name}`: topic {topic!r} has no instance {inst}; "
+                                  f"instances logged: {insts}")
+            have = _ulog_topics(source)
+            if not have:
+                raise SignalError(f"{source}: signal `{name}`: topic {topic!r} not in the log; the log holds "
+                                  f"no logged data at all (truncated or header-only file?)")
+            raise SignalError(f"{source}: signal `{name}`: topic {topic!r} not in the log; topics with "
+                              f"data: {listing(have)}")
+        if field not in d.data or field == "timestamp":
+            present = [f for f in d.data if f != "timestamp"]
+            raise SignalError(f"{source}: signal `{name}`: topic {label!r} has no field {field!r}; "
+                              f"fields: {listing(present)}")
+        t = np.asarray(d.data["timestamp"], dtype=float) * 1e-6
+        x = np.asarray(d.data[field], dtype=float)
+        series[name] = (t, x)
+        what[name] = f"signal `{name}` ({label}.{field})"
+        sig_units[name] = units_arg.get(name, _px4_unit(topic, field))
+
+    info = {k: v for k, v in ulog.msg_info_dict.items()
+            if k in ("sys_name", "ver_hw", "ver_sw", "ver_sw_release", "sys_uuid", "sys_os_name")}
+    drop_ms = [float(getattr(dr, "duration", 0.0)) for dr in ulog.dropouts]
+    meta = {"format": "ulog", "fields": dict(spec), "info": info,
+            "start_timestamp_s": ulog.start_timestamp * 1e-6,
+            "dropouts": {"count": len(drop_ms), "total_ms": float(sum(drop_ms))},
+            "file_corruption": bool(ulog.file_corruption)}
+    return from_series(series, what, sig_units, meta, ts, start, stop, source)

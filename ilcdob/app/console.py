@@ -1,0 +1,269 @@
+"""What the ``ilcdob`` commands show on the console: progress bars, notes, summaries, errors.
+
+:func:`run_command` maps parsed arguments onto the use cases of :mod:`ilcdob.app.commands`
+and prints their results: tables and summaries on stdout (for pipes), progress and notes on
+stderr (silenced by ``--quiet``), one ``ilcdob: error:`` line per failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+from ilcdob.errors import SpecError
+
+from . import commands as uc
+
+__all__ = ["CheckFailed", "Console", "run_command"]
+
+
+class CheckFailed(Exception):
+    """A check ran and its condition does not hold (exit status 1)."""
+
+
+class Console:
+    """Progress bars (tqdm, on stderr), notes and error lines.
+
+    Parameters
+    ----------
+    quiet : bool
+        No progress bars and no notes (errors are still printed).
+    """
+
+    def __init__(self, quiet: bool = False) -> None:
+        self.quiet = quiet
+        self._bar: Any = None
+        self._what = ""
+
+    def note(self, text: str) -> None:
+        """Print a note on stderr (unless quiet).
+
+        Parameters
+        ----------
+        text : str
+            The note.
+        """
+        if not self.quiet:
+            self._close()
+            print(text, file=sys.stderr, flush=True)
+
+    def error(self, text: str, tb: str | None = None, kind: str = "error") -> None:
+        """Print ``ilcdob: <kind>: <text>`` (and a traceback) on stderr.
+
+        Parameters
+        ----------
+        text : str
+            The message.
+        tb : str, optional
+            Traceback text (``--debug``).
+        kind : str
+            ``error``, or ``check`` for a check that did not hold.
+        """
+        self._close()
+        if tb:
+            print(tb, file=sys.stderr, end="")
+        print(f"ilcdob: {kind}: {text}", file=sys.stderr, flush=True)
+
+    def progress(self, done: int, total: int, what: str) -> None:
+        """The ``progress(done, total, what)`` callback of the use cases: a bar with ETA.
+
+        Parameters
+        ----------
+        done, total : int
+            Work units finished and in all.
+        what : str
+            The unit of work being done.
+        """
+        if self.quiet:
+            return
+        from tqdm import tqdm
+
+        if self._bar is None or self._bar.total != total or done < self._bar.n:
+            self._close()
+            self._bar = tqdm(total=total, file=sys.stderr, dynamic_ncols=True, leave=False,
+                             bar_format="{desc} {n}/{total} |{bar}| {elapsed}<{remaining}")
+        self._bar.set_description_str(what[:60], refresh=False)
+        self._bar.update(done - self._bar.n)
+        if done >= total:
+            self._close()
+
+    def _close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+
+def _reproduce(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    start = time.perf_counter()
+    res = uc.reproduce_to_folder(a.out, fleet=a.fleet, scenarios=a.scenarios, iterations=a.iterations,
+                                 plant=a.plant, seed=a.seed, law=a.law, figures=not a.no_figures,
+                                 overwrite=a.overwrite, progress=con.progress, argv=argv)
+    con.note(f"wrote {a.out} ({time.perf_counter() - start:.1f} s, law {res.law})")
+    for sr in res.scenarios:
+        for name in sr.order:
+            m = sr.systems[name].metrics()
+            print(f"scenario {sr.scenario.id} {name:>8}: RMSE no DOB {m['rmse_no_dob']:.4f} m, DOB "
+                  f"{m['rmse_dob']:.4f} m, learning " + ", ".join(f"{v:.5f}" for v in m["rmse_learning"]) + " m")
+    return 0
+
+
+def _number(text: str, name: str, valid: str, allowed: tuple[str, ...], kind: type) -> Any:
+    if text in allowed:
+        return None if text == "none" else text
+    try:
+        return kind(text)
+    except ValueError:
+        raise SpecError(f"`{name}`: got {text!r}, expected {valid}") from None
+
+
+def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    from ilcdob.identification.tfest import FitOptions
+    from ilcdob.uncertainty import ModelStructure
+
+    delay = _number(a.delay, "--delay", "'auto' or a number of seconds >= 0", ("auto",), float)
+    trend = _number(a.trend, "--trend", "'none' or a polynomial degree 0-5", ("none",), int)
+    structure = ModelStructure(a.poles, a.zeros, a.integrators)
+    options = FitOptions(delay=delay, max_delay=a.max_delay, trend=trend, time_limit=a.time_limit)
+    inputs = uc.IdentifyInputs(a.input, a.output, a.time, a.time_unit, a.start, a.stop)
+    est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out, validate=a.validate,
+                                                  plot=a.plot, progress=con.progress, argv=argv)
+    for fd in est_data + val_data:
+        gaps = fd.metadata.get("gaps") or []
+        if gaps:
+            con.note(f"{fd.source}: {len(gaps)} dropout(s) in the time stamps, each piece fitted with its own "
+                     "initial condition: " + ", ".join(f"{lo:.6g} to {hi:.6g} s" for lo, hi in gaps))
+    print(est.summary())
+    if est.solver.get("status") != "converged":
+        con.note(f"note: the fit stopped at its {est.solver.get('status')}; {a.out} holds the best model found "
+                 "(solver.status)")
+    con.note(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else ""))
+    if a.min_fit is not None:
+        fit = est.fit_validation if val_data else est.fit_estimation
+        which = "held-out" if val_data else "estimation (no --validate files)"
+        if not fit >= a.min_fit:
+            raise CheckFailed(f"--min-fit: {which} fit {fit:.2f} % is below {a.min_fit:g} % ({a.out} written)")
+    return 0
+
+
+def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    design, written = uc.design_to_folder(a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho,
+                                          samples=a.samples, bound=a.bound, n=a.n, law=a.law, trial=a.trial,
+                                          c_prefix=a.c_prefix, c_float=a.c_float, overwrite=a.overwrite, argv=argv)
+    if "L1" not in design.filters and (a.c_prefix is not None or a.c_float):
+        con.note(f"ilcdob: note: method {a.method} has no L1/L2 filters; no C code written")
+    print(json.dumps({k: v for k, v in written.items() if k not in ("L1", "L2")}))
+    con.note(f"wrote {a.out}")
+    return 0
+
+
+def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    from ilcdob.design.theorem import format_theorem_table
+
+    order = [s.strip() for s in a.order.split(",")] if a.order else None
+    checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=a.scale, argv=argv)
+    print(format_theorem_table(checks))
+    failing = [f"{c.source} -> {c.target}" for c in checks if not c.holds_everywhere]
+    if failing:
+        raise CheckFailed(f"the Theorem's condition does not hold at every frequency for {', '.join(failing)}")
+    return 0
+
+
+def _compare(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    from ilcdob.design.robust import RobustOptions
+    from ilcdob.validation.compare import CompareOptions
+
+    opts = CompareOptions(samples=a.samples, bound=a.bound, scale=a.scale, seed=a.seed, duration=a.duration,
+                          robust=RobustOptions(rho=a.rho), law=a.law)
+    cmp = uc.compare_to_folder(a.out, a.scenario, opts, fleet=a.fleet, methods=a.methods, overwrite=a.overwrite,
+                               progress=con.progress, argv=argv)
+    print(cmp.table(), end="")
+    if a.out:
+        con.note(f"wrote {a.out}")
+    return 0
+
+
+def _extensions(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    result = uc.extensions_to_folder(a.out, fleet=a.fleet, scenarios=a.scenarios, overwrite=a.overwrite, argv=argv)
+    print(result.table(), end="")
+    return 0
+
+
+def _campaign(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    from ilcdob.design.pair import DEFAULT_METHODS
+    from ilcdob.validation.campaign import CampaignOptions
+
+    opts = CampaignOptions(samples=a.samples, seed=a.seed, scale=a.scale, bound=a.bound, scenarios=tuple(a.scenarios),
+                           methods=tuple(a.methods or DEFAULT_METHODS), duration=a.duration,
+                           robust_models=a.robust_models, rho=a.rho, law=a.law)
+    result = uc.campaign_to_folder(a.out, opts, fleet=a.fleet, scheduler=a.scheduler, workers=a.workers,
+                                   overwrite=a.overwrite, progress=con.progress,
+                                   dashboard=con.note if a.dashboard else None, argv=argv)
+    print(result.table(), end="")
+    con.note(f"wrote {a.out} ({result.wall_time_s:.0f} s)")
+    return 0
+
+
+def _identify_fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    result = uc.identify_fleet_to_folder(a.out, fleet=a.fleet, seed=a.seed, overwrite=a.overwrite,
+                                         progress=con.progress, argv=argv)
+    for name, vid in result.results.items():
+        print(f"{name}: {vid.estimate.summary()}")
+    con.note(f"wrote {a.out}")
+    return 0
+
+
+def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    from pathlib import Path
+
+    from ilcdob.identified import load_model
+    from ilcdob.specs import DOBSpec, PIDSpec
+
+    path = Path(a.fleet_file)
+    created = not path.exists()
+    model_ts = load_model(a.model).sample_time
+    try:
+        controller = PIDSpec(a.kp, a.ki, a.kd, a.derivative_filter)
+        dob = DOBSpec(a.q_order, a.q_time_constant)
+    except SpecError as exc:
+        raise SpecError(f"{path}: system {a.name!r} (--kp/--ki/--kd/--derivative-filter, --q-order/"
+                        f"--q-time-constant): {exc}; nothing written") from exc
+    fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time)
+    if created:
+        origin = "--sample-time" if a.sample_time is not None else f"the sample_time of {a.model}"
+        con.note(f"created {path} with sample time {fleet.sample_time:g} s (from {origin})")
+    if model_ts != fleet.sample_time:
+        con.note(f"note: {a.model} was identified from data sampled at {model_ts:g} s; the fleet runs at "
+                 f"{fleet.sample_time:g} s (the continuous-time model is discretised at the fleet's)")
+    con.note(f"added {a.name} to {path}: systems {fleet.names}")
+    return 0
+
+
+def _report(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    con.note(f"wrote {uc.report_to_html(a.dirs, a.out)}")
+    return 0
+
+
+_COMMANDS = {"reproduce": _reproduce, "identify": _identify, "identify-fleet": _identify_fleet, "design": _design,
+             "check": _check, "compare": _compare, "campaign": _campaign, "extensions": _extensions,
+             "report": _report, "fleet": _fleet}
+
+
+def run_command(args: argparse.Namespace, argv: list[str], console: Console) -> int:
+    """Run the command of parsed ``args`` and print its results; returns the exit status.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments (:func:`ilcdob.app.cli.build_parser`).
+    argv : list of str
+        The raw arguments, recorded with the outputs.
+    console : Console
+        Where progress and notes go.
+    """
+    try:
+        return _COMMANDS[args.command](args, argv, console)
+    finally:
+        console._close()

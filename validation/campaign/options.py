@@ -1,0 +1,155 @@
+"""Settings of a Monte Carlo campaign and their identity (:func:`campaign_settings`)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.design.pair import DEFAULT_METHODS, METHODS
+from ilcdob.errors import IlcdobError
+from ilcdob.fleet import Fleet
+
+from ..scenarios import SCENARIOS
+
+__all__ = ["CampaignError", "CampaignOptions", "campaign_settings", "FORMAT_VERSION"]
+
+#: Version of the sample records and the settings file.
+FORMAT_VERSION = 1
+
+
+class CampaignError(IlcdobError, ValueError):
+    """A campaign cannot run: bad settings, an output folder holding another campaign, no cluster."""
+
+
+@dataclass(frozen=True)
+class CampaignOptions:
+    """Settings of a Monte Carlo campaign (see :mod:`ilcdob.validation.campaign`).
+
+    Attributes
+    ----------
+    samples : int
+        Number of samples N (each: one true plant per vehicle), >= 1.
+    seed : int
+        Campaign seed, >= 0; sample ``i`` uses the generator of ``SeedSequence(seed, spawn_key=(0, i))``.
+    scale : float
+        Scale of the identified standard deviations for the true plants (> 0; 1: the
+        identified uncertainty, > 1 beyond it).
+    bound : float, optional
+        Multiplicative uncertainty bound in (0, 1) instead of the identification (for true
+        plants and design samples alike).
+    scenarios : tuple of int
+        Scenario ids, each 1-4.
+    methods : tuple of str
+        Designs, a subset of :data:`ilcdob.design.pair.METHODS` (default
+        :data:`~ilcdob.design.pair.DEFAULT_METHODS`).
+    duration : float, optional
+        Fly only the first ``duration`` seconds of each scenario (s, > 0; default: all).
+    robust_models : int
+        Delta samples per system in the robust SOCP besides the nominal pair (>= 0); its cost
+        per trial grows about linearly with ``1 + robust_models``.
+    rho : float
+        Robust design's guaranteed improvement factor on its models (> 0).
+    law : {"paper", "exact-reference"}
+        Learning law applied around every design (:mod:`ilcdob.design.laws`); ``multi-source``
+        is refused (one pair from one DOB-only trial per scenario, where it is the paper's law).
+        The default is left out of the settings hash, so campaigns started before the law
+        existed resume.
+    """
+
+    samples: int = 200
+    seed: int = 0
+    scale: float = 1.0
+    bound: float | None = None
+    scenarios: tuple[int, ...] = (1, 2, 3, 4)
+    methods: tuple[str, ...] = DEFAULT_METHODS
+    duration: float | None = None
+    robust_models: int = 1
+    rho: float = 0.95
+    law: str = DEFAULT_LAW
+
+    def __post_init__(self) -> None:
+        def integer(v: object) -> bool:
+            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+        if not integer(self.samples) or self.samples < 1:
+            raise CampaignError(f"`samples`: got {self.samples!r}, expected an integer >= 1")
+        if not integer(self.seed) or self.seed < 0:
+            raise CampaignError(f"`seed`: got {self.seed!r}, expected an integer >= 0")
+        if not (isinstance(self.scale, (int, float)) and np.isfinite(self.scale) and self.scale > 0):
+            raise CampaignError(f"`scale`: got {self.scale!r}, expected a factor > 0 (1: identified uncertainty)")
+        if self.bound is not None and not (np.isfinite(self.bound) and 0 < self.bound < 1):
+            raise CampaignError(f"`bound`: got {self.bound!r}, expected a relative error in (0, 1)")
+        scenarios = tuple(self.scenarios)
+        if not scenarios or any(not integer(s) or s not in SCENARIOS for s in scenarios):
+            raise CampaignError(f"`scenarios`: got {list(scenarios)!r}, expected a non-empty list from "
+                                f"{sorted(SCENARIOS)}")
+        methods = tuple(self.methods)
+        bad = [m for m in methods if m not in METHODS]
+        if bad or not methods:
+            raise CampaignError(f"`methods`: got {list(methods)!r} (unknown: {bad}), expected a non-empty list "
+                                f"from {list(METHODS)}")
+        if self.duration is not None and not (np.isfinite(self.duration) and self.duration > 0):
+            raise CampaignError(f"`duration`: got {self.duration!r}, expected a duration > 0 s")
+        if not integer(self.robust_models) or self.robust_models < 0:
+            raise CampaignError(f"`robust_models`: got {self.robust_models!r}, expected an integer >= 0 "
+                                "(Delta samples besides the nominal pair)")
+        if not (np.isfinite(self.rho) and self.rho > 0):
+            raise CampaignError(f"`rho`: got {self.rho!r}, expected an improvement factor > 0 (e.g. 0.95)")
+        try:
+            law = check_law(self.law)
+        except IlcdobError as exc:
+            raise CampaignError(str(exc)) from None
+        if law == "multi-source":
+            raise CampaignError("`law`: 'multi-source' learns from every earlier system's trial, but a campaign flies "
+                                "one pair (j-1 -> j) per scenario from a single DOB-only trial of j-1, where it is the "
+                                "paper's law; use 'paper' or 'exact-reference'")
+        object.__setattr__(self, "scenarios", tuple(int(s) for s in dict.fromkeys(scenarios)))
+        object.__setattr__(self, "methods", tuple(dict.fromkeys(methods)))
+        object.__setattr__(self, "samples", int(self.samples))
+        object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "robust_models", int(self.robust_models))
+        object.__setattr__(self, "scale", float(self.scale))
+
+
+def _fleet_fingerprint(fleet: Fleet) -> str:
+    """SHA-256 of the fleet's specifications (sample time, every system's parameters)."""
+    return hashlib.sha256(repr((fleet.sample_time, fleet.systems)).encode()).hexdigest()
+
+
+def campaign_settings(fleet: Fleet, options: CampaignOptions) -> dict[str, Any]:
+    """The settings that determine every sample's result (all options but ``samples``).
+
+    Two runs with equal settings produce the same record for sample ``i``; ``id`` is their hash.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet flown (identified by the SHA-256 of its specifications, not its file's location).
+    options : CampaignOptions
+        The campaign's options.
+
+    Returns
+    -------
+    dict
+        ``{"format", "fleet": {"source", "sha256", "systems", "uncertainty"}, <options but
+        samples>, "id"}``, the content of ``campaign_settings.json``.
+    """
+    opts = asdict(options)
+    opts.pop("samples")
+    if opts.get("law") == DEFAULT_LAW:  # the default law keeps the ids of campaigns started before laws existed
+        opts.pop("law")
+    opts["scenarios"], opts["methods"] = list(options.scenarios), list(options.methods)
+    sources = {s.name: ("identification" if s.uncertainty is None and s.identification is not None
+                        else f"bound {s.uncertainty.bound:g}" if s.uncertainty is not None else "none")
+               for s in fleet.systems}
+    body = {"format": FORMAT_VERSION, "fleet": {"source": fleet.source, "sha256": _fleet_fingerprint(fleet),
+                                                  "systems": fleet.names, "uncertainty": sources}, **opts}
+    ident = dict(body)
+    ident["fleet"] = body["fleet"]["sha256"]  # the file's location does not change the results
+    body["id"] = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:16]
+    return body

@@ -1,0 +1,307 @@
+"""Running a campaign: sampling the true plants, the workers' state, the Dask client, :func:`run_campaign`."""
+
+from __future__ import annotations
+
+import os
+import re
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+from ilcdob.design.delta import DeltaSet, delta_set
+from ilcdob.design.laws import DEFAULT_LAW
+from ilcdob.design.pair import PairDesign, design_pair, with_law
+from ilcdob.design.robust import RobustOptions
+from ilcdob.errors import IlcdobError
+from ilcdob.fleet import Fleet
+from ilcdob.loop import LoopSystem
+
+from ..compare import PairScenario, evaluate_case, pair_scenario
+from .options import CampaignError, CampaignOptions, campaign_settings
+from .statistics import CampaignResult, campaign_statistics
+from .store import SAMPLES_FILE, SampleStore, campaign_lock, check_settings
+
+__all__ = ["FIR_DESIGN_SAMPLES", "draw_true_loops", "run_sample", "run_campaign"]
+
+#: Delta samples of the FIR design's robust ``|Te1|`` constraint (its default K).
+FIR_DESIGN_SAMPLES = 8
+_SCHEDULER_RE = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
+
+
+def _rng(seed: int, *key: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
+
+
+def draw_true_loops(fleet: Fleet, options: CampaignOptions, index: int) -> tuple[dict[str, LoopSystem], int]:
+    """Sample ``index``'s true loops, one per vehicle in fleet order, and the redraws of unstable loops.
+
+    Depends on ``(options.seed, index)``, ``scale`` and ``bound`` only.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet; each system's identification (or stated or given bound) is sampled.
+    options : CampaignOptions
+        Its ``seed``, ``scale`` and ``bound`` are used.
+    index : int
+        The sample, >= 0.
+
+    Returns
+    -------
+    loops : dict of str to LoopSystem
+        The true loop of every system (true plant; controller, Q and M from the model).
+    rejected : int
+        Draws rejected because their loop was unstable.
+    """
+    rng = _rng(options.seed, 0, index)
+    loops, rejected = {}, 0
+    for spec in fleet.systems:
+        ds = delta_set(spec, fleet.sample_time, 1, rng, scale=options.scale, bound=options.bound,
+                       w=np.array([1.0]))
+        loops[spec.name], rejected = ds.loops[0], rejected + ds.rejected
+    return loops, rejected
+
+
+def _design_deltas(fleet: Fleet, options: CampaignOptions) -> dict[str, DeltaSet]:
+    """The designers' Delta samples: identified uncertainty (scale 1) or the bound, seeded ``(seed, 1)``."""
+    k = max(FIR_DESIGN_SAMPLES, options.robust_models, 1)
+    rng = _rng(options.seed, 1)
+    return {s.name: delta_set(s, fleet.sample_time, k, rng, bound=options.bound) for s in fleet.systems}
+
+
+class _WorkerState:
+    """Per worker thread: the fleet's scenarios and designs of one campaign, built on first use."""
+
+    def __init__(self, fleet: Fleet, options: CampaignOptions):
+        self.fleet, self.options = fleet, options
+        self.pairs: dict[int, PairScenario] = {}
+        self.designs: dict[tuple[str, str, str], PairDesign | str] = {}
+        self._deltas: dict[str, DeltaSet] | None = None
+        self.lawful: dict[tuple[int, str], PairDesign] = {}
+
+    def pair(self, sid: int) -> PairScenario:
+        if sid not in self.pairs:
+            self.pairs[sid] = pair_scenario(self.fleet, sid, self.options.duration)
+        return self.pairs[sid]
+
+    def design(self, source: str, target: str, method: str, n: int) -> PairDesign | str:
+        """The design (built once), or the error message of a design that cannot be made."""
+        key = (source, target, method)
+        if key not in self.designs:
+            if self._deltas is None:
+                self._deltas = _design_deltas(self.fleet, self.options)
+            k = self.options.robust_models if method == "robust" else FIR_DESIGN_SAMPLES
+            deltas = {name: replace(self._deltas[name], loops=self._deltas[name].loops[:k])
+                      for name in (source, target)}
+            try:
+                self.designs[key] = design_pair(self.fleet, source, target, method, n=n, deltas=deltas,
+                                                robust=RobustOptions(rho=self.options.rho), lifted=False)
+            except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
+                self.designs[key] = f"design failed: {exc}"
+        return self.designs[key]
+
+    def with_law(self, sid: int, method: str, design: PairDesign) -> PairDesign:
+        """``design`` learning with the campaign's law on scenario ``sid`` (its reference terms, built once)."""
+        if self.options.law == DEFAULT_LAW:
+            return design
+        if (sid, method) not in self.lawful:
+            pair = self.pair(sid)
+            self.lawful[(sid, method)] = with_law(design, self.fleet, pair.source, pair.target, self.options.law,
+                                                   pair.r, pair.a_ref)
+        return self.lawful[(sid, method)]
+
+
+_local = threading.local()
+
+
+def _worker_state(fleet: Fleet, options: CampaignOptions, settings_id: str) -> _WorkerState:
+    cache = getattr(_local, "state", None)
+    if cache is None or cache[0] != settings_id:  # keep one campaign per thread (long-lived workers)
+        _local.state = cache = (settings_id, _WorkerState(fleet, options))
+    return cache[1]
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def run_sample(fleet: Fleet, options: CampaignOptions, settings_id: str, index: int) -> dict[str, Any]:
+    """Fly sample ``index`` through every scenario with every design (the Dask task).
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet (scattered to the workers).
+    options : CampaignOptions
+        The campaign's options.
+    settings_id : str
+        ``id`` of :func:`~ilcdob.validation.campaign.options.campaign_settings`; each worker
+        keeps the designs of one campaign, rebuilt when the id changes.
+    index : int
+        The sample, >= 0.
+
+    Returns
+    -------
+    dict
+        The JSON record of the sample: ``{"sample", "settings", "rejected", "plants": {name:
+        {"num", "den", "delay"}}, "scenarios": {id: {"source", "target", "rmse_without",
+        "ratios": {method: ratio or null}, "errors": {method: message}}}, "time_s", "cpu_s"}``
+        (wall-clock and CPU time of the worker, s; they differ when the cores are shared).
+    """
+    t0, c0 = time.perf_counter(), time.process_time()
+    state = _worker_state(fleet, options, settings_id)
+    loops, rejected = draw_true_loops(fleet, options, index)
+    scenarios = {}
+    for sid in options.scenarios:
+        pair = state.pair(sid)
+        designs, errors = {}, {}
+        for method in options.methods:
+            d = state.design(pair.source, pair.target, method, pair.t.size)
+            if isinstance(d, str):
+                errors[method] = d
+            else:
+                designs[method] = state.with_law(sid, method, d)
+        case = evaluate_case(pair, loops[pair.source], loops[pair.target], designs)
+        errors.update(case.errors)
+        scenarios[str(sid)] = {"source": pair.source, "target": pair.target, "rmse_without": case.rmse_without,
+                               "ratios": {m: _finite(case.ratios[m]) if m in case.ratios else None
+                                          for m in options.methods},
+                               "errors": errors}
+    plants = {name: {"num": list(lp.spec.plant.num), "den": list(lp.spec.plant.den), "delay": lp.spec.plant.delay}
+              for name, lp in loops.items()}
+    return {"sample": index, "settings": settings_id, "rejected": rejected, "plants": plants,
+            "scenarios": scenarios, "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+
+
+def _check_scheduler(address: str) -> None:
+    m = _SCHEDULER_RE.match(address)
+    if not m or not 0 < int(m.group(3)) < 65536:
+        raise CampaignError(f"`scheduler`: got {address!r}, expected a Dask scheduler address tcp://HOST:PORT "
+                            "(e.g. tcp://10.0.0.5:8786, printed by `dask scheduler`), or none for a local cluster")
+
+
+@contextmanager
+def _client(scheduler: str | None, workers: int | None, dashboard: bool = False) -> Iterator[Any]:
+    """A Dask client: on a new local cluster (with its dashboard on a free port if asked), or
+    connected to ``scheduler``."""
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        _check_scheduler(scheduler)
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise CampaignError(f"`scheduler`: cannot connect to {scheduler} ({exc}); is `dask scheduler` "
+                                "running there and reachable? Omit --scheduler for a local cluster") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = workers if workers is not None else len(os.sched_getaffinity(0))
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                      dashboard_address=":0" if dashboard else None,
+                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        yield client
+
+
+def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, scheduler: str | None = None,
+                 workers: int | None = None,
+                 progress: Callable[[int, int, str], None] | None = None,
+                 dashboard: Callable[[str], None] | None = None) -> CampaignResult:
+    """Run (or resume) a campaign whose samples are kept in ``out`` (see :mod:`ilcdob.validation.campaign`).
+
+    The folder holds the campaign's sample store and settings (:mod:`.store`), kept up to date
+    sample by sample so that a killed run resumes; the report (:meth:`CampaignResult.files`)
+    is not written here.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        Needs at least two systems; identified ones unless ``options.bound`` is given.
+    options : CampaignOptions
+        The campaign's settings.
+    out : str or Path
+        The campaign folder (created); holds ``samples.jsonl`` and ``campaign_settings.json``.
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a running Dask scheduler (default: a local cluster).
+    workers : int, optional
+        Local cluster: worker processes (default: the usable cores).
+    progress : callable, optional
+        Called as ``progress(done, total, what)``: once before flying (``done``: the samples
+        read back from the folder), then after each sample flown; ``total`` is
+        ``options.samples``. None: silent.
+    dashboard : callable, optional
+        Called with one line naming the Dask dashboard link when the cluster is up (a local
+        cluster then serves its dashboard on a free port). None: no dashboard.
+
+    Returns
+    -------
+    CampaignResult
+        Statistics of samples ``0 .. options.samples - 1``.
+
+    Raises
+    ------
+    CampaignError
+        Bad scheduler address or no connection, ``out`` holding a campaign with other settings
+        or in use, a sample failing on a worker (finished samples are kept: run again to resume).
+    """
+    t_start = time.perf_counter()
+    say = progress if progress is not None else (lambda done, total, what: None)
+    if scheduler is not None:
+        _check_scheduler(scheduler)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise CampaignError(f"`workers`: got {workers!r}, expected an integer >= 1")
+    if len(fleet.systems) < 2:
+        raise CampaignError(f"fleet {fleet.source}: a campaign needs at least two systems, got {fleet.names}")
+    if options.bound is None:
+        lacking = [s.name for s in fleet.systems if s.identification is None and s.uncertainty is None]
+        if lacking:
+            raise CampaignError(f"fleet {fleet.source}: systems {lacking} have neither an identification nor an "
+                                "`uncertainty = { bound }` to draw true plants from; identify them (ilcdob "
+                                "identify-fleet), state a bound in the fleet file, or give one (--bound 0.2)")
+    settings = campaign_settings(fleet, options)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with campaign_lock(out):
+        check_settings(out, settings)
+        store = SampleStore(out / SAMPLES_FILE, settings["id"])
+        records = store.load()
+        resumed = sum(1 for i in records if i < options.samples)
+        todo = [i for i in range(options.samples) if i not in records]
+        n_workers = 0
+        total = options.samples
+        say(resumed, total, f"campaign: {len(todo)} of {total} samples to fly ({resumed} already in {store.path})")
+        if todo:
+            with _client(scheduler, workers, dashboard is not None) as client:
+                if dashboard is not None:
+                    dashboard(f"Dask dashboard: {client.dashboard_link}")
+                from distributed import as_completed
+
+                n_workers = len(client.scheduler_info()["workers"])
+                fleet_f = client.scatter(fleet, broadcast=True)
+                futures = [client.submit(run_sample, fleet_f, options, settings["id"], i, pure=False,
+                                         key=f"ilcdob-campaign-{settings['id']}-{i}") for i in todo]
+                done = resumed
+                for fut in as_completed(futures):
+                    try:
+                        rec = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - any worker failure stops the campaign, resumable
+                        for f in futures:
+                            f.cancel()
+                        raise CampaignError(f"a sample failed on a worker: {type(exc).__name__}: {exc}; the "
+                                            f"finished samples are kept in {store.path}, run the same command "
+                                            "again to resume") from exc
+                    store.append(rec)
+                    records[rec["sample"]] = rec
+                    done += 1
+                    say(done, total, f"campaign: sample {rec['sample']} flown ({rec['time_s']:.1f} s on a worker)")
+        return campaign_statistics(records, options, settings, resumed, time.perf_counter() - t_start,
+                                   n_workers)
