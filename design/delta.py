@@ -26,7 +26,10 @@ from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 
-__all__ = ["DeltaSet", "delta_set"]
+__all__ = ["DeltaSet", "delta_set", "MAX_DELTA_SAMPLES"]
+
+#: Most sampled plants per system in a Delta set (the fir/robust designs grow with their number).
+MAX_DELTA_SAMPLES = 200
 
 
 @dataclass(frozen=True)
@@ -134,11 +137,12 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
     Raises
     ------
     SpecError
-        ``k < 1``, no uncertainty to sample from (neither a bound nor an identification), a
+        ``k`` outside 1 to :data:`MAX_DELTA_SAMPLES`, no uncertainty to sample from (neither a bound nor an identification), a
         bound outside (0, 1), or too many unstable samples.
     """
-    if k < 1:
-        raise SpecError(f"`k`: got {k}, expected >= 1 samples")
+    if k < 1 or k > MAX_DELTA_SAMPLES:
+        raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}: every sample is "
+                        "a closed loop that is built, flown and constrained on by the fir/robust designs")
     rng = np.random.default_rng(0) if rng is None else rng
     w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
     nominal = build_loop(spec.exact(), ts)

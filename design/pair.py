@@ -16,6 +16,8 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
+from ilcdob.lifted import check_lifted_size
+from ilcdob.display import html_table
 
 from .closed_form import closed_form_filters
 from .delta import DeltaSet, delta_set
@@ -64,6 +66,15 @@ class PairDesign:
     robust: RobustPairDesigner | None = field(default=None, repr=False)
     law: str = DEFAULT_LAW
     reference: ReferenceTerms | None = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        pair = f"{self.filters.get('from', '?')} -> {self.filters.get('to', '?')}"
+        return f"<PairDesign {self.method} {pair}, law {self.law}: {self.order}>"
+
+    def _repr_html_(self) -> str:
+        rows = [[k, v] for k, v in self.filters.items() if isinstance(v, (str, int, float, bool))]
+        return html_table(f"{self.method} design {self.filters.get('from', '?')} -> {self.filters.get('to', '?')}",
+                          ["", "value"], [*rows, ["order", self.order]])
 
     @property
     def order(self) -> str:
@@ -212,6 +223,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
     matrices = None
     if lifted:
+        check_lifted_size(n, "n")
         l1, l2 = NormOptimalDesigner(tgt, n, opts).lifted_matrices(src)
         matrices = {"L1": l1, "L2": l2}
     filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,

@@ -29,12 +29,13 @@ from typing import Callable
 
 import numpy as np
 
+from ilcdob.errors import FleetError
 from ilcdob.fleet import Fleet
 from ilcdob.fleet_io import fleet_to_toml
 from ilcdob.signals import FlightData
 from ilcdob.specs import IdentificationSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
-from ilcdob.vehicles.quadrotor import QuadrotorParams, fly, table_i_vehicles
+from ilcdob.vehicles.quadrotor import TABLE_I, QuadrotorParams, fly, table_i_vehicles
 
 from .excitation import Chirp, StepSequence
 from .results import TFEstimate
@@ -101,6 +102,15 @@ class VehicleIdentification:
     validation: tuple[FlightData, ...]
 
 
+def _check_table_i(fleet: Fleet, names: list[str]) -> None:
+    """FleetError unless every name in ``names`` has a nonlinear vehicle of Table I."""
+    unknown = [n for n in names if n not in TABLE_I]
+    if unknown:
+        raise FleetError(f"{fleet.source}: system(s) {unknown}: the nonlinear vehicles exist for "
+                         f"{', '.join(TABLE_I)} only (paper Table I); name the fleet's systems "
+                         f"{'/'.join(TABLE_I)}, or identify your own flight logs with `ilcdob identify`")
+
+
 def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 0.003,
                      progress: Callable[[int, int, str], None] | None = None,
                      vehicle: QuadrotorParams | None = None) -> VehicleIdentification:
@@ -127,6 +137,9 @@ def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 
     VehicleIdentification
     """
     say = progress if progress is not None else (lambda done, total, what: None)
+    fleet.loop(name)  # unknown names: a FleetError listing the fleet's systems
+    if vehicle is None:
+        _check_table_i(fleet, [name])
     params = vehicle if vehicle is not None else table_i_vehicles()[name]
     spec = next(s for s in fleet.systems if s.name == name)
     ts = fleet.sample_time
@@ -272,6 +285,7 @@ def identify_fleet(fleet: Fleet, *, seed: int = 0,
     FleetIdentification
     """
     say = progress if progress is not None else (lambda done, total, what: None)
+    _check_table_i(fleet, fleet.names)  # before any flight
     results = {}
     for i, name in enumerate(fleet.names):
         vid = identify_vehicle(name, fleet, seed=seed + 10 * i)

@@ -2,7 +2,7 @@
 
 :func:`fit_figures` builds the figures as :class:`matplotlib.figure.Figure` objects (no
 pyplot, no global backend: safe in threads and in programs with their own GUI backend);
-:func:`plot_fit` writes them as PNG files.
+the application writes them (``ilcdob identify --plot DIR``).
 """
 
 from __future__ import annotations
@@ -12,12 +12,11 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ilcdob.atomic import savefig_atomic
 from ilcdob.signals import FlightData
 
 from .results import TFEstimate, fit_percent
 
-__all__ = ["fit_figures", "plot_fit"]
+__all__ = ["fit_figures"]
 
 #: Resolution of the figures (dots per inch), used when they are saved.
 DPI = 110
@@ -115,35 +114,3 @@ def fit_figures(est: TFEstimate, estimation: list[FlightData], validation: list[
     return {"compare.png": _compare_figure(est, list(estimation), list(validation)),
             "residuals.png": _residuals_figure(est),
             "bode.png": _bode_figure(est, w)}
-
-
-def plot_fit(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData], out: str | Path,
-             w: np.ndarray | None = None) -> list[Path]:
-    """Write the figures of :func:`fit_figures` into a folder.
-
-    Parameters
-    ----------
-    est : TFEstimate
-        The fitted model.
-    estimation : list of FlightData
-        The experiments it was fitted to.
-    validation : list of FlightData
-        Held-out experiments (may be empty).
-    out : str or Path
-        Folder (created if missing); ``compare.png``, ``residuals.png`` and ``bode.png`` are
-        written into it, each atomically.
-    w : numpy.ndarray, optional
-        Frequencies of the Bode figure, rad/s (see :func:`fit_figures`).
-
-    Returns
-    -------
-    list of Path
-        The files written.
-    """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for name, fig in fit_figures(est, estimation, validation, w).items():
-        savefig_atomic(fig, out / name, dpi=DPI)
-        paths.append(out / name)
-    return paths

@@ -14,6 +14,7 @@ from typing import Any
 import control as ct
 import numpy as np
 
+from ilcdob.display import html_table
 from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
@@ -355,6 +356,24 @@ class TFEstimate:
             "solver": self.solver,
             "trend": self.trend,
         }
+
+    def __repr__(self) -> str:
+        held = "" if self.fit_validation is None else f", held-out {self.fit_validation:.1f} %"
+        delay = f" * exp(-{self.delay:.4g} s)" if self.delay else ""
+        return (f"<TFEstimate G(s) = ({_poly(self.num)}) / ({_poly(self.den)}){delay}; fit {self.fit_estimation:.1f} %"
+                f"{held}; {self.solver.get('status', 'status unknown')}>")
+
+    def _repr_html_(self) -> str:
+        std = np.sqrt(np.clip(np.diag(np.asarray(self.covariance)), 0.0, None))
+        names = [f"a{i}" for i in range(self.structure.n_free_poles - 1, -1, -1)] + \
+                [f"b{i}" for i in range(self.structure.n_zeros, -1, -1)] + (["delay (s)"] if self.delay_estimated else [])
+        values = [*np.asarray(self.theta, float), *([self.delay] if self.delay_estimated else [])]
+        rows = [[n, float(v), float(e)] for n, v, e in zip(names, values, std)]
+        rows += [["fit estimation (%)", self.fit_estimation, ""],
+                 ["fit held-out (%)", "-" if self.fit_validation is None else self.fit_validation, ""],
+                 ["solver", self.solver.get("status", "-"), ""]]
+        return html_table(f"G(s) = ({_poly(self.num)}) / ({_poly(self.den)})"
+                          + (f" exp(-{self.delay:.4g} s)" if self.delay else ""), ["", "value", "1 sigma"], rows)
 
     def summary(self) -> str:
         """Human-readable summary (parameters with 1-sigma, fit, residual tests)."""

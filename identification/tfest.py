@@ -65,6 +65,12 @@ __all__ = ["FitOptions", "tfest", "Progress"]
 Progress = Callable[[int, int, str], None]
 
 
+#: A converged fit with its offset estimated that explains less than this share of the output
+#: (fit, %) means the output does not respond to the input: :func:`tfest` refuses it instead
+#: of returning a model of noise (a weak but real response, e.g. 20 dB SNR, fits above 50 %).
+MIN_RESPONSE_FIT = 1.0
+
+
 def _silent(done: int, total: int, what: str) -> None:
     """The default ``progress``: reports nothing."""
 
@@ -712,10 +718,16 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     n_global = structure.n_params + (1 if estimate_delay else 0)
     cov = sigma2 * _scaled_pinv(h)[:n_global, :n_global]
     fitted = [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p), p.locals_)]
-    return TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
-                               delay_estimated=estimate_delay, sigma2=sigma2,
-                               experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
-                               input=input, output=output, trend=opts.trend, fitted=fitted,
-                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
-                                       "status": best.status, "iterations": best.iterations, "starts": runs,
-                                       "seconds": time.perf_counter() - t_start})
+    est = TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
+                              delay_estimated=estimate_delay, sigma2=sigma2,
+                              experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
+                              input=input, output=output, trend=opts.trend, fitted=fitted,
+                              solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
+                                      "status": best.status, "iterations": best.iterations, "starts": runs,
+                                      "seconds": time.perf_counter() - t_start})
+    if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:
+        raise SignalError(f"{exps[0].source}: output `{output}` shows no response to input `{input}`: the best "
+                          f"model explains {est.fit_estimation:.2g} % of it beyond its offset (below "
+                          f"{MIN_RESPONSE_FIT:g} %); check the signal names, the units and that the excitation "
+                          "reached the vehicle")
+    return est

@@ -8,17 +8,52 @@ samples on a uniform grid ``t = k * Ts``, ``k = 0..N-1``; positions in m, accele
 m/s^2, time in s.
 """
 
-from .errors import FleetError, IlcdobError, ModelFileError, SignalError, SpecError, UnstableLoopError
+def _source_checkout_layout() -> None:
+    """From a source checkout that is not installed (``python -m ilcdob`` in the repository root),
+    map ilcdob.design / ilcdob.identification / ilcdob.validation onto the folders beside this
+    one, as an installation does (pyproject.toml, ``[tool.setuptools.package-dir]``)."""
+    import importlib.abc
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    root = here.parent
+    subs = ("design", "identification", "validation")
+    if (here / "design").is_dir() or not (root / "pyproject.toml").is_file() \
+            or not all((root / sub / "__init__.py").is_file() for sub in subs):
+        return  # installed (or not this repository's layout): nothing to map
+
+    class _Layout(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path, target=None):  # noqa: D102 - the finder protocol
+            sub = name[len(__name__) + 1:] if name.startswith(__name__ + ".") else ""
+            if sub not in subs:
+                return None
+            return importlib.util.spec_from_file_location(name, root / sub / "__init__.py",
+                                                          submodule_search_locations=[str(root / sub)])
+
+    if not any(type(f).__name__ == "_Layout" for f in sys.meta_path):
+        sys.meta_path.insert(0, _Layout())
+
+
+_source_checkout_layout()
+
+from .errors import FleetError, IlcdobError, ModelFileError, NumericalError, SignalError, SpecError, UnstableLoopError
 from .fleet import Fleet, default_fleet, fleet_from_dict, fleet_from_systems, load_fleet
 from .fleet_io import add_system, fleet_to_toml
 from .identified import IdentifiedModel, load_model
 from .loop import LoopSystem, build_loop, freqresp
 from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
 
-__version__ = "0.1.0"
+try:
+    from importlib.metadata import PackageNotFoundError as _NotFound, version as _version
+
+    __version__ = _version("ilcdob")
+except _NotFound:  # a source checkout that is not installed
+    __version__ = "unknown"
 
 __all__ = [
-    "IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError",
+    "IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError", "NumericalError",
     "Fleet", "load_fleet", "default_fleet", "fleet_from_dict", "fleet_from_systems", "add_system", "fleet_to_toml",
     "IdentifiedModel", "load_model",
     "LoopSystem", "build_loop", "freqresp",

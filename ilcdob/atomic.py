@@ -1,7 +1,8 @@
 """Atomic file output: write to a temporary file in the target folder, then rename.
 
 A crash or an exception mid-write leaves the previous file (or none), never a half-written
-one: ``os.replace`` is atomic on POSIX and Windows within one file system.
+one: ``os.replace`` is atomic on POSIX and Windows within one file system. A temporary left by
+a killed writer (``.NAME.tmp-<pid>-...``) is removed by the next write of the same file.
 """
 
 from __future__ import annotations
@@ -13,13 +14,27 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "savefig_atomic"]
+__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic"]
 
 
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def _remove_stale(folder: Path, prefix: str) -> None:
+    """Remove temporaries ``<prefix><pid>-*`` of writers that were killed (their pid is gone)."""
+    for p in folder.glob(f"{prefix}*"):
+        pid = p.name[len(prefix):].split("-", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            p.unlink(missing_ok=True)
+        except PermissionError:
+            pass  # another user's live process
 
 
 @contextmanager
@@ -40,7 +55,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
+    prefix = f".{path.name}.tmp-"
+    _remove_stale(path.parent, prefix)
+    fd, tmp = tempfile.mkstemp(prefix=f"{prefix}{os.getpid()}-", suffix=path.suffix, dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -77,21 +94,3 @@ def write_json_atomic(path: str | Path, data: Any) -> None:
         Anything :func:`json.dumps` accepts; written with an indent of 2 and a final newline.
     """
     write_text_atomic(path, json.dumps(data, indent=2) + "\n")
-
-
-def savefig_atomic(fig: Any, path: str | Path, **kwargs: Any) -> None:
-    """``fig.savefig`` to ``path`` atomically (format from the suffix of ``path``).
-
-    Parameters
-    ----------
-    fig : matplotlib.figure.Figure
-        The figure (anything with a matplotlib-like ``savefig``).
-    path : str or Path
-        The file to write; its suffix gives the format (``png`` without one).
-    **kwargs
-        Passed to ``fig.savefig`` (e.g. ``dpi``).
-    """
-    path = Path(path)
-    fmt = path.suffix.lstrip(".") or "png"
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=fmt, **kwargs)

@@ -118,9 +118,57 @@ def discretize_plant(plant: PlantSpec, ts: float) -> ct.StateSpace:
     -------
     control.StateSpace
         The sampled plant (delayed inputs as extra states), ``dt = ts``.
+
+    Raises
+    ------
+    SpecError
+        The coefficients are out of double-precision range: the realisation or its
+        discretisation is not finite, or it does not reproduce ``num/den``.
     """
     sys_c = ct.tf2ss(ct.tf(list(plant.num), list(plant.den)))
-    return zoh_with_delay(sys_c, ts, plant.delay)
+    _check_realisation(plant, sys_c, ts)
+    sys_d = zoh_with_delay(sys_c, ts, plant.delay)
+    if not all(np.all(np.isfinite(np.asarray(m, dtype=float))) for m in (sys_d.A, sys_d.B, sys_d.C, sys_d.D)):
+        raise SpecError(f"`plant`: num = {list(plant.num)}, den = {list(plant.den)}: its zero-order-hold "
+                        f"discretisation at {ts:g} s overflows (non-finite matrices); {_RESCALE}")
+    return sys_d
+
+
+_RESCALE = ("the coefficients span too many orders of magnitude for double precision; give a plant whose poles, "
+            "zeros and gain are within about 1e-6 to 1e6 (rad/s, m/s^2 -> m), e.g. drop poles far above the "
+            "Nyquist frequency")
+
+#: Relative tolerance of the check that the state-space realisation of a plant has its
+#: transfer function (at a few frequencies below Nyquist).
+REALISATION_RTOL = 1e-6
+
+
+def _check_realisation(plant: PlantSpec, sys_c: ct.StateSpace, ts: float) -> None:
+    """SpecError when ``sys_c`` (``tf2ss`` of the plant) is not finite or lost the plant's dynamics.
+
+    With coefficients spanning hundreds of orders of magnitude the realisation silently drops
+    states (``1/(1e-20 s^3 + s^2)`` comes back with none) or overflows; the response is
+    compared with ``num(jw)/den(jw)`` at four frequencies between 1e-3 and 0.3 times Nyquist.
+    """
+    mats = [np.asarray(m, dtype=float) for m in (sys_c.A, sys_c.B, sys_c.C, sys_c.D)]
+    what = f"`plant`: num = {list(plant.num)}, den = {list(plant.den)}"
+    if not all(np.all(np.isfinite(m)) for m in mats):
+        raise SpecError(f"{what}: its state-space realisation is not finite; {_RESCALE}")
+    a, b, c, d = mats
+    for frac in (1.1e-3, 1.3e-2, 0.117, 0.31):
+        s = 1j * frac * math.pi / ts
+        with np.errstate(all="ignore"):
+            want = np.polyval(plant.num, s) / np.polyval(plant.den, s)
+        if not np.isfinite(want) or want == 0:
+            continue  # a pole or zero on the axis at this frequency: nothing to compare
+        try:
+            got = (c @ np.linalg.solve(s * np.eye(a.shape[0]) - a, b) + d).item() if a.size else d.item()
+        except np.linalg.LinAlgError:
+            got = complex("nan")
+        if not abs(got - want) <= REALISATION_RTOL * abs(want):
+            raise SpecError(f"{what}: its state-space realisation ({a.shape[0]} of {len(plant.den) - 1} states) does "
+                            f"not reproduce the transfer function (|P| at {frac * math.pi / ts:.4g} rad/s: {abs(got):.4g} "
+                            f"instead of {abs(want):.4g}); {_RESCALE}")
 
 
 def discretize_pid(pid: PIDSpec, ts: float) -> ct.StateSpace:

@@ -99,6 +99,22 @@ class Fleet:
     loops: tuple[LoopSystem, ...]
     source: str = "<memory>"
 
+    def __repr__(self) -> str:
+        return (f"<Fleet {', '.join(self.names)}; sample time {self.sample_time:g} s; from {self.source}>")
+
+    def _repr_html_(self) -> str:
+        from .display import html_table
+
+        rows = []
+        for s in self.systems:
+            p, c = s.nominal_plant, s.controller
+            rows.append([s.name, f"{list(p.num)} / {list(p.den)}", p.delay, f"{c.kp:g} / {c.ki:g} / {c.kd:g}",
+                         f"{s.dob.q_order}, {s.dob.q_time_constant:g} s",
+                         "identified" if s.identification else ("bound" if s.uncertainty else "-")])
+        return html_table(f"Fleet from {self.source}, sample time {self.sample_time:g} s",
+                          ["system", "model num / den", "delay (s)", "kp / ki / kd", "Q order, time constant",
+                           "uncertainty"], rows)
+
     @property
     def names(self) -> list[str]:
         """Names of the systems, in file order."""
@@ -197,8 +213,8 @@ def _system_from_table(src: str, idx: int, table: Any, base_dir: Path | None = N
         parts["identification"] = files[nominal_key].identification_spec(source=table[nominal_key][MODEL_FILE_KEY])
     try:
         return SystemSpec(name=table["name"], **parts)
-    except SpecError as exc:
-        raise FleetError(f"{label}: {exc}") from exc
+    except SpecError as exc:  # its message starts with the system's name already
+        raise FleetError(f"{src}: {exc}" if str(exc).startswith("system ") else f"{label}: {exc}") from exc
 
 
 def _check_sample_time(source: str, ts: Any) -> None:
@@ -329,13 +345,16 @@ def read_fleet_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     Raises
     ------
     FleetError
-        Unreadable file or TOML syntax error, naming the file.
+        Unreadable file, not UTF-8 text, or TOML syntax error, naming the file.
     """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise FleetError(f"{path}: cannot read fleet file ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise FleetError(f"{path}: not a UTF-8 text file (byte {exc.object[exc.start]:#04x} at offset "
+                         f"{exc.start}); a fleet file is TOML text (schema: ilcdob.fleet)") from exc
     try:
         return text, tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

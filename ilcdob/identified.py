@@ -28,7 +28,7 @@ import numpy as np
 from .errors import ModelFileError, SpecError
 from .uncertainty import ModelStructure
 from .specs import (DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec,
-                    as_polynomial)
+                    as_polynomial, check_covariance)
 
 
 __all__ = ["IdentifiedModel", "load_model", "model_from_dict", "REQUIRED_KEYS"]
@@ -159,6 +159,7 @@ class IdentifiedModel:
             what = "parameters and the delay" if self.delay_estimated else "parameters"
             raise SpecError(f"`covariance`: got shape {cov.shape}, expected a finite {n_cov} x {n_cov} matrix "
                             f"(covariance of the {len(params)} {what})")
+        check_covariance(cov, n_cov, "covariance")  # symmetric positive semi-definite
         ts = _number("sample_time", self.sample_time)
         if not (math.isfinite(ts) and ts > 0):
             raise SpecError(f"`sample_time`: got {self.sample_time!r}, expected a number > 0 (s)")

@@ -60,6 +60,10 @@ def _named(sys: ct.StateSpace, inp: str, out: str, name: str) -> ct.StateSpace:
 
 
 def _check_stable(sys: ct.StateSpace, what: str, system: str) -> None:
+    if not np.all(np.isfinite(np.asarray(sys.A, dtype=float))):
+        raise SpecError(f"system {system!r}: the {what} has non-finite state matrices (overflow); the plant, "
+                        "controller or DOB coefficients are out of double-precision range: give values within about "
+                        "1e-6 to 1e6 in their units")
     poles = np.linalg.eigvals(sys.A) if sys.nstates else np.zeros(0)
     bad = poles[np.abs(poles) >= STABILITY_MARGIN]
     if bad.size:

@@ -20,7 +20,67 @@ import numpy as np
 from .errors import SpecError
 
 __all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "SystemSpec",
-           "LTI_NUMERATOR_RTOL", "as_polynomial"]
+           "LTI_NUMERATOR_RTOL", "MAX_NOISE_AMPLITUDE", "COVARIANCE_RTOL", "as_polynomial", "check_covariance"]
+
+#: Largest process-noise amplitude a fleet may state, m/s^2 (about 100 g: far beyond any vehicle).
+MAX_NOISE_AMPLITUDE = 1e3
+
+#: Relative tolerance (of the largest entry) of the symmetry and positive-semi-definiteness
+#: checks of a covariance matrix: files store 10 significant digits, so the two triangles of
+#: a symmetric matrix may differ in the last one.
+COVARIANCE_RTOL = 1e-6
+
+
+def _real(name: str, value: object) -> float:
+    """``value`` as a float; SpecError naming ``name`` for text, booleans and other non-numbers."""
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise SpecError(f"`{name}`: got {value!r}, expected a number")
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise SpecError(f"`{name}`: got {value!r}, expected a number") from None
+
+
+def check_covariance(value: object, n: int, name: str = "covariance") -> np.ndarray:
+    """A covariance matrix checked to be a finite, symmetric, positive semi-definite n x n matrix.
+
+    Parameters
+    ----------
+    value : array_like
+        The matrix (list of rows).
+    n : int
+        Its expected size.
+    name : str
+        What it is, for the message.
+
+    Returns
+    -------
+    numpy.ndarray
+        The matrix as given (not symmetrised).
+
+    Raises
+    ------
+    SpecError
+        Not numbers, the wrong shape, non-finite, not symmetric or with a negative
+        eigenvalue (both up to :data:`COVARIANCE_RTOL` of the largest entry).
+    """
+    try:
+        cov = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SpecError(f"`{name}`: got {value!r}, expected a {n} x {n} matrix (list of rows)") from None
+    if cov.shape != (n, n) or not np.all(np.isfinite(cov)):
+        raise SpecError(f"`{name}`: expected a finite {n} x {n} matrix, got shape {cov.shape}"
+                        + ("" if cov.shape != (n, n) else f" with non-finite entries {cov.tolist()}"))
+    tol = COVARIANCE_RTOL * float(np.max(np.abs(cov), initial=0.0))
+    asym = float(np.max(np.abs(cov - cov.T), initial=0.0))
+    if asym > tol:
+        raise SpecError(f"`{name}`: not symmetric (largest |C - C^T| entry {asym:.3g}, got {cov.tolist()}); a "
+                        "covariance must be a symmetric positive semi-definite matrix")
+    low = float(np.min(np.linalg.eigvalsh((cov + cov.T) / 2), initial=0.0)) if n else 0.0
+    if low < -tol:
+        raise SpecError(f"`{name}`: has a negative eigenvalue {low:.3g} (got {cov.tolist()}); a covariance must "
+                        "be a symmetric positive semi-definite matrix")
+    return cov
 
 
 def as_polynomial(values: object, name: str) -> tuple[float, ...]:
@@ -55,6 +115,19 @@ def as_polynomial(values: object, name: str) -> tuple[float, ...]:
     if nz.size == 0:
         raise SpecError(f"`{name}`: polynomial is identically zero ({values!r})")
     return tuple(float(v) + 0.0 for v in arr[nz[0]:])  # + 0.0: no -0.0 in files and messages
+
+
+def _vector(values: object, name: str) -> tuple[float, ...]:
+    """Finite numbers of a 1-D list; SpecError naming ``name`` otherwise."""
+    if isinstance(values, (str, bytes)):
+        raise SpecError(f"`{name}`: got {values!r}, expected a list of numbers")
+    try:
+        arr = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError):
+        raise SpecError(f"`{name}`: got {values!r}, expected a list of numbers") from None
+    if arr.ndim != 1 or not np.all(np.isfinite(arr)):
+        raise SpecError(f"`{name}`: got {values!r}, expected a 1-D list of finite numbers")
+    return tuple(float(v) for v in arr)
 
 
 #: Leading numerator coefficients of a StateSpace converted to a transfer function that are
@@ -149,7 +222,7 @@ class PlantSpec:
                             "python-control TransferFunction or StateSpace alone")
         object.__setattr__(self, "num", as_polynomial(self.num, "plant.num"))
         object.__setattr__(self, "den", as_polynomial(self.den, "plant.den"))
-        object.__setattr__(self, "delay", float(self.delay))
+        object.__setattr__(self, "delay", _real("plant.delay", self.delay))
         _positive("plant.delay", self.delay, allow_zero=True)
         if len(self.num) >= len(self.den):
             raise SpecError(
@@ -225,7 +298,7 @@ class PIDSpec:
 
     def __post_init__(self) -> None:
         for name in ("kp", "ki", "kd", "derivative_filter"):
-            object.__setattr__(self, name, float(getattr(self, name)))
+            object.__setattr__(self, name, _real(f"controller.{name}", getattr(self, name)))
         _positive("controller.kp", self.kp)
         _positive("controller.ki", self.ki, allow_zero=True)
         _positive("controller.kd", self.kd, allow_zero=True)
@@ -252,10 +325,11 @@ class DOBSpec:
     q_time_constant: float
 
     def __post_init__(self) -> None:
-        if isinstance(self.q_order, bool) or not float(self.q_order).is_integer() or self.q_order < 1:
+        if isinstance(self.q_order, (bool, str, bytes)) or not isinstance(self.q_order, (int, float, np.number)) \
+                or not float(self.q_order).is_integer() or self.q_order < 1:
             raise SpecError(f"`dob.q_order`: got {self.q_order!r}, expected an integer >= 1")
         object.__setattr__(self, "q_order", int(self.q_order))
-        object.__setattr__(self, "q_time_constant", float(self.q_time_constant))
+        object.__setattr__(self, "q_time_constant", _real("dob.q_time_constant", self.q_time_constant))
         _positive("dob.q_time_constant", self.q_time_constant)
 
 
@@ -270,7 +344,7 @@ class NoiseSpec:
     Attributes
     ----------
     amplitude : float
-        m/s^2, >= 0 (default 0: no noise).
+        m/s^2, 0 to :data:`MAX_NOISE_AMPLITUDE` (default 0: no noise).
     frequency : float
         Hz, > 0.
     phase : float
@@ -283,8 +357,11 @@ class NoiseSpec:
 
     def __post_init__(self) -> None:
         for name in ("amplitude", "frequency", "phase"):
-            object.__setattr__(self, name, float(getattr(self, name)))
+            object.__setattr__(self, name, _real(f"noise.{name}", getattr(self, name)))
         _positive("noise.amplitude", self.amplitude, allow_zero=True)
+        if self.amplitude > MAX_NOISE_AMPLITUDE:
+            raise SpecError(f"`noise.amplitude`: got {self.amplitude!r}, expected 0 to {MAX_NOISE_AMPLITUDE:g} m/s^2 "
+                            "(the process noise at the plant input, an acceleration)")
         _positive("noise.frequency", self.frequency)
         if not math.isfinite(self.phase):
             raise SpecError(f"`noise.phase`: got {self.phase!r}, expected a finite number (rad)")
@@ -321,7 +398,7 @@ class UncertaintySpec:
     bound: float
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "bound", float(self.bound))
+        object.__setattr__(self, "bound", _real("uncertainty.bound", self.bound))
         if not (math.isfinite(self.bound) and 0 < self.bound < 1):
             raise SpecError(f"`uncertainty.bound`: got {self.bound!r}, expected a relative error in (0, 1)")
 
@@ -359,14 +436,16 @@ class IdentificationSpec:
     source: str = ""
 
     def __post_init__(self) -> None:
-        params = tuple(float(v) for v in self.parameters)
-        cov = np.asarray(self.covariance, dtype=float)
+        for key in ("poles", "zeros", "integrators"):
+            value = getattr(self, key)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise SpecError(f"`identification.{key}`: got {value!r}, expected an integer >= 0")
+        params = _vector(self.parameters, "identification.parameters")
         n = len(params) + (1 if self.delay_estimated else 0)
         if len(params) != self.poles - self.integrators + self.zeros + 1:
             raise SpecError(f"`identification.parameters`: {len(params)} values do not match poles={self.poles}, "
                             f"zeros={self.zeros}, integrators={self.integrators}")
-        if cov.shape != (n, n) or not np.all(np.isfinite(cov)):
-            raise SpecError(f"`identification.covariance`: expected a finite {n} x {n} matrix, got shape {cov.shape}")
+        cov = check_covariance(self.covariance, n, "identification.covariance")
         object.__setattr__(self, "parameters", params)
         object.__setattr__(self, "covariance", tuple(tuple(float(v) for v in row) for row in cov))
 

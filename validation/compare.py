@@ -36,9 +36,10 @@ from ilcdob.design.laws import DEFAULT_LAW, check_law
 from ilcdob.design.norm_optimal import NormOptimalOptions
 from ilcdob.design.pair import DEFAULT_METHODS, METHODS, PairDesign, design_pair, fleet_delta_sets
 from ilcdob.design.robust import RobustOptions
-from ilcdob.errors import IlcdobError, SpecError
+from ilcdob.errors import IlcdobError, NumericalError, SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
+from ilcdob.display import html_table
 
 from .reproduce import json_document
 from .scenarios import scenario
@@ -190,6 +191,19 @@ class Comparison:
     methods: list[MethodComparison]
     law: str = DEFAULT_LAW
 
+    def __repr__(self) -> str:
+        ok = [m for m in self.methods if m.error is None]
+        best = min(ok, key=lambda m: m.ratio_worst, default=None)
+        lead = f"; best worst-case ratio {best.method} {best.ratio_worst:.3g}" if best else ""
+        return (f"<Comparison scenario {self.scenario} {self.source} -> {self.target}, {len(self.methods)} designs, "
+                f"{self.samples} Delta samples ({self.delta_set}){lead}>")
+
+    def _repr_html_(self) -> str:
+        rows = [[m.method, m.order, m.ratio_nominal, m.ratio_median, m.ratio_worst, m.design_time_s,
+                 m.error or ""] for m in self.methods]
+        return html_table(f"Scenario {self.scenario}, {self.source} -> {self.target}: ratio ||e_j|| / ||e'_j||",
+                          ["method", "order", "nominal", "median", "worst", "design time (s)", "why no result"], rows)
+
     def row(self, method: str) -> MethodComparison:
         """The row of design ``method``.
 
@@ -226,6 +240,8 @@ class Comparison:
     def figure(self, rho: float | None = None) -> Figure:
         """``compare_ratios.png``: the ratio of every case per design (log scale).
 
+        A design that failed has its place on the axis, labelled "design failed", and no points.
+
         Parameters
         ----------
         rho : float, optional
@@ -233,22 +249,28 @@ class Comparison:
         """
         from matplotlib.figure import Figure  # matplotlib only when the figure is made
 
-        fig = Figure(figsize=(7, 3.8))
+        fig = Figure(figsize=(8, 3.8), layout="constrained")
         ax = fig.subplots()
-        rows = [m for m in self.methods if m.error is None]
-        for i, m in enumerate(rows):
+        first = True
+        for i, m in enumerate(self.methods):
+            if m.error is not None:
+                continue
             ax.scatter(np.full(len(m.ratios) - 1, i) + np.linspace(-0.15, 0.15, len(m.ratios) - 1), m.ratios[1:],
-                       s=14, color="0.4", label="Delta samples" if i == 0 else None)
-            ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if i == 0 else None)
-        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+                       s=14, color="0.4", label="Delta samples" if first else None)
+            ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if first else None)
+            first = False
+        ax.axhline(1.0, color="k", lw=0.8, ls="--", label="no improvement (ratio 1)")
         if rho is not None:
             ax.axhline(rho, color="C0", lw=0.8, ls=":", label=f"robust rho = {rho:g}")
-        ax.set_xticks(range(len(rows)), [m.method for m in rows])
+        ax.set_xticks(range(len(self.methods)),
+                      [m.method + ("\n(design failed)" if m.error is not None else "") for m in self.methods])
+        ax.set_xlim(-0.5, len(self.methods) - 0.5)
         ax.set_yscale("log")
         ax.set_ylabel("||e_j|| / ||e'_j||")
-        ax.set_title(f"Scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law})")
-        ax.legend(fontsize=8)
-        fig.tight_layout()
+        ax.set_title(f"Scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law})",
+                     fontsize=10)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
         return fig
 
     def files(self, rho: float | None = None) -> dict[str, object]:
@@ -349,6 +371,10 @@ def pair_scenario(fleet: Fleet, scenario_id: int, duration: float | None = None)
     t = sc.time(fleet.sample_time)
     if duration is not None:
         t = t[t < duration]
+        if t.size < 2:
+            raise SpecError(f"`duration`: got {duration!r} s, which covers {t.size} sample of the fleet's "
+                            f"{fleet.sample_time:g} s; a flight needs at least 2 samples: give a duration above "
+                            f"{fleet.sample_time:g} s (scenario {scenario_id} lasts {sc.duration:g} s)")
     wind = sc.disturbance(t)
     specs = {s.name: s for s in fleet.systems}
     return PairScenario(scenario_id, source, target, t, sc.reference(t), sc.acceleration(t),
@@ -375,6 +401,13 @@ def evaluate_case(pair: PairScenario, source_loop: LoopSystem, target_loop: Loop
     e_prev = fly(source_loop, pair.d_source)
     e_wo = fly(target_loop, pair.d_target)
     norm_wo = float(np.linalg.norm(e_wo))
+    if not np.isfinite(norm_wo):
+        raise NumericalError(f"scenario {pair.scenario}: the error of {pair.target} without learning is not finite "
+                             f"({norm_wo!r}); its loop diverged numerically")
+    if norm_wo == 0:  # no ratio ||e_j|| / ||e'_j|| exists
+        raise SpecError(f"scenario {pair.scenario}: the error of {pair.target} without learning is {norm_wo!r} m over "
+                        f"the {pair.t.size} samples flown, so the ratio ||e_j|| / ||e'_j|| is undefined; fly a longer "
+                        "duration")
     zero = np.zeros(pair.t.size)
     ratios: dict[str, float] = {}
     rmses: dict[str, float] = {}

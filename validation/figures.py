@@ -1,8 +1,10 @@
 """Figures of the reproduction, in the paper's layout, as :class:`matplotlib.figure.Figure` objects.
 
 * ``rmse_bars.png`` - RMSE per scenario and system: no DOB, only DOB, learning 1..n;
-* ``error_s<N>.png`` - tracking error against time per system;
-* ``disturbance_s<N>.png`` - disturbance estimates against the true disturbance;
+* ``error_s<N>.png`` - tracking error against time per system (one row each): no DOB, only
+  DOB and every learning iteration, and beside it the learning iterations alone (zoom);
+* ``disturbance_s<N>.png`` - the true disturbance, the DOB-only estimate d_hat and the
+  estimate d_hat + d_f of every learning iteration, and beside it each estimate's error;
 * ``bode_loops.png`` - G_r and G_d (with the no-DOB G_d for comparison);
 * ``bode_learning.png`` - L1 and L2 of every learning pair flown;
 * ``bode_te.png`` - Te1, Te2 (error propagation with learning, under a stated model error)
@@ -70,9 +72,15 @@ def _done(fig: Figure) -> Figure:
     return fig
 
 
+def _legend_below(fig: Figure, handles, labels, ncol: int) -> None:
+    """One legend for the whole figure, below every axes (constrained layout keeps it off the data)."""
+    fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize=8, frameon=False)
+
+
 def _rmse_bars(res: ReproductionResult) -> Figure:
     n = len(res.scenarios)
-    fig, axes = _subplots(1, n, (4.2 * n, 3.6), squeeze=False)
+    fig = Figure(figsize=(4.2 * n, 3.9), layout="constrained")
+    axes = fig.subplots(1, n, squeeze=False)
     labels = ["no DOB", "only DOB"] + [f"learning {i + 1}" for i in range(res.iterations)]
     for ax, sr in zip(axes[0], res.scenarios):
         names = sr.order
@@ -83,50 +91,97 @@ def _rmse_bars(res: ReproductionResult) -> Figure:
                 m = sr.systems[name].metrics()
                 vals.append([m["rmse_no_dob"], m["rmse_dob"], *m["rmse_learning"]][k])
             ax.bar(np.arange(len(names)) + (k - (len(labels) - 1) / 2) * width, vals, width,
-                   label=lab, color=_COLORS[k % len(_COLORS)])
+                   label=lab, color=_trial_color(k, res.iterations))
         ax.set_yscale("log")
         ax.set_xticks(np.arange(len(names)), names)
         ax.set_title(f"Scenario {sr.scenario.id}: {sr.scenario.title}", fontsize=9)
         ax.set_ylabel("tracking RMSE (m)")
         ax.grid(True, axis="y", which="both", alpha=0.3)
-    axes[0][0].legend(fontsize=7)
-    return _done(fig)
+    _legend_below(fig, *axes[0][0].get_legend_handles_labels(), ncol=len(labels))
+    return fig
 
 
-def _per_system(sr, title: str, ylabel: str, draw) -> Figure:
-    """One row per system of scenario ``sr``; ``draw(ax, system_result)`` fills a row."""
+#: Line styles of the learning iterations 1, 2, ... (cycled), widest first so that iterations
+#: that coincide (exact models) stay visible on top of each other.
+_ITERATION_STYLES = ["-", "--", ":", "-.", (0, (5, 1, 1, 1, 1, 1)), (0, (1, 3))]
+
+
+def _trial_color(k: int, iterations: int) -> str:
+    """Colour of trial ``k``: 0 no DOB, 1 only DOB, 2.. learning iterations (distinct for any count)."""
+    if k < 2:
+        return _COLORS[k]
+    if iterations <= len(_COLORS) - 2:
+        return _COLORS[k]
+    from matplotlib import colormaps
+    from matplotlib.colors import to_hex
+
+    return to_hex(colormaps["viridis"](0.15 + 0.75 * (k - 2) / max(iterations - 1, 1)))
+
+
+def _iteration_style(i: int, iterations: int) -> dict[str, object]:
+    """Plot keywords of learning iteration ``i`` (0-based) of ``iterations``."""
+    return {"color": _trial_color(i + 2, iterations), "ls": _ITERATION_STYLES[i % len(_ITERATION_STYLES)],
+            "lw": max(2.4 - 0.5 * i, 0.9), "label": f"learning {i + 1}"}
+
+
+def _per_system(sr, iterations: int, title: str, panels: tuple[str, str], ylabel: tuple[str, str],
+                draw) -> Figure:
+    """One row per system of scenario ``sr``, two panels per row (all trials | a zoom);
+    ``draw(ax_left, ax_right, system_result, iterations)`` fills a row. One legend below."""
     names = sr.order
-    fig, axes = _subplots(len(names), 1, (9, 2.2 * len(names)), sharex=True, squeeze=False)
-    for ax, system in zip(axes[:, 0], names):
-        draw(ax, sr.systems[system])
-        ax.set_ylabel(f"{system}\n{ylabel}")
-        ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
-    axes[0, 0].set_title(f"Scenario {sr.scenario.id}: {title}")
-    axes[-1, 0].set_xlabel("time (s)")
-    return _done(fig)
+    fig = Figure(figsize=(13, 2.3 * len(names) + 0.9), layout="constrained")
+    axes = fig.subplots(len(names), 2, sharex=True, squeeze=False)
+    for row, system in zip(axes, names):
+        draw(row[0], row[1], sr.systems[system], iterations)
+        for ax, lab in zip(row, ylabel):
+            ax.set_ylabel(f"{system}\n{lab}")
+            ax.grid(True, alpha=0.3)
+    for ax, panel in zip(axes[0], panels):
+        ax.set_title(panel, fontsize=9)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(f"Scenario {sr.scenario.id}: {title}")
+    seen: dict[str, object] = {}
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(lab, h)
+    _legend_below(fig, list(seen.values()), list(seen), ncol=min(len(seen), 6))
+    return fig
 
 
-def _draw_error(ax, s) -> None:
-    ax.plot(s.no_dob.t, s.no_dob.e, color=_COLORS[0], lw=0.9, label="no DOB")
-    ax.plot(s.dob.t, s.dob.e, color=_COLORS[1], lw=0.9, label="only DOB")
-    ax.plot(s.learning[0].t, s.learning[0].e, color=_COLORS[2], lw=1.1, label="learning 1")
+def _draw_error(left, right, s, iterations: int) -> None:
+    left.plot(s.no_dob.t, s.no_dob.e, color=_COLORS[0], lw=0.9, label="no DOB")
+    left.plot(s.dob.t, s.dob.e, color=_COLORS[1], lw=0.9, label="only DOB")
+    for i, f in enumerate(s.learning):
+        left.plot(f.t, f.e, **_iteration_style(i, iterations))
+        right.plot(f.t, f.e, **_iteration_style(i, iterations))
 
 
-def _draw_disturbance(ax, s) -> None:
-    lf = s.learning[0]
-    ax.plot(s.dob.t, s.dob.d, color="k", lw=1.2, label="true d (wind + noise)")
-    ax.plot(s.dob.t, s.dob.d_hat, color=_COLORS[1], lw=0.9, label="DOB estimate (only DOB)")
-    ax.plot(lf.t, lf.d_hat + lf.d_f, color=_COLORS[2], lw=0.9, ls="--", label="d_hat + d_f (learning 1)")
+def _draw_disturbance(left, right, s, iterations: int) -> None:
+    # the true disturbance on top of the estimates (zorder), so that it stays visible
+    left.plot(s.dob.t, s.dob.d, color="k", lw=1.0, zorder=5, label="true d (wind + noise)")
+    left.plot(s.dob.t, s.dob.d_hat, color=_COLORS[1], lw=0.9, label="only DOB: d_hat")
+    right.plot(s.dob.t, s.dob.d_hat - s.dob.d, color=_COLORS[1], lw=0.9, label="only DOB: d_hat")
+    for i, f in enumerate(s.learning):
+        style = _iteration_style(i, iterations)
+        style["label"] = f"learning {i + 1}: d_hat + d_f"
+        left.plot(f.t, f.d_hat + f.d_f, **style)
+        right.plot(f.t, f.d_hat + f.d_f - f.d, **style)
 
 
 def _time_series(res: ReproductionResult) -> dict[str, Figure]:
     figs = {}
+    n = res.iterations
     for sr in res.scenarios:
         sid = sr.scenario.id
-        figs[f"error_s{sid}.png"] = _per_system(sr, "tracking error", "error e (m)", _draw_error)
-        figs[f"disturbance_s{sid}.png"] = _per_system(sr, "disturbance estimates", "d (m/s$^2$)",
-                                                      _draw_disturbance)
+        figs[f"error_s{sid}.png"] = _per_system(
+            sr, n, f"tracking error of every trial ({n} learning iteration{'s' * (n != 1)})",
+            ("no DOB, only DOB and every learning iteration", "learning iterations only (zoom)"),
+            ("error e (m)", "error e (m)"), _draw_error)
+        figs[f"disturbance_s{sid}.png"] = _per_system(
+            sr, n, f"disturbance estimates of every trial ({n} learning iteration{'s' * (n != 1)})",
+            ("true disturbance and its estimates", "estimate minus true disturbance"),
+            ("d (m/s$^2$)", "estimate - d (m/s$^2$)"), _draw_disturbance)
     return figs
 
 

@@ -42,6 +42,7 @@ from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law, referen
 from ilcdob.design.multi_source import SourceTrial, multi_source_learning
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
+from ilcdob.display import html_table
 
 from .scenarios import Scenario, scenario
 from .simulate import Flight, simulate_flight
@@ -155,6 +156,22 @@ class ReproductionResult:
     filters: dict[tuple[str, str], LearningFilters]
     elapsed_s: float
     law: str = DEFAULT_LAW
+
+    def _ratios(self) -> list[tuple[int, str, dict[str, float]]]:
+        return [(sr.scenario.id, name, sr.systems[name].metrics()) for sr in self.scenarios for name in sr.order]
+
+    def __repr__(self) -> str:
+        worst = max((m["rmse_learning"][-1] / m["rmse_dob"] for _, _, m in self._ratios()), default=float("nan"))
+        return (f"<{type(self).__name__} law {self.law}, {len(self.scenarios)} scenario(s) x "
+                f"{len(self.fleet.systems)} systems, {self.iterations} iteration(s); last learning / DOB-only RMSE "
+                f"at most {100 * worst:.3g} %>")
+
+    def _repr_html_(self) -> str:
+        rows = [[sid, name, 1e3 * m["rmse_no_dob"], 1e3 * m["rmse_dob"], *(1e3 * v for v in m["rmse_learning"])]
+                for sid, name, m in self._ratios()]
+        return html_table(f"Tracking RMSE in mm (law {self.law})",
+                          ["scenario", "system", "no DOB", "DOB only",
+                           *(f"learning {i + 1}" for i in range(self.iterations))], rows)
 
     def to_dict(self) -> dict[str, object]:
         """The content of ``results.json`` (RMSE in m, and m/s^2 for ``rmse_dhat_*``)."""
@@ -286,9 +303,11 @@ def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
     for fig in figures:
         text = FIGURE_TEXT.get(fig)
         if text is None and fig.startswith("error_s"):
-            text = f"Scenario {fig[7:-4]}: tracking error against time."
+            text = (f"Scenario {fig[7:-4]}: tracking error (m) against time of every system: no DOB, DOB only "
+                    "and every learning iteration (left), the learning iterations alone (right).")
         elif text is None and fig.startswith("disturbance_s"):
-            text = f"Scenario {fig[13:-4]}: disturbance estimates against the true disturbance."
+            text = (f"Scenario {fig[13:-4]}: disturbance estimate (m/s^2) of every system against the true "
+                    "disturbance: DOB only and d_hat + d_f of every learning iteration (left), their errors (right).")
         lines += [f"{text}", "", f"![{fig}]({fig})", ""]
     return "\n".join(lines)
 

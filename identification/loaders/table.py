@@ -213,11 +213,17 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
 
     try:
         with open(source, encoding="utf-8", newline="") as fh:
-            lines = fh.read().splitlines()
+            text = fh.read()
     except UnicodeDecodeError as exc:
         raise SignalError(f"{source}: not a UTF-8 text file ({exc}); expected CSV text") from None
     except OSError as exc:
         raise SignalError(f"{source}: cannot read the file ({exc})") from None
+    fast = _fast_csv(text, time, cols)
+    if fast is not None:
+        t, values, file_units, data_lines = fast
+        return _csv_result(source, t, values, cols, time, units_arg, file_units, data_lines, 0.0, ts, start, stop)
+    lines = text.splitlines()
+    del text
 
     file_units: dict[str, str] = {}
     body: list[str] = []
@@ -273,25 +279,79 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
                 raise SignalError(f"{source}: line {data_lines[r]}: column `{c}`: {what}; expected a "
                                   f"number") from None
 
-    tunit = units_arg.get("time", file_units.get(time, "s"))
-    scale = _time_scale(tunit, source, time)
-    t = out[time] * scale
-    _warn_unstated_unit(t, "time" in units_arg or time in file_units, source, time)
+    t = out[time]
     origin = 0.0
     if np.isfinite(t[0]) and abs(t[0]) >= EPOCH_SHIFT_S:
         # subtract the first stamp in decimal arithmetic: exact differences of the text
         j = index[time]
         try:
             first = Decimal(data_rows[0][j].strip())
-            t = np.array([float(Decimal(row[j].strip()) - first) for row in data_rows]) * scale
-            origin = float(first) * scale
+            t = np.array([float(Decimal(row[j].strip()) - first) for row in data_rows])
+            origin = float(first)
         except (InvalidOperation, ValueError):
             pass
+    return _csv_result(source, t, out, cols, time, units_arg, file_units, data_lines, origin, ts, start, stop)
+
+
+def _csv_result(source: str, t: np.ndarray, values: dict[str, np.ndarray], cols: dict[str, str], time: str,
+                units_arg: dict[str, str], file_units: dict[str, str], data_lines: np.ndarray, origin: float,
+                ts: float | None, start: float | None, stop: float | None) -> FlightData:
+    """The FlightData of parsed CSV columns (time in the file's unit, ``origin`` subtracted)."""
+    tunit = units_arg.get("time", file_units.get(time, "s"))
+    scale = _time_scale(tunit, source, time)
+    t = t * scale
+    _warn_unstated_unit(t, "time" in units_arg or time in file_units, source, time)
     sig_units = {n: units_arg.get(n, file_units.get(c, "")) for n, c in cols.items()}
     what = {n: f"signal `{n}` (column `{c}`)" for n, c in cols.items()}
     meta = {"format": "csv", "columns": dict(cols), "time_column": time}
-    return _from_table(t, {n: out[c] for n, c in cols.items()}, what, sig_units, meta, ts, start, stop,
-                       source, rows=data_lines, origin=origin)
+    return _from_table(t, {n: values[c] for n, c in cols.items()}, what, sig_units, meta, ts, start, stop,
+                       source, rows=data_lines, origin=origin * scale)
+
+
+def _fast_csv(text: str, time: str, cols: dict[str, str]) -> tuple | None:
+    """Parse the common case with pyarrow's CSV reader: comment lines only before the header,
+    no blank or comment line in the data, every wanted cell a number, the first stamp small
+    enough for binary floating point. Anything else returns None, and the line-by-line parser
+    (slower; exact messages with line numbers) reads the file."""
+    import io
+
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    pos, line_no, file_units = 0, 0, {}
+    while True:
+        end = text.find("\n", pos)
+        if end < 0:
+            return None
+        line = text[pos:end].strip()
+        line_no += 1
+        if line and not line.startswith("#"):
+            break
+        m = _UNITS_LINE.match(line)
+        if m:
+            file_units.update(_parse_units_line(m.group(1)))
+        pos = end + 1
+    body = text[pos:]
+    if "#" in body or '"' in body or "\n\n" in body.replace("\r\n", "\n").rstrip("\n"):
+        return None
+    header = [h.strip() for h in text[pos:end].split(",")]
+    wanted = [time, *cols.values()]
+    if len(set(header)) != len(header) or any(c not in header for c in wanted):
+        return None
+    try:
+        table = pacsv.read_csv(io.BytesIO(body.encode("utf-8")),
+                               read_options=pacsv.ReadOptions(column_names=header, skip_rows=1),
+                               convert_options=pacsv.ConvertOptions(
+                                   include_columns=list(dict.fromkeys(wanted)),
+                                   column_types={c: pa.float64() for c in wanted}))
+    except (pa.ArrowInvalid, ValueError):
+        return None
+    if table.num_rows < 2 or any(table.column(c).null_count for c in wanted):
+        return None
+    values = {c: table.column(c).to_numpy() for c in wanted}
+    if not np.isfinite(values[time][0]) or abs(values[time][0]) >= EPOCH_SHIFT_S:
+        return None
+    return values[time], values, file_units, line_no + 1 + np.arange(table.num_rows)
 
 
 # --------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 Argument parsing and dispatch only: every command is a use case of
 :mod:`ilcdob.app.commands`, which Python users can call directly. Exit status: 0 success;
 1 a check that ran and did not hold (``check``; ``identify --min-fit``); 2 bad input or
-usage; 3 a solver or numerical failure.
+usage; 3 a solver or numerical failure, or an internal error (a bug: reported in one line).
 """
 
 from __future__ import annotations
@@ -51,9 +51,17 @@ class _Defaults(argparse.HelpFormatter):
         return f"{text} (default: {shown})"
 
 
+def _globals(p: argparse.ArgumentParser, default: object) -> None:
+    """--quiet and --debug, accepted before and after the command name."""
+    p.add_argument("--quiet", action="store_true", default=default, help="no progress bars or notes on stderr")
+    p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
+
+
 def _sub(sub, name: str, text: str) -> argparse.ArgumentParser:
-    return sub.add_parser(name, help=text, description=text, epilog=f"example: {_EXAMPLES[name]}",
-                          formatter_class=_Defaults)
+    p = sub.add_parser(name, help=text, description=text, epilog=f"example: {_EXAMPLES[name]}",
+                       formatter_class=_Defaults)
+    _globals(p, argparse.SUPPRESS)
+    return p
 
 
 def _common(p: argparse.ArgumentParser, out: str | None, fleet: bool = True, law: bool = False) -> None:
@@ -94,8 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``ilcdob`` command."""
     parser = argparse.ArgumentParser(prog="ilcdob", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"ilcdob {version()}")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars or notes on stderr")
-    parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
+    _globals(parser, False)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     p = _sub(sub, "reproduce", "run the paper's four scenarios; write results, figures and an index")
     _common(p, "output folder (written as a unit)", law=True)
@@ -177,6 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     fad = p.add_subparsers(dest="fleet_command", required=True).add_parser(
         "add", help="add a system flying an identified model.json (creates the fleet file if needed)",
         epilog=f"example: {_EXAMPLES['fleet']}", formatter_class=_Defaults)
+    _globals(fad, argparse.SUPPRESS)
     fad.add_argument("fleet_file", metavar="FLEET.toml", help="fleet file to create or append to")
     fad.add_argument("--name", required=True, help="name of the new system")
     fad.add_argument("--model", required=True, help="model.json of `ilcdob identify`")
@@ -225,6 +233,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         console.error("interrupted; outputs of this run were not written (earlier outputs are intact)")
         return 130
+    except Exception as exc:  # a bug, not bad input: one line (--debug: the traceback), exit 3
+        console.internal_error(exc, tb=traceback.format_exc() if args.debug else None)
+        return 3
 
 
 def _os_message(exc: BaseException) -> str:

@@ -320,8 +320,16 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     from ilcdob.identification.loaders import load_csv
     from ilcdob.signals import FlightData
 
+    from ilcdob.design.delta import MAX_DELTA_SAMPLES
+    from ilcdob.lifted import check_lifted_size
+
     if c_prefix is not None:
         check_c_prefix(c_prefix)
+    if n is not None:
+        check_lifted_size(n, "--n")
+    if method in ("fir", "robust", "robust-set") and samples > MAX_DELTA_SAMPLES:
+        raise SpecError(f"`--samples`: got {samples}, expected 1 to {MAX_DELTA_SAMPLES} Delta-set samples per system: "
+                        f"every sample is a closed loop that --method {method} builds, flies and constrains on")
     law = check_law(law, "--law")
     if law == "multi-source":
         raise SpecError("`--law multi-source`: it learns from the trials of every earlier system at once, and "

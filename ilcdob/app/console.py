@@ -20,6 +20,10 @@ from . import commands as uc
 __all__ = ["CheckFailed", "Console", "run_command"]
 
 
+#: Without a terminal, progress is logged as plain lines at most this often, s.
+LOG_EVERY_S = 10.0
+
+
 class CheckFailed(Exception):
     """A check ran and its condition does not hold (exit status 1)."""
 
@@ -36,7 +40,7 @@ class Console:
     def __init__(self, quiet: bool = False) -> None:
         self.quiet = quiet
         self._bar: Any = None
-        self._what = ""
+        self._logged = -float("inf")
 
     def note(self, text: str) -> None:
         """Print a note on stderr (unless quiet).
@@ -67,17 +71,40 @@ class Console:
             print(tb, file=sys.stderr, end="")
         print(f"ilcdob: {kind}: {text}", file=sys.stderr, flush=True)
 
+    def internal_error(self, exc: BaseException, tb: str | None = None) -> None:
+        """Print ``ilcdob: error: internal error: <type>: <message>`` for an unexpected exception (a bug).
+
+        Parameters
+        ----------
+        exc : BaseException
+            The exception that escaped the command.
+        tb : str, optional
+            Traceback text (``--debug``).
+        """
+        self.error(f"internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback; please "
+                   "report it)", tb=tb)
+
     def progress(self, done: int, total: int, what: str) -> None:
-        """The ``progress(done, total, what)`` callback of the use cases: a bar with ETA.
+        """The ``progress(done, total, what)`` callback of the use cases: a bar with ETA on a
+        terminal; elsewhere (logs, CI) a plain line at most every :data:`LOG_EVERY_S` seconds.
 
         Parameters
         ----------
         done, total : int
-            Work units finished and in all.
+            Work units finished and in all (``total`` 0: a remark, printed as a note).
         what : str
             The unit of work being done.
         """
         if self.quiet:
+            return
+        if total <= 0:
+            self.note(what)
+            return
+        if not sys.stderr.isatty():
+            now = time.monotonic()
+            if done >= total or now - self._logged >= LOG_EVERY_S:
+                self._logged = now
+                print(f"[{done}/{total}] {what}", file=sys.stderr, flush=True)
             return
         from tqdm import tqdm
 

@@ -37,6 +37,10 @@ Inputs, detected by file name in each folder
     ``share_improved`` of the ratio ``||e_j|| / ||e'_j||`` (< 1: learning improved), but any
     numeric field is shown. Lists of numbers (frequency grids, samples) are not tabulated;
     the report says how many values it left out.
+    A row with a text field ``error`` (a design that ``ilcdob compare`` could not make) holds
+    no result: it is shown with that reason instead of its empty values. The figure written
+    beside each file (``compare_ratios.png``, ``campaign_ratios.png``) is embedded below its
+    tables.
 
 Beside ``results.json``, ``ilcdob reproduce`` writes the report's other inputs
 (:func:`report_files`): ``fleet.json`` (the fleet table with its identified models and
@@ -162,12 +166,16 @@ class JsonTable:
         Row label and its values by column.
     omitted : int
         Numbers in lists that were left out of the table.
+    failed : tuple of (str, str)
+        Rows that hold no result: row label and the reason, from the row's text field ``error``
+        (e.g. a design of ``ilcdob compare`` that could not be made). Their values stay in ``rows``.
     """
 
     path: str
     columns: tuple[str, ...]
     rows: tuple[tuple[str, dict[str, Any]], ...]
     omitted: int = 0
+    failed: tuple[tuple[str, str], ...] = ()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -178,6 +186,9 @@ def _read_json(path: Path) -> Any:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ReportError(f"{path}: cannot read ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise ReportError(f"{path}: not a UTF-8 text file (byte {exc.object[exc.start]:#04x} at offset {exc.start}); "
+                          f"regenerate it with `{KNOWN_FILES[path.name]}`") from exc
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
@@ -321,8 +332,12 @@ def _row_label(row: dict, index: int) -> tuple[str, set[str]]:
 
 
 def _make_table(path: str, rows: list[tuple[str, dict, set[str]]]) -> JsonTable:
-    flat, omitted = [], 0
+    flat, omitted, failed = [], 0, []
     for label, row, used in rows:
+        reason = row.get("error")
+        if isinstance(reason, str) and reason.strip():
+            failed.append((label, reason.strip()))
+            used = used | {"error"}
         values, n = _flatten({k: v for k, v in row.items() if k not in used})
         flat.append((label, values))
         omitted += n
@@ -339,7 +354,7 @@ def _make_table(path: str, rows: list[tuple[str, dict, set[str]]]) -> JsonTable:
                 other.append(k)
     # a column that only ever holds null carries nothing
     numeric = [k for k in numeric if any(values.get(k) is not None for _, values in flat)]
-    return JsonTable(path, tuple(numeric + other), tuple(flat), omitted)
+    return JsonTable(path, tuple(numeric + other), tuple(flat), omitted, tuple(failed))
 
 
 def _join(path: str, key: Any) -> str:
@@ -362,7 +377,8 @@ def json_tables(data: Any, path: str = "") -> list[JsonTable]:
     """
     if isinstance(data, dict):
         if _is_table(list(data.values())):
-            return [_make_table(path, [(str(k), v, set()) for k, v in data.items()])]
+            return [_make_table(path, [(str(k), v, {f for f in _LABEL_KEYS if v.get(f) == k})
+                                       for k, v in data.items()])]
         out = []
         for k, v in data.items():
             if isinstance(v, (dict, list)):
@@ -423,14 +439,16 @@ def _figure(data: bytes, alt: str, caption: str) -> str:
             f"<figcaption>{escape(caption)}</figcaption></figure>")
 
 
-def _file_figure(folder: Path, name: str, caption: str) -> str:
+def _file_figure(folder: Path, name: str, caption: str, made_by: str = "results.json") -> str:
+    """The PNG ``folder / name`` as an embedded figure with ``caption`` (a note when it is absent);
+    ``made_by``: the known file whose command writes it (named when the file is not a PNG)."""
     path = folder / name
     if not path.is_file():
         return f'<p class="missing">Figure {escape(name)} is not in {escape(str(folder))} (it was written without ' \
                "figures, or by an older version): not shown.</p>"
     data = path.read_bytes()
     if not data.startswith(b"\x89PNG\r\n\x1a\n"):
-        raise ReportError(f"{path}: not a PNG file; regenerate the folder with `{KNOWN_FILES['results.json']}`")
+        raise ReportError(f"{path}: not a PNG file; regenerate the folder with `{KNOWN_FILES[made_by]}`")
     return _figure(data, name, f"{caption} ({path})")
 
 
@@ -539,13 +557,19 @@ def _plant_section(res: JsonInput) -> str:
              f"{escape(_fmt(data.get('sample_time')))} s. Tracking RMSE in mm (no DOB, only DOB, learning "
              "iterations) and RMSE of the total disturbance estimate (d_hat + d_f) against the true disturbance "
              "in m/s^2.</p>", _rmse_table(data),
-             _file_figure(folder, "rmse_bars.png", "Tracking RMSE per scenario and system (log scale)")]
+             _file_figure(folder, "rmse_bars.png", "Tracking RMSE (m, log scale) per scenario and system: no DOB, "
+                          "only DOB and every learning iteration")]
     for sc in data["scenarios"]:
         sid = sc.get("id", "?")
         parts.append(f"<h3>Scenario {escape(str(sid))}: {escape(str(sc.get('title', '')))}</h3>")
-        parts.append(_file_figure(folder, f"error_s{sid}.png", f"Scenario {sid}: tracking error against time"))
+        parts.append(_file_figure(folder, f"error_s{sid}.png",
+                                  f"Scenario {sid}: tracking error e (m) against time (s), one row per system; "
+                                  "left no DOB, only DOB and every learning iteration, right the learning "
+                                  "iterations alone (zoom)"))
         parts.append(_file_figure(folder, f"disturbance_s{sid}.png",
-                                  f"Scenario {sid}: disturbance estimates against the true disturbance"))
+                                  f"Scenario {sid}: true disturbance (wind + noise) and its estimates (m/s^2) "
+                                  "against time (s), one row per system: only DOB (d_hat) and every learning "
+                                  "iteration (d_hat + d_f); right each estimate minus the true disturbance"))
     return "\n".join(parts)
 
 
@@ -603,8 +627,9 @@ def _theorem_html(folder: Path) -> str:
         parts.append(_table(["pair", "holds", "min margin", "worst w (rad/s)", "failing band (rad/s)"], rows))
         parts.append("<details><summary>as printed by <code>ilcdob check</code></summary>"
                      f'<pre class="plain">{escape(o["table"])}</pre></details>')
-    parts.append(_file_figure(folder, "theorem.png", "The Theorem's condition per source system: the uncertainty "
-                              "must stay below the right-hand side"))
+    parts.append(_file_figure(folder, "theorem.png", "The Theorem's condition per source system of the first "
+                              "order against frequency (rad/s): |Delta_(j-1)| (3-sigma uncertainty) and "
+                              "|1 + P C|_(j-1) / 2; learning helps where the first stays below the second"))
     return "\n".join(parts)
 
 
@@ -651,11 +676,46 @@ def _json_section(j: JsonInput, what: str) -> str:
                               "is shown as is.", "an object of methods, e.g. {\"methods\": {name: {field: number}}}"))
         parts.append(f'<pre class="plain">{escape(cut)}</pre>')
     for t in tables:
-        rows = [[label] + [_fmt(values[c]) if c in values else "-" for c in t.columns] for label, values in t.rows]
         note = f" ({t.omitted} list values not tabulated)" if t.omitted else ""
         parts.append(f"<p class=\"where\">{escape(t.path or '(top level)')}{escape(note)}</p>")
-        parts.append(_table(["method"] + list(t.columns), rows))
+        parts.append(_method_table(t))
     return "\n".join(parts)
+
+
+def _method_table(t: JsonTable) -> str:
+    """A method table as HTML; a row without result (:attr:`JsonTable.failed`) shows its reason
+    across the value columns instead of empty cells."""
+    reasons = dict(t.failed)
+    head = "".join(f"<th>{escape(h)}</th>" for h in ["method", *t.columns])
+    body = []
+    for label, values in t.rows:
+        if label in reasons:
+            body.append(f'<tr class="failed"><td>{escape(label)}</td><td colspan="{max(len(t.columns), 1)}">'
+                        f"<strong>no result</strong>: {escape(reasons[label])}</td></tr>")
+        else:
+            body.append("<tr>" + "".join(f"<td>{escape(c)}</td>" for c in
+                                         [label, *(_fmt(values[k]) if k in values else "-" for k in t.columns)])
+                        + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody></table>"
+
+
+_COMPARE_CAPTION = ("Improvement ratio ||e_j|| / ||e'_j|| (log scale; below 1: learning helped) of every design "
+                    "for the pair flown: diamond the nominal plants, dots each sampled plant of the Delta set; "
+                    "dotted line the robust design's guaranteed factor rho when given. A design that failed has "
+                    "no points")
+_CAMPAIGN_CAPTION = ("Distribution of the improvement ratio ||e_j|| / ||e'_j|| (log scale; below 1: learning "
+                     "improved) over the sampled plants, per method (with its share of improved runs) and per "
+                     "scenario: box quartiles, whiskers the range, dots the single runs")
+
+
+def _compare_html(j: JsonInput) -> str:
+    return _json_section(j, "design methods") + "\n" + _file_figure(j.folder, "compare_ratios.png",
+                                                                    _COMPARE_CAPTION, "compare.json")
+
+
+def _campaign_html(j: JsonInput) -> str:
+    return _json_section(j, "campaign statistics") + "\n" + _file_figure(j.folder, "campaign_ratios.png",
+                                                                         _CAMPAIGN_CAPTION, "campaign.json")
 
 
 _CSS = """
@@ -667,6 +727,7 @@ th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
 table.wide td, table.wide th { text-align: left; }
 figure { margin: 1em 0; } img { max-width: 100%; height: auto; }
 figcaption { font-size: 0.85em; color: #555; }
+tr.failed td { color: #8a2a00; background: #fff4e5; text-align: left; }
 .missing { background: #fff4e5; border-left: 4px solid #e8a33d; padding: 0.4em 0.8em; }
 .status-ok { color: #1a7f37; } .status-none { color: #b35900; font-weight: bold; }
 .where { font-family: monospace; font-size: 0.85em; color: #555; margin-bottom: 0; }
@@ -717,7 +778,8 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
             body.append(_missing(f"{res.folder} has no fleet.json (written by `ilcdob reproduce`).", "fleet.json"))
         if (res.folder / "identified_models.png").is_file():
             body.append(_file_figure(res.folder, "identified_models.png",
-                                     "Identified plant models with their 3-sigma multiplicative uncertainty band"))
+                                     "Identified plant models: magnitude (dB) against frequency (rad/s) with "
+                                     "their 3-sigma multiplicative uncertainty band, and that bound |Delta(jw)|"))
     sections.append(_Section("fleet", "Fleet and identified models", "\n".join(body), srcs, reproduce_cmd))
 
     # Bode figures
@@ -751,13 +813,15 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
 
     sections.append(_Section(
         "compare", "Design comparison",
-        "\n".join(_json_section(j, "design methods") for j in inputs.compare),
+        "<p>Each design of <code>ilcdob compare</code> flown for one pair, nominal and over the Delta set; "
+        "ratio = ||e_j|| / ||e'_j|| (&lt; 1: learning helped). A design that could not be made is listed with "
+        "its reason.</p>\n" + "\n".join(_compare_html(j) for j in inputs.compare) if inputs.compare else "",
         [str(j.path) for j in inputs.compare], f"compare.json from `{KNOWN_FILES['compare.json']}`"))
     sections.append(_Section(
         "campaign", "Campaign statistics",
         "<p>Statistics per method of the improvement ratio ||e_j|| / ||e'_j|| over the sampled plants "
         "(&lt; 1: learning improved on what system j would have had without it).</p>\n"
-        + "\n".join(_json_section(j, "campaign statistics") for j in inputs.campaign)
+        + "\n".join(_campaign_html(j) for j in inputs.campaign)
         if inputs.campaign else "",
         [str(j.path) for j in inputs.campaign], f"campaign.json from `{KNOWN_FILES['campaign.json']}`"))
 

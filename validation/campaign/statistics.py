@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from ilcdob.display import fmt, html_table
+
 from ..reproduce import json_document
 from .options import CampaignError, CampaignOptions
 
@@ -104,6 +106,17 @@ class CampaignResult:
     sample_time_s: float
     sample_cpu_s: float
     workers: int
+
+    def __repr__(self) -> str:
+        stats = ", ".join(f"{m} median {fmt(st.median, 3)} worst {fmt(st.worst, 3)}" for m, st in self.methods.items())
+        return (f"<CampaignResult {self.options.samples} samples ({self.uncertainty}), "
+                f"{len(self.scenarios)} scenario(s): {stats}>")
+
+    def _repr_html_(self) -> str:
+        rows = [[m, st.median, st.p95, st.worst, "-" if st.share_improved is None else f"{100 * st.share_improved:.1f} %",
+                 st.runs] for m, st in self.methods.items()]
+        return html_table(f"Ratio ||e_j|| / ||e'_j|| over {self.options.samples} samples ({self.uncertainty})",
+                          ["method", "median", "p95", "worst", "improved", "runs"], rows)
 
     @property
     def uncertainty(self) -> str:

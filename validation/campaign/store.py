@@ -146,6 +146,9 @@ def check_settings(out: Path, settings: dict[str, Any]) -> None:
             old = json.loads(path.read_text(encoding="utf-8"))
         except ValueError as exc:
             raise CampaignError(f"{path}: not valid JSON ({exc}); start fresh with another --out folder") from None
+        if not isinstance(old, dict):
+            raise CampaignError(f"{path}: expected a JSON object, got {type(old).__name__}; start fresh with another "
+                                "--out folder")
         if old.get("id") != settings["id"]:
             diff = [k for k in sorted(set(old) | set(settings)) if k not in ("id",) and old.get(k) != settings.get(k)
                     and not (k == "fleet" and isinstance(old.get(k), dict)

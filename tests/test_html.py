@@ -13,15 +13,18 @@ import os
 import re
 import shutil
 import subprocess
+from html import escape
 from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
 
 from ilcdob.app.cli import main
-from ilcdob.app.commands import report_to_html, reproduce_to_folder
+from ilcdob.app.commands import compare_to_folder, report_to_html, reproduce_to_folder
 from ilcdob.app.html import ReportError, ReportOptions, build_report, json_tables
 from ilcdob.app.output import OutputError
+from ilcdob.design.fir import FIROptions
+from ilcdob.validation.compare import CompareOptions
 from ilcdob.validation.reproduce import reproduce
 
 CHROMIUM = "/usr/bin/chromium"
@@ -45,12 +48,35 @@ def paper_dir(tmp_path_factory, fleet) -> Path:
     return out
 
 
+def _png(path: Path, text: str) -> None:
+    """A small stand-in figure (a PNG as the commands write them)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3, 2))
+    fig.subplots().plot([1, 2, 3], label=text)
+    fig.savefig(path, format="png", dpi=110)
+
+
 @pytest.fixture(scope="module")
 def json_dirs(tmp_path_factory) -> tuple[Path, Path]:
     cmp_dir, camp_dir = tmp_path_factory.mktemp("compare"), tmp_path_factory.mktemp("campaign")
     (cmp_dir / "compare.json").write_text(json.dumps(COMPARE))
     (camp_dir / "campaign.json").write_text(json.dumps(CAMPAIGN))
+    _png(cmp_dir / "compare_ratios.png", "compare")
+    _png(camp_dir / "campaign_ratios.png", "campaign")
     return cmp_dir, camp_dir
+
+
+@pytest.fixture(scope="module")
+def failed_compare(tmp_path_factory) -> Path:
+    """A real ``ilcdob compare`` folder where the FIR design fails: a convergence margin of 0.95
+    (|Te1| <= 0.05) that 8 taps cannot meet under a 60 % bound, in 5 solver iterations."""
+    out = tmp_path_factory.mktemp("failed") / "compare"
+    fir = FIROptions(n_taps=8, advance=2, max_iter=5, n_grid=20, margin=0.95)
+    cmp = compare_to_folder(out, 1, CompareOptions(samples=1, bound=0.6, duration=5.0, fir=fir),
+                            methods=["closed-form", "fir"])
+    assert cmp.row("fir").error and cmp.row("closed-form").error is None
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -94,10 +120,11 @@ def test_report_is_self_contained(full_report):
     assert not re.search(r"https?://", html)
     assert "<link" not in html and "<script" not in html
     # figures of the tiny run: identified models, 3 Bode, RMSE bars, error/disturbance of scenario 4,
-    # and the Theorem-check figure written beside them by `reproduce`
+    # and the Theorem-check figure written beside them by `reproduce`; then the compare and campaign figures
     alts = [img["alt"] for img in parsed.images]
     assert alts == ["identified_models.png", "bode_loops.png", "bode_learning.png", "bode_te.png",
-                    "rmse_bars.png", "error_s4.png", "disturbance_s4.png", "theorem.png"]
+                    "rmse_bars.png", "error_s4.png", "disturbance_s4.png", "theorem.png",
+                    "compare_ratios.png", "campaign_ratios.png"]
     umask = os.umask(0)
     os.umask(umask)
     assert full_report.stat().st_mode & 0o777 == 0o666 & ~umask  # as any new file, not the private 0600 temp
@@ -125,10 +152,61 @@ def test_missing_inputs_are_named_and_no_numbers_invented(tmp_path, json_dirs):
                     "Nonlinear plant", "Theorem check", "Design comparison"):
         row = re.search(rf'<a href="#\w+">{re.escape(heading)}[^<]*</a></td><td>(.*?)</td>', html).group(1)
         assert "no input" in row and "expected" in row, heading
-    assert "<img" not in html  # no results.json: no figure at all
+    # no results.json: no figure but the campaign's own
+    assert [img["alt"] for img in _parse(html).images] == ["campaign_ratios.png"]
     compare = html[html.index('<h2 id="compare">'):html.index('<h2 id="campaign">')]
-    assert "<table" not in compare and "No input" in compare
+    assert "<table" not in compare and "No input" in compare and "<img" not in compare
     assert "0.0654" in html  # the campaign that was given is rendered
+
+
+def _figures(html: str) -> dict[str, str]:
+    """Caption of every embedded figure, by its alt text."""
+    return dict(re.findall(r'<img src="data:image/png;base64,[^"]+" alt="([^"]+)"><figcaption>(.*?)</figcaption>',
+                           html))
+
+
+def test_compare_and_campaign_figures_are_embedded_in_their_sections(full_report, json_dirs):
+    html = full_report.read_text(encoding="utf-8")
+    compare = html[html.index('<h2 id="compare">'):html.index('<h2 id="campaign">')]
+    campaign = html[html.index('<h2 id="campaign">'):]
+    assert list(_figures(compare)) == ["compare_ratios.png"]
+    assert list(_figures(campaign)) == ["campaign_ratios.png"]
+    # the figure follows its tables, and its caption says what it shows and where it comes from
+    assert compare.index("<img") > compare.index("ratio_median")
+    caption = _figures(compare)["compare_ratios.png"]
+    assert "Improvement ratio" in caption and "nominal" in caption and "Delta set" in caption
+    assert str(json_dirs[0] / "compare_ratios.png") in caption
+    caption = _figures(campaign)["campaign_ratios.png"]
+    assert "Distribution of the improvement ratio" in caption and "quartiles" in caption
+    assert str(json_dirs[1] / "campaign_ratios.png") in caption
+
+
+def test_every_figure_caption_says_what_it_shows(full_report):
+    captions = _figures(full_report.read_text(encoding="utf-8"))
+    assert len(captions) == 10
+    for alt, caption in captions.items():
+        text = caption.split(" (/")[0]  # without the file's path
+        assert len(text) > 40 and alt not in text, (alt, caption)
+    assert "every learning iteration" in captions["rmse_bars.png"]
+    assert "every learning iteration" in captions["error_s4.png"] and "(m)" in captions["error_s4.png"]
+    assert "every learning" in captions["disturbance_s4.png"] and "m/s^2" in captions["disturbance_s4.png"]
+
+
+def test_a_failed_design_shows_its_reason(failed_compare):
+    html = build_report([failed_compare])
+    reason = json.loads((failed_compare / "compare.json").read_text())["methods"]["fir"]["error"]
+    assert "not met" in reason
+    row = re.search(r'<tr class="failed"><td>fir</td><td colspan="(\d+)">(.*?)</td></tr>', html)
+    assert row, "no row with the failed design's reason"
+    assert row.group(2) == f"<strong>no result</strong>: {escape(reason)}"
+    # it spans the value columns of the table: one cell instead of a row of nulls
+    header = re.search(r"<thead><tr><th>method</th>(.*?)</tr></thead>\n<tbody>\n<tr><td>closed-form", html)
+    assert int(row.group(1)) == header.group(1).count("<th>")
+    # the design that was made keeps its numbers; the figure of the real folder is embedded
+    assert re.search(r"<tr><td>closed-form</td><td>[0-9.e-]+</td>", html)
+    assert list(_figures(html)) == ["compare_ratios.png"]
+    (table,) = json_tables(json.loads((failed_compare / "compare.json").read_text()))
+    assert table.failed == (("fir", reason),) and "error" not in table.columns
 
 
 def test_json_tables_shapes():
@@ -150,6 +228,10 @@ def test_json_tables_shapes():
     rows = json_tables({"rows": [{"source": "A", "target": "B", "ratio": 0.5}, {"name": "x", "ratio": None}]})[0].rows
     assert [label for label, _ in rows] == ["A -> B", "x"]
     assert json_tables({"note": "nothing numeric", "list": [1, 2, 3]}) == []
+    # a row with a text "error" has no result: its reason is kept, the column is not
+    (t,) = json_tables({"methods": {"a": {"x": 1.0, "error": None}, "b": {"x": None, "error": " boom "}}})
+    assert t.columns == ("x",) and t.failed == (("b", "boom"),)
+    assert COMPARE and json_tables(COMPARE)[0].failed == ()
 
 
 def test_errors_name_the_folder_and_the_expected_files(tmp_path, paper_dir):
@@ -230,4 +312,4 @@ def test_every_figure_renders_in_chromium(full_report, tmp_path):
     assert dom.body.get("data-checked") == "yes", run.stdout[:500]
     states = {img.get("alt"): img.get("data-ok") for img in dom.images}
     assert states.pop("control") == "no"  # the probe does detect a broken image
-    assert len(states) == 8 and set(states.values()) == {"yes"}, states
+    assert len(states) == 10 and set(states.values()) == {"yes"}, states

@@ -1,0 +1,47 @@
+"""Short text and HTML summaries of result objects, for the console and for notebooks.
+
+Result classes define ``__repr__`` as one line naming what matters (``<TFEstimate fit 98.9 %
+...>``) and ``_repr_html_`` as a small table, which Jupyter shows in place of the repr.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from html import escape
+
+__all__ = ["html_table", "fmt"]
+
+
+def fmt(value: object, digits: int = 4) -> str:
+    """A number with ``digits`` significant digits (other values as ``str``).
+
+    Parameters
+    ----------
+    value : object
+        The value to show.
+    digits : int
+        Significant digits of floats.
+    """
+    if isinstance(value, bool) or value is None:
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def html_table(title: str, header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A small HTML table with a caption; cells are formatted with :func:`fmt` and escaped.
+
+    Parameters
+    ----------
+    title : str
+        Caption of the table.
+    header : sequence of str
+        Column names.
+    rows : sequence of sequences
+        Cell values, row by row.
+    """
+    head = "".join(f"<th>{escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{escape(fmt(c))}</td>" for c in r) + "</tr>" for r in rows)
+    return (f"<table><caption style='text-align:left'><b>{escape(title)}</b></caption>"
+            f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")

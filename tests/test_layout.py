@@ -1,0 +1,106 @@
+"""The layout: every import points one way, and the source tree runs without installing.
+
+Layers, lowest first: kernel (``ilcdob/*.py``) <- vehicles (``ilcdob.vehicles``) <-
+identification <- design <- validation <- application (``ilcdob.app``). A module may import
+its own layer and the layers below it, never one above (lazy imports inside functions
+included). The README's layout table states the same.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+#: folder (relative to the repository) -> (package name, layer rank)
+PACKAGES = {"ilcdob": ("ilcdob", 0), "ilcdob/vehicles": ("ilcdob.vehicles", 1),
+            "identification": ("ilcdob.identification", 2), "design": ("ilcdob.design", 3),
+            "validation": ("ilcdob.validation", 4), "ilcdob/app": ("ilcdob.app", 5)}
+LAYERS = sorted(((pkg, rank) for pkg, rank in PACKAGES.values()), key=lambda x: -len(x[0]))
+
+
+def _rank(module: str) -> int | None:
+    """Layer of a dotted ilcdob module name (None: not ilcdob)."""
+    if module == "ilcdob.__main__":  # ``python -m ilcdob``: the application's entry point
+        return PACKAGES["ilcdob/app"][1]
+    for pkg, rank in LAYERS:
+        if module == pkg or module.startswith(pkg + "."):
+            return rank
+    return None
+
+
+def _modules() -> list[tuple[Path, str]]:
+    out = []
+    for folder, (pkg, _) in PACKAGES.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            rel = path.relative_to(ROOT / folder).with_suffix("")
+            parts = [p for p in rel.parts if p != "__init__"]
+            if folder == "ilcdob" and parts and parts[0] in ("vehicles", "app"):
+                continue  # their own layers
+            out.append((path, ".".join([pkg, *parts])))
+    return out
+
+
+def _imports(path: Path, module: str) -> list[tuple[int, str]]:
+    """Every imported ilcdob module name (absolute), with its line."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - node.level + 1]
+                name = ".".join(base + ([node.module] if node.module else []))
+            else:
+                name = node.module or ""
+            found.append((node.lineno, name))
+            found += [(node.lineno, f"{name}.{a.name}") for a in node.names]  # `from ilcdob import app`
+    return [(line, name) for line, name in found if name == "ilcdob" or name.startswith("ilcdob.")]
+
+
+def _upward() -> list[str]:
+    bad = []
+    for path, module in _modules():
+        own = _rank(module)
+        for line, name in _imports(path, module):
+            target = _rank(name)
+            if target is not None and target > own and not name.endswith(("__version__",)):
+                bad.append(f"{path.relative_to(ROOT)}:{line}: {module} imports {name}")
+    return bad
+
+
+def test_every_import_points_down_the_layers():
+    assert _modules(), "no module found"
+    assert _upward() == []
+
+
+def test_the_checker_sees_an_upward_import():
+    # the kernel importing the application layer, absolute and relative, is caught
+    assert _rank("ilcdob.app.cli") == 5 and _rank("ilcdob.fleet") == 0 and _rank("ilcdob.vehicles.quadrotor") == 1
+    tree = "from .app import cli\nimport ilcdob.validation.compare\n"
+    fake = ROOT / "ilcdob" / "_layout_probe_never_committed.py"
+    try:
+        fake.write_text(tree)
+        names = [n for _, n in _imports(fake, "ilcdob._layout_probe_never_committed")]
+    finally:
+        fake.unlink()
+    assert "ilcdob.app" in names and "ilcdob.validation.compare" in names
+
+
+@pytest.mark.parametrize("code", ["import ilcdob.design, ilcdob.identification.loaders, ilcdob.validation.campaign; "
+                                  "print(ilcdob.design.__file__)"])
+def test_the_source_tree_imports_without_installing(code, tmp_path):
+    # run from the repository root, no -P: the source tree is what Python finds first
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert Path(run.stdout.strip()) == ROOT / "design" / "__init__.py"
+    run = subprocess.run([sys.executable, "-m", "ilcdob", "--version"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0 and run.stdout.startswith("ilcdob "), run.stderr[-2000:]
