@@ -1,4 +1,4 @@
-"""Beyond the paper: learning from every earlier system, weighted by model confidence."""
+"""Extension beyond the paper: learning from every earlier system, weighted by model confidence."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Beyond the paper: the reference term (1 - G_r) r kept exactly in the learning signal."""
+"""Extension beyond the paper: the reference term (1 - G_r) r kept exactly in the learning signal."""
 
 from __future__ import annotations
 

@@ -4,7 +4,8 @@ Each function checks its output location before any computation, runs the librar
 its outputs through :mod:`ilcdob.app.output` (a folder as a unit, or one atomic file) and
 returns the result object. Nothing here prints: long work reports through ``progress``
 (``progress(done, total, what)``, None: silent), and :mod:`ilcdob.app.cli` turns results
-into console lines.
+into console lines. The library is imported inside each function, so that ``ilcdob --help``
+and quick commands start without loading cvxpy, CasADi and Dask.
 
 | function | command | writes |
 |---|---|---|
@@ -33,7 +34,7 @@ import numpy as np
 from ilcdob.errors import SignalError, SpecError
 from ilcdob.fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
 
-from .html import report_files
+from .html import build_report, report_files
 from .output import OutputFolder, Provenance, check_output_path, write_file
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "identify_fleet_to_folder",
@@ -314,14 +315,13 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         The design and the ``filters.json`` content written.
     """
     from ilcdob.design.c_export import check_c_prefix, design_files
+    from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.design.laws import check_law
     from ilcdob.design.pair import design_pair, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
     from ilcdob.identification.loaders import load_csv
-    from ilcdob.signals import FlightData
-
-    from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.lifted import check_lifted_size
+    from ilcdob.signals import FlightData
 
     if c_prefix is not None:
         check_c_prefix(c_prefix)
@@ -597,6 +597,4 @@ def report_to_html(dirs: Sequence[str | Path], out: str | Path) -> Path:
     Path
     """
     check_output_path(out, folder=False)
-    from .html import build_report
-
     return write_file(out, build_report(dirs))
