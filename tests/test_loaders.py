@@ -426,3 +426,14 @@ def test_load_flight_dispatch(tmp_path):
         load_flight(ULG, {"z": "vehicle_local_position.z"}, time="stamp")
     with pytest.raises(SignalError, match=r"unknown keyword argument\(s\) \['tss'\]"):
         load_flight(ULG, {"z": "vehicle_local_position.z"}, tss=0.1)
+
+
+def test_time_unit_comment_line(tmp_path):
+    """``# time: ms`` before the header states the time column's unit, on the fast (pyarrow) and
+    the line-by-line path alike (a comment inside the data takes the latter)."""
+    rows = "\n".join(f"{20 * k},{np.sin(k / 10):.6f}" for k in range(200))
+    (tmp_path / "fast.csv").write_text(f"# time: ms\ntime,x\n{rows}\n")
+    (tmp_path / "slow.csv").write_text(f"# time: ms\ntime,x\n{rows}\n# end of log\n")
+    for name in ("fast.csv", "slow.csv"):
+        fd = load_csv(tmp_path / name, {"x": "x"})
+        assert fd.ts == pytest.approx(0.02) and fd.t[-1] == pytest.approx(199 * 0.02), name

@@ -118,15 +118,22 @@ def _from_table(t: np.ndarray, cols: dict[str, np.ndarray], what: dict[str, str]
 # --------------------------------------------------------------------------------------
 
 _UNITS_LINE = re.compile(r"^\s*#\s*units\s*:\s*(.*)$", re.IGNORECASE)
+#: ``# time: ms``: a comment naming one column's time unit (s, ms, us or ns) also states it.
+_TIME_UNIT_LINE = re.compile(r"^\s*#\s*([A-Za-z_][\w.\[\]]*)\s*:\s*(s|ms|us|ns)\s*$")
 
 
-def _parse_units_line(text: str) -> dict[str, str]:
-    units = {}
-    for item in text.split(","):
-        if "=" in item:
-            k, v = item.split("=", 1)
-            units[k.strip()] = v.strip()
-    return units
+def _comment_units(line: str) -> dict[str, str]:
+    """Units stated by a comment line: ``# units: time=ms, x=m`` or ``# time: ms``."""
+    m = _UNITS_LINE.match(line)
+    if m:
+        units = {}
+        for item in m.group(1).split(","):
+            if "=" in item:
+                k, v = item.split("=", 1)
+                units[k.strip()] = v.strip()
+        return units
+    m = _TIME_UNIT_LINE.match(line)
+    return {m.group(1): m.group(2)} if m else {}
 
 
 def _time_scale(unit: str, source: str, column: str) -> float:
@@ -176,7 +183,9 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
 
     Lines whose first non-blank character is ``#`` are comments; a comment
     ``# units: time=s, x=m, ...`` (what :meth:`FlightData.to_csv` writes) gives the unit of
-    each column. Blank lines are skipped.
+    each column, and ``# time: ms`` the unit of one time column (s, ms, us or ns). Blank lines
+    are skipped. Files with comments only before the header and plain numeric cells are read
+    with pyarrow's CSV reader; any other file line by line, with messages naming the line.
 
     Parameters
     ----------
@@ -233,9 +242,7 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
         if not stripped:
             continue
         if stripped.startswith("#"):
-            m = _UNITS_LINE.match(stripped)
-            if m:
-                file_units.update(_parse_units_line(m.group(1)))
+            file_units.update(_comment_units(stripped))
             continue
         body.append(line)
         line_no.append(i)
@@ -327,9 +334,7 @@ def _fast_csv(text: str, time: str, cols: dict[str, str]) -> tuple | None:
         line_no += 1
         if line and not line.startswith("#"):
             break
-        m = _UNITS_LINE.match(line)
-        if m:
-            file_units.update(_parse_units_line(m.group(1)))
+        file_units.update(_comment_units(line))
         pos = end + 1
     body = text[pos:]
     if "#" in body or '"' in body or "\n\n" in body.replace("\r\n", "\n").rstrip("\n"):
