@@ -229,6 +229,16 @@ def test_large_csv_reads_fast_path_and_slow_path_alike(tmp_path):
     assert fast.units == slow.units == {"u": "m/s^2", "y": "m"}
 
 
+def test_design_n_must_match_the_trial(tmp_path, capsys):
+    t = np.arange(500) * 0.02
+    FlightData(t, {"error": 0.01 * np.sin(t), "learning": np.zeros(t.size)}, {"error": "m", "learning": "m/s^2"}
+               ).to_csv(tmp_path / "trial.csv")
+    line = _error(capsys, ["design", "--from", "UAV1", "--to", "UAV2", "--method", "norm-optimal", "--trial",
+                           str(tmp_path / "trial.csv"), "--n", "300", "--out", str(tmp_path / "d")], 2)
+    assert "`--n`: got 300" in line and "500 samples" in line and "--n 500" in line
+    assert not (tmp_path / "d").exists()
+
+
 # 13
 @pytest.mark.parametrize("cut", ["{t},4.", "{t},{u}", "{t},{u},1.2e"])
 def test_csv_cut_in_its_last_row(tmp_path, capsys, cut):
@@ -280,3 +290,13 @@ def test_unexpected_exception_is_one_line_exit_3(capsys, monkeypatch):
                     "traceback; please report it)")
     assert main(["--quiet", "--debug", "check"]) == 3
     assert "Traceback" in capsys.readouterr().err
+
+
+def test_design_rerun_with_another_method_leaves_no_stale_file(tmp_path, capsys):
+    out = tmp_path / "d"
+    assert main(["--quiet", "design", "--from", "UAV1", "--to", "UAV2", "--out", str(out)]) == 0
+    assert (out / "filters.h").exists()
+    assert main(["--quiet", "design", "--from", "UAV1", "--to", "UAV2", "--method", "norm-optimal", "--n", "40",
+                 "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["README.md", "filters.json", "lifted.npz", "manifest.json"]
+    assert json.loads((out / "filters.json").read_text())["method"] == "norm-optimal"

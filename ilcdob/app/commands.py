@@ -353,6 +353,10 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     data = load_csv(trial, columns) if trial else None
     if data is not None and abs(data.ts - flt.sample_time) > 1e-9:
         raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
+    if data is not None and n is not None and n != len(data):
+        raise SpecError(f"`--n`: got {n}, but the trial {trial} has {len(data)} samples; the learning signal is "
+                        f"computed for the whole trial, so its matrices must be {len(data)} long: omit --n or give "
+                        f"--n {len(data)}")
     n = n or (len(data) if data is not None else None)
     deltas = None
     if method in ("fir", "robust", "robust-set"):
