@@ -93,6 +93,15 @@ def test_output_locations_are_checked_before_any_work(tmp_path):
             check_output_path(ro / "out", folder=True)
 
 
+def test_a_symlinked_output_folder_keeps_its_link(tmp_path):
+    real, link = tmp_path / "real", tmp_path / "link"
+    _write(real, "first", ["a.txt"])
+    link.symlink_to(real, target_is_directory=True)
+    _write(link, "second", ["b.txt"])
+    assert link.is_symlink() and (link / "b.txt").read_text() == "second b.txt\n"
+    assert sorted(p.name for p in real.iterdir()) == ["b.txt", MANIFEST]
+
+
 def test_kept_files_are_carried_into_the_new_folder(tmp_path):
     out = tmp_path / "out"
     out.mkdir()

@@ -314,6 +314,8 @@ class OutputFolder:
     def __init__(self, out: str | Path, provenance: Provenance, *, overwrite: bool = False,
                  keep: Iterable[str] = ()) -> None:
         self.out = check_output_path(out, folder=True, overwrite=overwrite, resumable=keep)
+        if self.out.is_symlink():  # replace the folder it points to, keep the link
+            self.out = self.out.resolve()
         self.provenance = provenance
         self.keep = tuple(keep)
         self.files: list[str] = []
