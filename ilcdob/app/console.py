@@ -51,7 +51,7 @@ class Console:
             The note.
         """
         if not self.quiet:
-            self._close()
+            self.close()
             print(text, file=sys.stderr, flush=True)
 
     def error(self, text: str, tb: str | None = None, kind: str = "error") -> None:
@@ -66,7 +66,7 @@ class Console:
         kind : str
             ``error``, or ``check`` for a check that did not hold.
         """
-        self._close()
+        self.close()
         if tb:
             print(tb, file=sys.stderr, end="")
         print(f"ilcdob: {kind}: {text}", file=sys.stderr, flush=True)
@@ -109,15 +109,16 @@ class Console:
         from tqdm import tqdm
 
         if self._bar is None or self._bar.total != total or done < self._bar.n:
-            self._close()
+            self.close()
             self._bar = tqdm(total=total, file=sys.stderr, dynamic_ncols=True, leave=False,
                              bar_format="{desc} {n}/{total} |{bar}| {elapsed}<{remaining}")
         self._bar.set_description_str(what[:60], refresh=False)
         self._bar.update(done - self._bar.n)
         if done >= total:
-            self._close()
+            self.close()
 
-    def _close(self) -> None:
+    def close(self) -> None:
+        """End the progress bar, if one is shown."""
         if self._bar is not None:
             self._bar.close()
             self._bar = None
@@ -293,4 +294,4 @@ def run_command(args: argparse.Namespace, argv: list[str], console: Console) -> 
     try:
         return _COMMANDS[args.command](args, argv, console)
     finally:
-        console._close()
+        console.close()
