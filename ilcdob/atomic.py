@@ -14,17 +14,27 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic"]
+__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "current_umask", "stale_entries"]
 
 
-def _umask() -> int:
+def current_umask() -> int:
+    """The process's file-creation mask (read without changing it)."""
     mask = os.umask(0)
     os.umask(mask)
     return mask
 
 
-def _remove_stale(folder: Path, prefix: str) -> None:
-    """Remove temporaries ``<prefix><pid>-*`` of writers that were killed (their pid is gone)."""
+def stale_entries(folder: Path, prefix: str) -> list[Path]:
+    """Entries ``<prefix><pid>-*`` of ``folder`` left by writers that were killed (their pid is gone).
+
+    Parameters
+    ----------
+    folder : Path
+        Where the writers put their temporaries.
+    prefix : str
+        The temporaries' name prefix, followed by the writer's pid and ``-``.
+    """
+    stale = []
     for p in folder.glob(f"{prefix}*"):
         pid = p.name[len(prefix):].split("-", 1)[0]
         if not pid.isdigit() or int(pid) == os.getpid():
@@ -32,9 +42,10 @@ def _remove_stale(folder: Path, prefix: str) -> None:
         try:
             os.kill(int(pid), 0)
         except ProcessLookupError:
-            p.unlink(missing_ok=True)
+            stale.append(p)
         except PermissionError:
             pass  # another user's live process
+    return stale
 
 
 @contextmanager
@@ -56,13 +67,14 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     prefix = f".{path.name}.tmp-"
-    _remove_stale(path.parent, prefix)
+    for stale in stale_entries(path.parent, prefix):
+        stale.unlink(missing_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f"{prefix}{os.getpid()}-", suffix=path.suffix, dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
-        os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
+        os.chmod(tmp_path, 0o666 & ~current_umask())  # mkstemp makes 0600; give the file the usual mode
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():

@@ -63,6 +63,14 @@ def _provenance(command: str, argv: Sequence[str] | None, fleet_hash: str | None
     return Provenance(command, list(argv or []), fleet_hash, law)
 
 
+def _write_folder(out: str | Path, provenance: Provenance, *maps: dict[str, Any], overwrite: bool = False,
+                  keep: Sequence[str] = ()) -> None:
+    """Write content maps into ``out`` as one unit (:class:`OutputFolder`)."""
+    with OutputFolder(out, provenance, overwrite=overwrite, keep=keep) as folder:
+        for files in maps:
+            folder.add_all(files)
+
+
 def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, scenarios: Sequence[int] = (1, 2, 3, 4),
                         iterations: int = 3, plant: str = "linear", seed: int = 0, law: str = "paper",
                         figures: bool = True, overwrite: bool = False, progress: Progress | None = None,
@@ -107,7 +115,7 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         raise SpecError(f"`--law {law}` with `--plant nonlinear`: the nonlinear reproduction flies the paper's law "
                         "with its flight-implementation additions (ilcdob.design.flown) and has no other law; use "
                         "--plant linear, or --law paper")
-    folder = OutputFolder(out, Provenance("reproduce"), overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet)
     if plant == "nonlinear":
         from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
@@ -118,10 +126,8 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         from ilcdob.validation.reproduce import reproduce
 
         res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress)
-    folder.provenance = _provenance("reproduce", argv, digest, res.law)
-    with folder:
-        folder.add_all(res.files(figures=figures))
-        folder.add_all(report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures))
+    _write_folder(out, _provenance("reproduce", argv, digest, res.law), res.files(figures=figures),
+                  report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures), overwrite=overwrite)
     return res
 
 
@@ -217,8 +223,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     data["files"] = {"estimation": [str(f) for f in files], "validation": [str(f) for f in validate]}
     data["provenance"] = prov.to_dict()
     if plot is not None:
-        with OutputFolder(plot, prov) as folder:
-            folder.add_all(fit_figures(est, est_data, val_data))
+        _write_folder(plot, prov, fit_figures(est, est_data, val_data))
     write_file(out, data)
     return est, est_data, val_data
 
@@ -249,12 +254,10 @@ def identify_fleet_to_folder(out: str | Path, *, fleet: str | Path | None = None
     """
     from ilcdob.identification.fleet_id import identify_fleet
 
-    folder = OutputFolder(out, Provenance("identify-fleet"), overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet)
     result = identify_fleet(flt, seed=seed, progress=progress)
-    folder.provenance = _provenance("identify-fleet", argv, digest)
-    with folder:
-        folder.add_all(result.files())
+    _write_folder(out, _provenance("identify-fleet", argv, digest), result.files(), overwrite=overwrite)
     return result
 
 
@@ -343,7 +346,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     if method == "robust" and trial is None:
         raise SpecError("`--method robust`: the robust learning signal is an SOCP solved per trial; give the "
                         "previous system's trial with --trial CSV (columns time, error, learning)")
-    folder = OutputFolder(out, Provenance("design"), overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet)
     columns = {"e": "error", "d_f": "learning"}
     if law == "exact-reference":
@@ -391,9 +394,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
             {"e_ref_source": "m", "correction": "m/s^2"},
             source=f"reference terms of {source} -> {target} for {trial}").to_csv
     files, written = design_files(filters, list(others), prefix=c_prefix, float_variant=c_float)
-    folder.provenance = _provenance("design", argv, digest, law)
-    with folder:
-        folder.add_all({**others, **files})
+    _write_folder(out, _provenance("design", argv, digest, law), others, files, overwrite=overwrite)
     return design, written
 
 
@@ -471,13 +472,13 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
     from ilcdob.design.pair import DEFAULT_METHODS
     from ilcdob.validation.compare import compare_designs
 
-    folder = OutputFolder(out, Provenance("compare"), overwrite=overwrite) if out is not None else None
+    if out is not None:
+        check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet)
     cmp = compare_designs(flt, scenario, list(methods or DEFAULT_METHODS), options, progress=progress)
-    if folder is not None:
-        folder.provenance = _provenance("compare", argv, digest, options.law)
-        with folder:
-            folder.add_all(cmp.files(rho=options.robust.rho if options.robust else None))
+    if out is not None:
+        _write_folder(out, _provenance("compare", argv, digest, options.law),
+                      cmp.files(rho=options.robust.rho if options.robust else None), overwrite=overwrite)
     return cmp
 
 
@@ -504,12 +505,10 @@ def extensions_to_folder(out: str | Path, *, fleet: str | Path | None = None, sc
     """
     from ilcdob.validation.extensions import extensions_study
 
-    folder = OutputFolder(out, Provenance("extensions"), overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet)
     result = extensions_study(flt, list(scenarios))
-    folder.provenance = _provenance("extensions", argv, digest)
-    with folder:
-        folder.add_all(result.files(out=str(out)))
+    _write_folder(out, _provenance("extensions", argv, digest), result.files(out=str(out)), overwrite=overwrite)
     return result
 
 
@@ -547,13 +546,12 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     """
     from ilcdob.validation.campaign import STORE_FILES, run_campaign
 
-    folder = OutputFolder(out, Provenance("campaign"), overwrite=overwrite, keep=STORE_FILES)
+    check_output_path(out, folder=True, overwrite=overwrite, resumable=STORE_FILES)
     flt, digest = fleet_and_hash(fleet)
     result = run_campaign(flt, options, out, scheduler=scheduler, workers=workers, progress=progress,
                           dashboard=dashboard)
-    folder.provenance = _provenance("campaign", argv, digest, options.law)
-    with folder:
-        folder.add_all(result.files())
+    _write_folder(out, _provenance("campaign", argv, digest, options.law), result.files(), overwrite=overwrite,
+                  keep=STORE_FILES)
     return result
 
 

@@ -66,7 +66,7 @@ import numpy as np
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
 
-from .output import MANIFEST, read_manifest
+from .output import MANIFEST, file_sha256, read_manifest
 
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "report_files", "THEOREM_SAMPLES"]
@@ -264,8 +264,6 @@ def check_folder(folder: Path) -> str:
         A file listed in the folder's ``manifest.json`` is missing or differs from what that
         run wrote (a file of another run, or edited since).
     """
-    import hashlib
-
     manifest = read_manifest(folder)
     if manifest is None:
         return f"{folder}: no {MANIFEST} (written by an earlier version of ilcdob): provenance unknown"
@@ -274,7 +272,7 @@ def check_folder(folder: Path) -> str:
         if not path.is_file():
             raise ReportError(f"{folder}: {name} is listed in {MANIFEST} but missing; the folder is incomplete. "
                               "Regenerate it with the command in its manifest")
-        if hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+        if file_sha256(path) != digest:
             raise ReportError(f"{folder}: {name} differs from the file its run wrote ({MANIFEST}); the folder mixes "
                               f"files of different runs or was edited. Regenerate it: "
                               f"ilcdob {manifest.get('command', '')} {' '.join(manifest.get('arguments', []))}")

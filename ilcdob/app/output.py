@@ -42,11 +42,11 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from ilcdob.atomic import atomic_path
+from ilcdob.atomic import atomic_path, current_umask, stale_entries
 from ilcdob.errors import IlcdobError
 
 __all__ = ["FIGURE_DPI", "MANIFEST", "OutputError", "OutputFolder", "Provenance", "check_output_path",
-           "json_text", "read_manifest", "version", "write_file"]
+           "file_sha256", "json_text", "read_manifest", "version", "write_file"]
 
 #: Name of the file that records what produced an output folder; written last.
 MANIFEST = "manifest.json"
@@ -171,7 +171,14 @@ def _check_name(name: str) -> None:
         raise ValueError(f"output file name {name!r}: expected a relative path inside the folder, not {MANIFEST}")
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """SHA-256 of a file's bytes, hex (what ``manifest.json`` records).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    """
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
@@ -244,30 +251,11 @@ def _staging_prefix(out: Path) -> str:
     return f".{out.name}{_STAGING}"
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _remove_stale_staging(out: Path) -> None:
     """Remove staging folders of killed runs into ``out`` (their process no longer exists)."""
-    prefix = _staging_prefix(out)
     parent = out.absolute().parent
-    if not parent.is_dir():
-        return
-    for p in parent.iterdir():
-        if not p.name.startswith(prefix):
-            continue
-        try:
-            pid = int(p.name[len(prefix):].split("-", 1)[0])
-        except ValueError:
-            continue
-        if pid != os.getpid() and not _pid_alive(pid):
+    if parent.is_dir():
+        for p in stale_entries(parent, _staging_prefix(out)):
             shutil.rmtree(p, ignore_errors=True)
 
 
@@ -386,9 +374,9 @@ class OutputFolder:
         staging = self._staged()
         self._carry()
         manifest = {"writer": "ilcdob", **self.provenance.to_dict(),
-                    "files": {n: _sha256(staging / n) for n in self.files}}
+                    "files": {n: file_sha256(staging / n) for n in self.files}}
         (staging / MANIFEST).write_text(json_text(manifest, MANIFEST), encoding="utf-8")
-        os.chmod(staging, 0o777 & ~_umask())
+        os.chmod(staging, 0o777 & ~current_umask())
         out = self.out
         if not out.exists():
             os.rename(staging, out)
@@ -408,12 +396,6 @@ class OutputFolder:
         elif self.staging is not None:
             shutil.rmtree(self.staging, ignore_errors=True)
             self.staging = None
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def write_file(path: str | Path, content: Any) -> Path:
