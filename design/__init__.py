@@ -1,15 +1,17 @@
 """Learning-filter design: closed-form filters of the Theorem and their lifted form, FIR,
-norm-optimal and robust designs, model reduction (:mod:`.reduction`) and the learning law
-as flown on a real vehicle with wrong models (:mod:`.flown`)."""
+norm-optimal and robust designs, model reduction (:mod:`.reduction`), the learning band
+that makes every law fly on noisy trials (:mod:`.band`), the acceleration limit
+(:mod:`.limit`) and the airframe correction for wind on the rigid body (:mod:`.flown`)."""
 
 from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, reconstruct_disturbance,
                           simulate_map)
 from .delta import DeltaSet, delta_set
-from .flown import VehicleLearning, vehicle_learning
+from .band import LearningBand, choose_band
+from .limit import LearningLimitError, LearningLimitWarning
 from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .laws import LAWS, ReferenceTerms, check_law, reference_terms
-from .pair import METHODS, PairDesign, design_pair, with_law
+from .pair import METHODS, LearningSignal, PairDesign, design_pair, with_law
 from .robust import RobustDesigner, RobustOptions, RobustPairDesigner
 from .theorem import PairCheck, format_theorem_table, theorem_check
 from .lifted_filters import LiftedLearningFilters, lifted_filters
@@ -22,4 +24,4 @@ __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter"
            "METHODS", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
            "reference_terms", "PairCheck", "format_theorem_table", "theorem_check",
            "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner",
-           "VehicleLearning", "vehicle_learning"]
+           "LearningBand", "choose_band", "LearningSignal", "LearningLimitError", "LearningLimitWarning"]

@@ -19,11 +19,34 @@ polynomials on the centred abscissa (Forsythe's three-term recurrence), which so
 same least-squares problem as ``numpy.polyfit`` without its conditioning loss; the two
 agree to rounding.
 
+Beside them the source has the whole learning law of the design, ::
+
+    int PREFIX_learn(const double *e, const double *df_prev, double *df_next, size_t n,
+                     double *work);
+
+computing :func:`~ilcdob.design.export.apply_learning` (``filters.json`` keys ``band`` and
+``disturbance``) ::
+
+    d_f = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
+
+into ``df_next``: ``H`` extends the trial by ``band.pad`` samples at each end (zeros before,
+the least-squares line through its last ``band.end_fit`` samples after, fitted on the centred
+abscissa: the problem ``numpy.polyfit`` of degree 1 solves), ``F`` is ``band.sos`` run
+forwards from the state ``band.zi`` times the first sample, then backwards from ``band.zi``
+times the last (``scipy.signal.sosfilt`` operation by operation), ``L1``/``L2`` are the apply
+functions above run in place on the extended signals, ``W`` (``disturbance.W.sos``, the
+airframe correction) runs forwards from rest and ``crop`` keeps the trial's ``n`` samples.
+Without a band it is ``W{L1{e} + L2{d_f_prev}}``. The caller provides ``work``,
+``PREFIX_LEARN_WORK(n)`` doubles (``2 (n + 2 pad)``); ``df_next`` may be ``e`` or
+``df_prev``. It returns 0, or ``PREFIX_LEARN_EMPTY`` (n = 0) or ``PREFIX_LEARN_NULL`` (a
+NULL pointer) without writing anything.
+
 With ``float_variant`` the source also has ``PREFIX_l1_apply_f`` (``float`` data,
 coefficients and arithmetic) for single-precision FPUs. Its error relative to the double
 version is measured when the code is written, by running the same float arithmetic in
 numpy (float32) on :func:`reference_trial`, and stated in the header, ``filters.json`` and
-the folder's README.
+the folder's README. The learning law has no float variant (its band and line fit run in
+double only).
 
 :func:`write_design_folder` writes ``filters.json``, ``filters.h``, ``filters.c`` and
 ``README.md`` of one design, each atomically.
@@ -31,6 +54,7 @@ the folder's README.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -428,6 +452,248 @@ def _stack_values(coeffs: dict[str, Any]) -> int:
     return state + fit
 
 
+@dataclass(frozen=True)
+class _Learning:
+    """The parts of the learning law beyond L1/L2, checked (:func:`_learning_parts`)."""
+
+    sos: np.ndarray | None       # one pass of F (None: no band)
+    zi: np.ndarray | None        # its steady state per unit input
+    pad: int                     # samples added at each end (0 without a band)
+    end_fit: int                 # samples the end line is fitted to
+    cutoff: float | None         # F's corner, rad/s
+    order: int | None            # F's Butterworth order, when stated
+    why: str                     # the band's source and reason, for the README
+    w_sos: np.ndarray | None     # the airframe correction W (None: none)
+
+
+def _sections(value: object, key: str) -> np.ndarray:
+    """``value`` as finite second-order sections ``[b0, b1, b2, 1, a1, a2]``, else :class:`SpecError`."""
+    try:
+        sos = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SpecError(f"`{key}`: got {value!r:.80}, expected rows [b0, b1, b2, 1, a1, a2] of numbers") from None
+    if sos.ndim != 2 or sos.shape[0] < 1 or sos.shape[1] != 6:
+        raise SpecError(f"`{key}`: got an array of shape {sos.shape}, expected at least one row "
+                        "[b0, b1, b2, 1, a1, a2] (shape (sections, 6))")
+    if not np.all(np.isfinite(sos)):
+        raise SpecError(f"`{key}`: non-finite coefficient(s); expected finite numbers")
+    if not np.all(sos[:, 3] == 1.0):
+        raise SpecError(f"`{key}`: got a0 = {sos[:, 3].tolist()}, expected rows [b0, b1, b2, 1, a1, a2] (a0 = 1)")
+    return sos
+
+
+def _count(value: object, key: str, least: int) -> int:
+    """``value`` as an integer number of samples ``>= least``, else :class:`SpecError`."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise SpecError(f"`{key}`: got {value!r}, expected an integer number of samples >= {least}")
+    return int(value)
+
+
+def _learning_parts(filters: dict[str, Any]) -> _Learning:
+    """The band and airframe correction of ``filters.json``, checked for the C code.
+
+    Raises
+    ------
+    SpecError
+        A ``band`` or ``disturbance`` entry of the wrong type, shape or value, naming its key.
+    """
+    band = filters.get("band")
+    if band is None:
+        band = {}
+    if not isinstance(band, dict):
+        raise SpecError(f"`band`: got {band!r:.80}, expected a mapping (LearningBand.to_dict)")
+    cutoff = band.get("cutoff_rad_s")
+    sos = zi = None
+    pad, end_fit, order, why = 0, 1, None, ""
+    if band.get("sos") is not None:
+        sos = _sections(band["sos"], "band.sos")
+        try:
+            zi = np.asarray(band.get("zi"), dtype=float)
+        except (TypeError, ValueError):
+            raise SpecError(f"`band.zi`: got {band.get('zi')!r:.80}, expected {sos.shape[0]} rows of 2 "
+                            "numbers (scipy.signal.sosfilt_zi of `band.sos`)") from None
+        if zi.shape != (sos.shape[0], 2):
+            raise SpecError(f"`band.zi`: got shape {zi.shape}, expected ({sos.shape[0]}, 2) for "
+                            f"{sos.shape[0]} section(s) in `band.sos` (scipy.signal.sosfilt_zi)")
+        if not np.all(np.isfinite(zi)):
+            raise SpecError("`band.zi`: non-finite value(s); expected finite numbers (scipy.signal.sosfilt_zi)")
+        pad = _count(band.get("pad"), "band.pad", 0)
+        end_fit = _count(band.get("end_fit"), "band.end_fit", 1)
+        if (isinstance(cutoff, bool) or not isinstance(cutoff, (int, float))
+                or not (math.isfinite(cutoff) and cutoff > 0)):
+            raise SpecError(f"`band.cutoff_rad_s`: got {cutoff!r}, expected the corner of `band.sos`, a "
+                            "frequency > 0 rad/s")
+        order = band.get("order") if isinstance(band.get("order"), int) else None
+        why = str(band.get("reason") or band.get("source") or "")
+    elif cutoff is not None:
+        raise SpecError(f"`band.sos`: missing, but `band.cutoff_rad_s` is {cutoff!r}; expected the sections of "
+                        "the band's filter F (or cutoff_rad_s None: no filter)")
+    dist = filters.get("disturbance")
+    if dist is None:
+        dist = {}
+    if not isinstance(dist, dict):
+        raise SpecError(f"`disturbance`: got {dist!r:.80}, expected a mapping such as {{'at': 'command'}}")
+    w_sos = None
+    if dist.get("W") is not None:
+        w = dist["W"]
+        if not isinstance(w, dict) or w.get("sos") is None:
+            raise SpecError(f"`disturbance.W`: got {w!r:.80}, expected {{'sos': [[b0, b1, b2, 1, a1, a2], ...]}}")
+        w_sos = _sections(w["sos"], "disturbance.W.sos")
+    elif dist.get("at", "command") == "airframe":
+        raise SpecError("`disturbance.W`: missing, but `disturbance.at` is 'airframe'; expected the airframe "
+                        "correction {'sos': [[b0, b1, b2, 1, a1, a2], ...]}")
+    return _Learning(sos, zi, pad, end_fit, float(cutoff) if sos is not None else None, order, why, w_sos)
+
+
+def _learn_c(prefix: str, lp: _Learning) -> str:
+    """Coefficient tables, helpers and ``<prefix>learn`` (double only)."""
+    macro = prefix.upper()
+    out = ["\n/* ------------------------------------------------------------------ the learning law */\n"]
+    if lp.sos is not None:
+        ns = lp.sos.shape[0]
+        what = f"Butterworth order {lp.order}, " if lp.order else ""
+        out.append(f"\n/* F, the learning band: one pass, {ns} second-order section{'s' if ns > 1 else ''} "
+                   f"({what}corner {lp.cutoff:.6g} rad/s),\n   rows b0 b1 b2 a0 a1 a2 (a0 = 1); zi: its state "
+                   "per unit input at rest (scipy.signal.sosfilt_zi). */\n")
+        out.append(_array_c(_DOUBLE, f"{prefix}band_sos", lp.sos))
+        out.append(_array_c(_DOUBLE, f"{prefix}band_zi", lp.zi))
+    if lp.w_sos is not None:
+        nw = lp.w_sos.shape[0]
+        out.append(f"\n/* W, the airframe correction: {nw} second-order section{'s' if nw > 1 else ''} run "
+                   "forwards from rest,\n   rows b0 b1 b2 a0 a1 a2 (a0 = 1). */\n")
+        out.append(_array_c(_DOUBLE, f"{prefix}w_sos", lp.w_sos))
+    if lp.sos is not None or lp.w_sos is not None:
+        out.append(f"""
+/* Second-order sections over x[0..n) in place from the state z, forwards or (backward != 0)
+   backwards, in the operation order of scipy.signal.sosfilt. */
+static void {prefix}sections(const double (*sos)[6], size_t ns, double (*z)[2], double *x,
+{' ' * (13 + len(prefix))}size_t n, int backward)
+{{
+    size_t k, i;
+
+    for (k = 0; k < n; ++k) {{
+        double *at = backward ? x + (n - 1 - k) : x + k;
+        double v = *at;
+        for (i = 0; i < ns; ++i) {{
+            const double x_new = sos[i][0] * v + z[i][0];
+            z[i][0] = sos[i][1] * v - sos[i][4] * x_new + z[i][1];
+            z[i][1] = sos[i][2] * v - sos[i][5] * x_new;
+            v = x_new;
+        }}
+        *at = v;
+    }}
+}}
+""")
+    if lp.sos is not None:
+        ns = lp.sos.shape[0]
+        out.append(f"""
+/* One zero-phase pass of F over x[0..n) in place, n >= 1: forwards from the state zi x[0],
+   then backwards from zi y[n-1] (scipy.signal.sosfiltfilt with padtype=None). */
+static void {prefix}band_pass(double *x, size_t n)
+{{
+    double z[{ns}][2];
+    size_t i;
+
+    for (i = 0; i < {ns}; ++i) {{
+        z[i][0] = {prefix}band_zi[i][0] * x[0];
+        z[i][1] = {prefix}band_zi[i][1] * x[0];
+    }}
+    {prefix}sections({prefix}band_sos, {ns}, z, x, n, 0);
+    for (i = 0; i < {ns}; ++i) {{
+        z[i][0] = {prefix}band_zi[i][0] * x[n - 1];
+        z[i][1] = {prefix}band_zi[i][1] * x[n - 1];
+    }}
+    {prefix}sections({prefix}band_sos, {ns}, z, x, n, 1);
+}}
+""")
+        if lp.pad:
+            out.append(f"""
+/* H: x[0..n), n >= 1, extended by PAD = {macro}PAD samples at each end into
+   h[0..n + 2 PAD): zeros before; after the end the least-squares line through the last
+   m = min(END_FIT, n) samples, END_FIT = {macro}END_FIT (numpy.polyfit of degree 1 in
+   ilcdob.design.export; m = 1: the last sample), here on the centred abscissa
+   t_i = i - (m - 1)/2, i = 0..m-1: mean + slope t. */
+static void {prefix}horizon(const double *x, size_t n, double *h)
+{{
+    const size_t m = n < {macro}END_FIT ? n : {macro}END_FIT;
+    const double *u = x + (n - m);
+    const double half = 0.5 * (double)(m - 1);
+    double s_x = 0.0, s_tt = 0.0, s_tx = 0.0, mean, slope = 0.0;
+    size_t i;
+
+    for (i = 0; i < m; ++i) {{
+        const double t = (double)i - half;
+        s_x = s_x + u[i];
+        s_tt = s_tt + t * t;
+        s_tx = s_tx + t * u[i];
+    }}
+    mean = s_x / (double)m;
+    if (m > 1)
+        slope = s_tx / s_tt;
+    for (i = 0; i < {macro}PAD; ++i)
+        h[i] = 0.0;
+    for (i = 0; i < n; ++i)
+        h[{macro}PAD + i] = x[i];
+    for (i = 0; i < {macro}PAD; ++i)
+        h[{macro}PAD + n + i] = mean + slope * ((double)(m + i) - half);
+}}
+""")
+        else:
+            out.append(f"""
+/* H with {macro}PAD = 0: the trial as it is. */
+static void {prefix}horizon(const double *x, size_t n, double *h)
+{{
+    size_t i;
+
+    for (i = 0; i < n; ++i)
+        h[i] = x[i];
+}}
+""")
+    if lp.w_sos is not None:
+        nw = lp.w_sos.shape[0]
+        out.append(f"""
+/* W over x[0..n) in place, from rest. */
+static void {prefix}w_pass(double *x, size_t n)
+{{
+    double z[{nw}][2] = {{{{0.0}}}};
+
+    {prefix}sections({prefix}w_sos, {nw}, z, x, n, 0);
+}}
+""")
+    checks = (f"    if (n == 0)\n        return {macro}LEARN_EMPTY;\n"
+              f"    if (e == NULL || df_prev == NULL || df_next == NULL || work == NULL)\n"
+              f"        return {macro}LEARN_NULL;\n")
+    note = "   /* e and df_prev are read before df_next is written */"
+    w_step = f"    {prefix}w_pass(a, len);\n" if lp.w_sos is not None else ""
+    if lp.sos is not None:
+        body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
+                f"    len = n + 2 * (size_t){macro}PAD;\n    a = work;\n    b = work + len;\n"
+                f"    {prefix}horizon(e, n, a);{note}\n"
+                f"    {prefix}band_pass(a, len);\n    {prefix}l1_apply(a, a, len);\n"
+                f"    {prefix}horizon(df_prev, n, b);\n"
+                f"    {prefix}band_pass(b, len);\n    {prefix}l2_apply(b, b, len);\n"
+                f"    for (k = 0; k < len; ++k)\n        a[k] = a[k] + b[k];\n"
+                f"{w_step}"
+                f"    {prefix}band_pass(a, len);\n"
+                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n    return 0;\n")
+    elif lp.w_sos is not None:
+        body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
+                f"    len = n;\n    a = work;\n    b = work + n;\n"
+                f"    {prefix}l1_apply(e, a, n);{note}\n"
+                f"    {prefix}l2_apply(df_prev, b, n);\n"
+                f"    for (k = 0; k < n; ++k)\n        a[k] = a[k] + b[k];\n{w_step}"
+                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n    return 0;\n")
+    else:
+        body = (f"    double *a, *b;\n    size_t k;\n\n{checks}"
+                f"    a = work;\n    b = work + n;\n"
+                f"    {prefix}l1_apply(e, a, n);{note}\n"
+                f"    {prefix}l2_apply(df_prev, b, n);\n"
+                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k] + b[k];\n    return 0;\n")
+    out.append(f"\nint {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, "
+               f"double *work)\n{{\n{body}}}\n")
+    return "".join(out)
+
+
 def _comment(text: str) -> str:
     """``text`` safe inside a C block comment."""
     return str(text).replace("*/", "* /")
@@ -446,40 +712,92 @@ class CCode:
     float_errors : dict of str -> float
         Per filter, the measured ``max |y_float - y_double| / max |y_double|`` of the float
         variant on :func:`reference_trial` (empty without the float variant).
+    pad : int
+        Samples the learning law adds at each end of the trial (``band.pad``; 0 without a band).
     """
 
     prefix: str
     header: str
     source: str
     float_errors: dict[str, float] = field(default_factory=dict)
+    pad: int = 0
 
     @property
     def info(self) -> dict[str, Any]:
         """What ``filters.json`` records about the C code (key ``c``)."""
-        out: dict[str, Any] = {"header": "filters.h", "source": "filters.c", "prefix": self.prefix,
-                               "functions": [f"{self.prefix}{k.lower()}_apply" for k in FILTER_KEYS]}
+        p, m = self.prefix, self.prefix.upper()
+        out: dict[str, Any] = {"header": "filters.h", "source": "filters.c", "prefix": p,
+                               "functions": [f"{p}learn", *(f"{p}{k.lower()}_apply" for k in FILTER_KEYS)],
+                               "learn": {"function": f"{p}learn", "computes": "ilcdob.design.export.apply_learning",
+                                         "work": f"{m}LEARN_WORK(n) = 2 * (n + 2 * {self.pad}) doubles",
+                                         "returns": f"0; {m}LEARN_EMPTY = 1 (n == 0) or {m}LEARN_NULL = 2 "
+                                                    "(a NULL pointer), nothing written"}}
         if self.float_errors:
-            out["float"] = {"functions": [f"{self.prefix}{k.lower()}_apply_f" for k in FILTER_KEYS],
+            out["float"] = {"functions": [f"{p}{k.lower()}_apply_f" for k in FILTER_KEYS],
                             "max_relative_error": self.float_errors,
-                            "measured_on": _REFERENCE_TEXT + " (float32 emulation of the C arithmetic)"}
+                            "measured_on": _REFERENCE_TEXT + " (float32 emulation of the C arithmetic)",
+                            "learn": "none: the learning law runs in double only"}
         return out
 
 
+def _limit(filters: dict[str, Any]) -> float | None:
+    """The learning vehicle's acceleration limit of ``filters.json`` (m/s^2), None when none is stated."""
+    limit = filters.get("limit")
+    value = limit.get("acceleration_m_s2") if isinstance(limit, dict) else None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return None
+    return float(value)
+
+
+def _law_comment(macro: str, lp: _Learning) -> str:
+    """The lines of the header describing what ``learn`` computes."""
+    if lp.sos is not None:
+        order = f"order {lp.order} " if lp.order else ""
+        lines = ["    d_next = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f}}}}})" if lp.w_sos is not None
+                 else "    d_next = crop(F{L1{F{H{e}}} + L2{F{H{d_f}}}})",
+                 "exactly as ilcdob.design.export.apply_learning does (to rounding), where",
+                 f"  F  is the learning band: a Butterworth {order}low-pass with corner {lp.cutoff:.6g} rad/s",
+                 f"     ({macro}BAND_CUTOFF), run forwards from its steady state at the first sample, then",
+                 "     backwards from its steady state at the last (zero phase);",
+                 f"  H  extends the trial by {macro}PAD samples at each end: zeros before, after the end",
+                 f"     the least-squares line through its last {macro}END_FIT samples;"]
+        if lp.w_sos is not None:
+            lines.append("  W  is the airframe correction (the disturbance acts on the airframe), from rest;")
+        lines += ["  L1, L2 run as the functions below, on the extended signals;",
+                  "  crop keeps the trial's n samples."]
+    else:
+        lines = ["    d_next = W{L1{e} + L2{d_f}}" if lp.w_sos is not None else "    d_next = L1{e} + L2{d_f}",
+                 "exactly as ilcdob.design.export.apply_learning does (to rounding): no learning band",
+                 f"(no filter, {macro}BAND_CUTOFF 0.0), L1 and L2 act on the trial as recorded"
+                 + (";" if lp.w_sos is not None else ".")]
+        if lp.w_sos is not None:
+            lines.append("W is the airframe correction (the disturbance acts on the airframe), from rest.")
+    return "".join(f" * {line}\n" for line in lines)
+
+
 def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bool = False) -> CCode:
-    """``filters.h`` and ``filters.c`` for the ``L1``/``L2`` filters of a design.
+    """``filters.h`` and ``filters.c`` for the learning law and the ``L1``/``L2`` filters of a design.
 
     Parameters
     ----------
     filters : dict
-        ``filters.json`` content with ``from``, ``to``, ``method``, ``sample_time``, ``L1``, ``L2``.
+        ``filters.json`` content with ``from``, ``to``, ``method``, ``sample_time``, ``L1``, ``L2``
+        and optionally ``band`` and ``disturbance`` (module docstring).
     prefix : str, optional
         Symbol prefix (default :func:`default_c_prefix` of the pair), checked by :func:`check_c_prefix`.
     float_variant : bool
-        Also emit ``<prefix>l1_apply_f``/``l2_apply_f`` in ``float``.
+        Also emit ``<prefix>l1_apply_f``/``l2_apply_f`` in ``float`` (the learning law has no
+        float variant).
 
     Returns
     -------
     CCode
+
+    Raises
+    ------
+    SpecError
+        A missing key, a bad prefix, or a filter, ``band`` or ``disturbance.W`` entry of the
+        wrong shape or value (the message names the key).
     """
     missing = [k for k in ("from", "to", "method", "sample_time", *FILTER_KEYS) if k not in filters]
     if missing:
@@ -487,6 +805,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
                         f"{filters.get('method')!r} has no L1/L2 filters (only closed-form and fir do)")
     prefix = check_c_prefix(default_c_prefix(str(filters["from"]), str(filters["to"])) if prefix is None
                             else prefix)
+    lp = _learning_parts(filters)
     macro = prefix.upper()
     guard = f"{macro}FILTERS_H"
     pair = _comment(f"{filters['from']} -> {filters['to']}")
@@ -499,29 +818,56 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
         for k in FILTER_KEYS:
             decls.append(f"void {prefix}{k.lower()}_apply{ct.suffix}(const {ct.name} *u, {ct.name} *y, size_t n);")
     adv = {k: int(filters[k]["advance"]) for k in FILTER_KEYS}
-    stack = max(_stack_values(filters[k]) for k in FILTER_KEYS)
+    stack = max([_stack_values(filters[k]) for k in FILTER_KEYS]
+                + [2 * s.shape[0] for s in (lp.sos, lp.w_sos) if s is not None])
     float_note = ""
     if float_variant:
         float_note = (
             " *\n * float variant (*_apply_f: float data, coefficients and arithmetic): measured\n"
             " *   max |y_float - y_double| / max |y_double| = "
             + ", ".join(f"{errors[k]:.2e} ({k})" for k in FILTER_KEYS)
-            + f"\n *   on {_REFERENCE_TEXT}\n *   (float32 emulation of this arithmetic when the file was written).\n")
+            + f"\n *   on {_REFERENCE_TEXT}\n *   (float32 emulation of this arithmetic when the file was written).\n"
+            f" *   The learning law ({prefix}learn) has no float variant: it runs in double only.\n")
+    limit = _limit(filters)
+    limit_note = ""
+    if limit is not None:
+        limit_note = (f" * learn does not apply the learning vehicle's acceleration limit ({macro}ACCELERATION_LIMIT,\n"
+                      " * filters.json `limit`): check d_next (with the exact-reference correction added, if any)\n"
+                      " * against it before flying it.\n")
+    limit_macro = "" if limit is None else (f"#define {macro}ACCELERATION_LIMIT {limit!r} /* m/s^2, of the "
+                                            "learning vehicle: |d_next| must stay below it */\n")
+    if lp.sos is not None:
+        band_macros = (f"#define {macro}BAND_CUTOFF {lp.cutoff!r} /* rad/s, corner of the learning band F */\n"
+                       f"#define {macro}PAD {lp.pad} /* samples added at each end of the trial */\n"
+                       f"#define {macro}END_FIT {lp.end_fit} /* samples the line continuing the trial is "
+                       "fitted to */\n")
+    else:
+        band_macros = (f"#define {macro}BAND_CUTOFF 0.0 /* no learning band: L1, L2 act on the trial as "
+                       "recorded */\n"
+                       f"#define {macro}PAD 0 /* no band: nothing added to the trial */\n")
     header = f"""\
 /* Learning filters {pair} (method {_comment(filters['method'])}), written by `ilcdob design`.
  *
- * Between two flights, the learning signal of the next vehicle j is
- *     d_f,j = L1{{e_j-1}} + L2{{d_f,j-1}}
- * from the previous vehicle's recorded trial: its tracking error e (m) and the learning
- * signal it flew, d_f (m/s^2), both sampled every {macro}SAMPLE_TIME seconds from the
- * start of the trial. Call {prefix}l1_apply on e, {prefix}l2_apply on d_f, add the two
- * outputs sample by sample (m/s^2) and feed the sum forward on the next flight.
+ * Between two flights, the learning signal d_next of the next vehicle is computed from the
+ * previous vehicle's recorded trial, its tracking error e (m) and the learning signal it
+ * flew, d_f (m/s^2; zeros if none), n samples each, every {macro}SAMPLE_TIME seconds from
+ * the start of the trial, by one call:
  *
- * Each function filters one whole recorded trial of n samples (n >= 1; n = 0 does nothing)
+ *     static double work[{macro}LEARN_WORK(N_MAX)];      (scratch, N_MAX >= n)
+ *     if ({prefix}learn(e, d_f, d_next, n, work) != 0) {{ n == 0 or a NULL pointer }}
+ *
+ * then d_next (m/s^2) is fed forward on the next flight, sample k at time k Ts. It is
+{_law_comment(macro, lp)} * work holds {macro}LEARN_WORK(n) doubles and overlaps none of e, d_f, d_next; d_next
+ * may be e or d_f (both are read before d_next is written). learn returns 0, or without
+ * writing anything {macro}LEARN_EMPTY (n == 0) or {macro}LEARN_NULL (a NULL pointer).
+{limit_note} *
+ * The filters alone: {prefix}l1_apply and {prefix}l2_apply each filter one whole
+ * recorded trial of n samples (n >= 1; n = 0 does nothing)
  * exactly as ilcdob.design.export.apply_coefficients does: the filter looks
  * {macro}L1_ADVANCE (L2: {macro}L2_ADVANCE) samples ahead, the input is taken as zero
  * before the trial and continued past its end by the least-squares cubic through its last
- * 16 samples. y must hold n values and may be u (in place). No allocation: the filter
+ * 16 samples. y must hold n values and may be u (in place). With a band or W their sum is
+ * not the learning signal: use learn. No allocation: the filter
  * state and the cubic live in local arrays of at most {stack} numbers ({8 * stack} bytes in
  * double, {4 * stack} in float) plus a few scalars. Compile with -ffp-contract=off (no fused multiply-add)
  * to reproduce the Python arithmetic operation by operation; contraction changes the
@@ -535,11 +881,16 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
 #define {macro}SAMPLE_TIME {ts!r} /* s */
 #define {macro}L1_ADVANCE {adv['L1']} /* samples of look-ahead of L1 */
 #define {macro}L2_ADVANCE {adv['L2']} /* samples of look-ahead of L2 */
+{band_macros}{limit_macro}#define {macro}LEARN_WORK(n) (2 * ((n) + 2 * {macro}PAD)) /* doubles of scratch for learn */
+#define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
+#define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
 
 #ifdef __cplusplus
 extern "C" {{
 #endif
 
+/* The learning law: previous vehicle's trial (e in m, df_prev in m/s^2) -> df_next (m/s^2). */
+int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, double *work);
 /* L1: previous vehicle's tracking error (m) -> learning signal (m/s^2). */
 {decls[0]}
 /* L2: previous vehicle's learning signal (m/s^2) -> learning signal (m/s^2). */
@@ -561,7 +912,8 @@ extern "C" {{
             parts.append("\n" + _tail_c(prefix, ct))
         for k in FILTER_KEYS:
             parts.append("\n" + _filter_c(prefix, k, filters[k], ct))
-    return CCode(prefix=prefix, header=header, source="".join(parts), float_errors=errors)
+    parts.append(_learn_c(prefix, lp))
+    return CCode(prefix=prefix, header=header, source="".join(parts), float_errors=errors, pad=lp.pad)
 
 
 # --------------------------------------------------------------------------- design folder
@@ -572,8 +924,10 @@ _FILE_TEXT = {
                     "(`advance` samples of look-ahead and second-order sections `sos`, rows "
                     "[b0, b1, b2, 1, a1, a2] in powers of z^-1, or FIR taps `num`; direct-form `num`/`den` only "
                     "where they reproduce the sections, else `num_den_omitted` says why)",
-    "filters.h": "C99 declarations of the functions running L1 and L2 on a recorded trial, with the sample time "
-                 "and the look-ahead of each filter",
+    "filters.h": "C99 declarations of the function computing the learning signal from a recorded trial (`learn`: "
+                 "L1 and L2 within the learning band, with the airframe correction when there is one) and of the "
+                 "functions running L1 and L2 alone, with the sample time, the band and the look-ahead of each "
+                 "filter",
     "filters.c": "their implementation (no allocation; compile it with your firmware or ground tool)",
     "lifted.npz": "numpy arrays: for norm-optimal the lifted matrices L1, L2 (N x N, d_f,j = L1 e_j-1 + "
                   "L2 d_f,j-1); for robust the learning signal d_f, the predicted improvement ratios and errors",
@@ -584,6 +938,29 @@ _FILE_TEXT = {
                            "signal, for the given trial's reference",
     "README.md": "this file",
 }
+
+
+def _band_readme(filters: dict[str, Any], lp: _Learning) -> list[str]:
+    """README sentences on the band and the airframe correction that ``learn`` applies."""
+    out = []
+    if lp.sos is not None:
+        order = f"of order {lp.order} " if lp.order else ""
+        out.append(f"The learning band F is a zero-phase Butterworth low-pass {order}with corner {lp.cutoff:.4g} rad/s"
+                   + (f" ({lp.why})" if lp.why else "") + f"; the trial is extended by {lp.pad} samples at each end "
+                   f"(zeros before, the least-squares line through its last {lp.end_fit} samples after).")
+        if (filters.get("band") or {}).get("request") == "auto":
+            out.append("The corner was chosen when this folder was written; the Python design chooses it per trial "
+                       "(`--bandwidth auto`): for another trial run `ilcdob design --trial` again, or state the "
+                       "corner with `--bandwidth`.")
+    else:
+        out.append("No learning band (no filter): L1 and L2 act on the trial as recorded.")
+    if lp.w_sos is not None:
+        out.append("W is the airframe correction (the disturbance acts on the airframe), run after L1 + L2.")
+    limit = _limit(filters)
+    if limit is not None:
+        out.append(f"`learn` does not apply the acceleration limit of {filters['to']} ({limit:.4g} m/s^2, `limit` "
+                   "in `filters.json`): check `d_next` against it before flying it.")
+    return out
 
 
 def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | None = None) -> str:
@@ -597,38 +974,56 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
         Names of the files in the folder (described in this order).
     code : CCode, optional
         The C code written, for its function names and float figures.
+
+    Returns
+    -------
+    str
+        The README text (Markdown).
     """
     src, tgt, ts = filters["from"], filters["to"], float(filters["sample_time"])
     lines = [f"# Learning design {src} -> {tgt} ({filters['method']})", "",
              f"Written by `ilcdob design`. Sample time Ts = {ts:g} s. Vehicle {tgt} learns from the previous "
-             f"vehicle {src}: d_f,j = L1{{e_j-1}} + L2{{d_f,j-1}}.", "", "## Files", ""]
+             f"vehicle {src}: d_f,j = L1{{e_j-1}} + L2{{d_f,j-1}}"
+             + (", through the learning band and corrections below." if code is not None else "."),
+             "", "## Files", ""]
     lines += [f"- `{name}`: {_FILE_TEXT.get(name, '')}" for name in files]
     lines += ["", "## Between two flights", ""]
     if code is not None:
-        p = code.prefix
+        p, m = code.prefix, code.prefix.upper()
+        lp = _learning_parts(filters)
+        law = "L1{F{H{e}}} + L2{F{H{d_f}}}" if lp.sos is not None else "L1{e} + L2{d_f}"
+        if lp.w_sos is not None:
+            law = f"W{{{law}}}"
+        if lp.sos is not None:
+            law = f"crop(F{{{law}}})"
         lines += [f"After a flight of {src}, take its recorded tracking error e (m) and the learning signal it "
-                  f"flew, d_f (m/s^2; zeros if none), sampled every {ts:g} s from the start of the trial. Then",
+                  f"flew, d_f (m/s^2; zeros if none), n samples every {ts:g} s from the start of the trial. Then",
                   "",
                   "```c",
                   '#include "filters.h"',
-                  "/* e, d_f: the recorded trial; a, b, d_next: arrays of n doubles */",
-                  f"{p}l1_apply(e, a, n);      /* L1{{e}}, m/s^2 */",
-                  f"{p}l2_apply(d_f, b, n);    /* L2{{d_f}}, m/s^2 */",
-                  "for (k = 0; k < n; ++k) d_next[k] = a[k] + b[k];",
+                  f"static double work[{m}LEARN_WORK(N_MAX)];   /* scratch, N_MAX >= n */",
+                  "/* e, d_f: the recorded trial; d_next: n doubles (may be e or d_f) */",
+                  f"if ({p}learn(e, d_f, d_next, n, work) != 0) {{ /* n == 0 or a NULL pointer */ }}",
                   "```",
                   "",
-                  f"and feed `d_next` forward (m/s^2) on the next flight of {tgt}, sample k at time k Ts. Each "
-                  "function filters the whole trial at once (the filters look ahead "
+                  f"and feed `d_next` forward (m/s^2) on the next flight of {tgt}, sample k at time k Ts. "
+                  f"`{p}learn` computes d_next = {law} over the whole trial at once, exactly as "
+                  "`ilcdob.design.export.apply_learning` does in Python (to rounding); no allocation, "
+                  f"`work` holds `{m}LEARN_WORK(n)` = 2 (n + 2 x {lp.pad}) doubles.",
+                  "", *_band_readme(filters, lp), "",
+                  f"The filters alone are `{p}l1_apply` and `{p}l2_apply` (they look ahead "
                   f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
-                  "continued past its end by a cubic), exactly as "
-                  "`ilcdob.design.export.apply_coefficients` does in Python."]
+                  "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does)"
+                  + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
+                     or lp.w_sos is not None else "; their sum is what `learn` returns.")]
         if filters.get("law") == "exact-reference":
             lines += ["", f"Learning law exact-reference (`ilcdob.design.laws`): pass `e - e_ref_source` instead "
-                      f"of `e` to `{p}l1_apply` and add `correction` to `d_next`, both from `reference_terms.csv` "
+                      f"of `e` to `{p}learn` and add `correction` to `d_next`, both from `reference_terms.csv` "
                       "(they depend on the reference trajectory: run `ilcdob design --law exact-reference` again "
                       "for another trajectory). `learning_signal.csv` already includes both."]
         if code.float_errors:
-            lines += ["", "The float variant (`*_apply_f`) differs from the double one by at most "
+            lines += ["", "The float variant (`*_apply_f`, L1 and L2 only; `learn` runs in double) differs from "
+                      "the double one by at most "
                       + ", ".join(f"{v:.2e} ({k})" for k, v in code.float_errors.items())
                       + f" of the output's maximum, measured on {_REFERENCE_TEXT}."]
     elif "learning_signal.csv" in files:

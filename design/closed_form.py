@@ -8,8 +8,9 @@ System j learns from system j-1::
 
 (hats on the j-1 maps: they are built from system j-1's *model*). Because the factors
 commute, ``d_f,j = L1_j{e'_{j-1}}`` with ``e'_{j-1} = e_{j-1} + Gf_{j-1}{d_f,{j-1}}`` the
-error system j-1 would have had without learning; this is how :meth:`LearningFilters.apply`
-computes it (one inversion instead of two).
+error system j-1 would have had without learning. :meth:`LearningFilters.apply` runs the two
+filters on their own signals, as the exported C code does: ``L2`` is causal and stable, so
+it needs no continuation of ``d_f,{j-1}`` past the trial's end.
 
 Zeros and poles of ``L1_j`` come from the blocks, never from a quotient of polynomials::
 
@@ -126,8 +127,6 @@ class LearningFilters:
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
         """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem).
 
-        Computed as ``L1{e_{j-1} + Gf_{j-1}{d_f,{j-1}}}`` (identical, since L2 = L1 Gf_{j-1}).
-
         Parameters
         ----------
         e_prev : array, m
@@ -142,8 +141,8 @@ class LearningFilters:
         """
         e = as_signal(e_prev, "e_prev")
         df = as_signal(df_prev, "df_prev", e.size)
-        e_virtual = e + simulate_map(self.source.G_f, df) if np.any(df) else e
-        return self.L1.apply(e_virtual, "e_prev")
+        out = self.L1.apply(e, "e_prev")
+        return out + self.L2.apply(df, "df_prev") if np.any(df) else out
 
     def l1_response(self, w: np.ndarray) -> np.ndarray:
         """Frequency response of ``L1``.

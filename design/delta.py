@@ -26,7 +26,7 @@ from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 
-__all__ = ["DeltaSet", "delta_set", "MAX_DELTA_SAMPLES"]
+__all__ = ["DeltaSet", "delta_set", "delta_bound", "MAX_DELTA_SAMPLES"]
 
 #: Most sampled plants per system in a Delta set (the fir/robust designs grow with their number).
 MAX_DELTA_SAMPLES = 200
@@ -144,24 +144,17 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
         raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}: every sample is "
                         "a closed loop that is built, flown and constrained on by the fir/robust designs")
     rng = np.random.default_rng(0) if rng is None else rng
-    w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
     nominal = build_loop(spec.exact(), ts)
-    if bound is None and spec.uncertainty is not None:
-        bound = spec.uncertainty.bound
-    if bound is None and spec.identification is None:
+    found = delta_bound(spec, ts, w, scale, bound)
+    if found is None:
         raise SpecError(f"system {spec.name!r}: no identification in the fleet and no `bound` given; "
                         "identify it (ilcdob identify-fleet), state `uncertainty = { bound = 0.2 }` in the "
                         "fleet file, or pass bound=<relative error, e.g. 0.2>")
-    if bound is not None:
-        if not (np.isfinite(bound) and 0 < bound < 1):
-            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
-        gen, source, bnd = _bound_samples(spec, bound, k, rng), "fleet bound", np.full(w.size, float(bound))
+    w, bnd, source = found
+    if source == "fleet bound":
+        gen = _bound_samples(spec, float(bnd[0]), k, rng)
     else:
-        ident = spec.identification
-        gen, source = _identified_samples(spec, k, rng, scale), "identification"
-        bnd = scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),
-                                           np.asarray(ident.parameters), np.asarray(ident.covariance),
-                                           spec.nominal_plant.delay, ident.delay_estimated, w)
+        gen = _identified_samples(spec, k, rng, scale)
     loops, rejected = [], 0
     model = spec.nominal_plant
     while len(loops) < k:
@@ -174,3 +167,44 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
                 raise SpecError(f"system {spec.name!r}: {rejected} sampled plants gave unstable loops; the "
                                 "uncertainty is too large for this controller (lower `scale` or `bound`)") from None
     return DeltaSet(spec.name, nominal, tuple(loops), w, bnd, rejected, source)
+
+
+def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale: float = 1.0,
+                bound: float | None = None) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """The frequency-wise bound ``|Delta(jw)|`` of a system's Delta set, without sampling plants.
+
+    Same precedence as :func:`delta_set`: ``bound``, then the fleet file's
+    ``uncertainty.bound``, then the identification's 3-sigma bound (times ``scale``).
+
+    Parameters
+    ----------
+    spec : SystemSpec
+    ts : float
+        Sample time, s.
+    w : array, optional
+        Frequencies, rad/s (default: 200 log-spaced points from 0.01 rad/s to Nyquist).
+    scale : float
+        Multiplier of the identified standard deviations.
+    bound : float, optional
+        A common multiplicative bound in (0, 1).
+
+    Returns
+    -------
+    (w, bound, source) or None
+        Frequencies, the bound on them and ``"fleet bound"`` or ``"identification"``; None
+        when the system has neither a bound nor an identification.
+    """
+    w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
+    if bound is None and spec.uncertainty is not None:
+        bound = spec.uncertainty.bound
+    if bound is not None:
+        if not (np.isfinite(bound) and 0 < bound < 1):
+            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+        return w, np.full(w.size, float(bound)), "fleet bound"
+    ident = spec.identification
+    if ident is None:
+        return None
+    bnd = scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),
+                                       np.asarray(ident.parameters), np.asarray(ident.covariance),
+                                       spec.nominal_plant.delay, ident.delay_estimated, w)
+    return w, bnd, "identification"

@@ -33,8 +33,8 @@ from ilcdob.signals import as_signal, extend_smoothly
 
 from .noncausal import ZPKFilter
 
-__all__ = ["zpk_to_coefficients", "apply_coefficients", "direct_form_grid", "direct_form_disagreement",
-           "DIRECT_FORM_RTOL"]
+__all__ = ["zpk_to_coefficients", "apply_coefficients", "apply_learning", "direct_form_grid",
+           "direct_form_disagreement", "DIRECT_FORM_RTOL"]
 
 #: Largest relative disagreement of ``num``/``den`` with ``sos`` for ``num``/``den`` to be written.
 DIRECT_FORM_RTOL = 1e-6
@@ -193,3 +193,68 @@ def apply_coefficients(coeffs: dict[str, Any], x: object) -> np.ndarray:
                         + (f" ({why})" if why else "") + f"; got keys {sorted(coeffs)}")
     return y[adv:adv + x.size]
 
+
+
+def _forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """One zero-phase pass: ``sos`` forwards from the state ``zi x[0]``, then backwards from
+    ``zi y[-1]`` (what ``scipy.signal.sosfiltfilt(..., padtype=None)`` computes)."""
+    y, _ = signal.sosfilt(sos, x, zi=zi * x[0])
+    y, _ = signal.sosfilt(sos, y[::-1], zi=zi * y[-1])
+    return y[::-1]
+
+
+def _horizon(x: np.ndarray, pad: int, n_fit: int) -> np.ndarray:
+    """Zeros before, the least-squares line through the last ``n_fit`` samples after."""
+    m = min(n_fit, x.size)
+    k = np.arange(m, dtype=float)
+    coef = np.polyfit(k, x[-m:], 1) if m > 1 else np.array([0.0, x[-1]])
+    return np.concatenate([np.zeros(pad), x, np.polyval(coef, np.arange(m, m + pad, dtype=float))])
+
+
+def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> np.ndarray:
+    """The learning law of a ``filters.json`` computed from its coefficients alone.
+
+    What the C function ``<prefix>learn`` runs (:mod:`.c_export`), in numpy::
+
+        d_f = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
+
+    ``H`` extends the trial by ``band.pad`` samples (zeros before, the least-squares line
+    through its last ``band.end_fit`` samples after), ``F`` is ``band.sos`` run forwards then
+    backwards from the steady state ``band.zi`` times the first sample of each pass, ``W``
+    is ``disturbance.W.sos`` run forwards from rest, ``L1``/``L2`` run as
+    :func:`apply_coefficients`; ``crop`` keeps the trial's samples. Without a band (no
+    ``band.sos``) it is ``W{L1{e} + L2{d_f_prev}}``.
+
+    Parameters
+    ----------
+    filters : dict
+        ``filters.json`` content with ``L1`` and ``L2`` (closed-form and FIR designs).
+    e_prev : array, m
+        The previous vehicle's tracking error (for ``exact-reference``: with its reference
+        error removed).
+    df_prev : array, m/s^2
+        The learning signal it flew (zeros if none).
+
+    Returns
+    -------
+    numpy.ndarray
+        The learning signal, m/s^2 (for ``exact-reference``: before the reference correction).
+    """
+    missing = [k for k in ("L1", "L2") if k not in filters]
+    if missing:
+        raise SpecError(f"filters: missing key(s) {missing}; method {filters.get('method')!r} has no L1/L2 filters")
+    e = as_signal(e_prev, "e_prev")
+    df = as_signal(df_prev, "df_prev", e.size)
+    band = filters.get("band") or {}
+    w_sos = (filters.get("disturbance") or {}).get("W", {}).get("sos")
+    if band.get("sos") is None:
+        y = apply_coefficients(filters["L1"], e) + apply_coefficients(filters["L2"], df)
+        return signal.sosfilt(np.asarray(w_sos, float), y) if w_sos is not None else y
+    sos, zi = np.asarray(band["sos"], float), np.asarray(band["zi"], float)
+    pad, n_fit = int(band["pad"]), int(band["end_fit"])
+    x1 = _forward_backward(sos, zi, _horizon(e, pad, n_fit))
+    x2 = _forward_backward(sos, zi, _horizon(df, pad, n_fit))
+    y = apply_coefficients(filters["L1"], x1) + apply_coefficients(filters["L2"], x2)
+    if w_sos is not None:
+        y = signal.sosfilt(np.asarray(w_sos, float), y)
+    return _forward_backward(sos, zi, y)[pad:pad + e.size]

@@ -11,7 +11,9 @@ applied as the exact stable inversion of docs/theory.md section 2:
   the end of the trial (stable in reversed time);
 * surplus zeros become an advance of ``k`` samples (non-causal lead).
 
-Boundary effects: the causal part assumes the system was at rest before ``t = 0``. The
+Boundary effects: the trial is taken as zero before ``t = 0``; the anti-causal part's answer
+there (to the trial's first samples) is computed over a lead of zeros and passed on to the
+causal part, which starts at rest before that lead. The
 anti-causal and advance parts need the input a little beyond the trial; it is continued by
 a cubic fitted to the last samples (:func:`extend_smoothly`), long enough for the
 anti-causal response to decay below 1e-12 of its size. Padding with zeros instead would put
@@ -115,11 +117,14 @@ class ZPKFilter:
         n = x.size
         k = self.advance
         pu = self.anticausal_poles
-        n_pad = k + 8
+        n_pad, n_pre = k + 8, 0
         if len(pu):
-            slowest = float(np.min(np.abs(pu)))
-            n_pad += int(np.ceil(12.0 / np.log10(slowest)))
-        x = extend_smoothly(x, n_pad)
+            # the anti-causal part answers before t = 0 to the trial's first samples: its
+            # output there decays like |p|^-m and feeds the causal part, so it is computed
+            # over a lead of zeros long enough for it to fall below 1e-12 of its size
+            n_pre = int(np.ceil(12.0 / np.log10(float(np.min(np.abs(pu))))))
+            n_pad += n_pre
+        x = np.concatenate([np.zeros(n_pre), extend_smoothly(x, n_pad)])
         # anti-causal part: prod 1/(z - p) = prod(-1/p) * prod 1/(1 - z/p), run in reversed time
         if len(pu):
             sos_u = signal.zpk2sos(np.zeros(len(pu)), 1.0 / pu, 1.0)
@@ -128,4 +133,4 @@ class ZPKFilter:
         # causal part with k extra poles at the origin, then advance by k samples
         pc = np.concatenate([self.causal_poles, np.zeros(k)])
         sos_c = signal.zpk2sos(self.zeros, pc, self.gain)
-        return signal.sosfilt(sos_c, x)[k:k + n]
+        return signal.sosfilt(sos_c, x)[n_pre + k:n_pre + k + n]

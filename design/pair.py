@@ -5,11 +5,24 @@ content (discrete filters applied to the previous system's error and learning si
 second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.export`; the C
 code of :mod:`.c_export` runs them), the lifted matrices
 for the lifted methods, and the learning signal for a given trial of the previous system.
+
+Every design learns through the same law (:meth:`PairDesign.learning`)::
+
+    d_f,j = limit( reference_out( F{ W{ learn( F{H{reference_in(e_{j-1})}}, F{H{d_f,{j-1}}} ) } } ) )
+
+``learn`` is the method's filter (the Theorem's ``L1{.} + L2{.}`` for the closed form), ``F``
+and ``H`` the learning band and trial horizon (:mod:`.band`; off when the data and models
+allow the Theorem's filters as they are), ``W`` the airframe correction when the disturbance
+acts on the airframe (:mod:`.flown`), ``reference_in``/``reference_out`` the reference terms
+of the ``exact-reference`` law (:mod:`.laws`) and ``limit`` the learning vehicle's
+acceleration limit (:mod:`.limit`). The C code of a design runs the same chain from
+``filters.json``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any, Callable
 
 import numpy as np
@@ -18,22 +31,51 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.lifted import check_lifted_size
 from ilcdob.display import html_table
+from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.signals import as_signal
+from ilcdob.specs import LimitSpec
 
-from .closed_form import closed_form_filters
-from .delta import DeltaSet, delta_set
+from .band import LearningBand, check_bandwidth, choose_band
+from .closed_form import LearningFilters, closed_form_filters, simulate_map
+from .delta import DeltaSet, delta_bound, delta_set
 from .export import zpk_to_coefficients
 from .fir import FIROptions, design_fir
+from .flown import DISTURBANCE_PATHS, airframe_path_filter
 from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
+from .limit import LIMIT_POLICIES, LimitReport, enforce_limit
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
 from .robust_set import RobustSetOptions, design_robust_set
+from .theorem import theorem_rhs
 
-__all__ = ["PairDesign", "design_pair", "with_law", "fleet_delta_sets", "METHODS", "DEFAULT_METHODS"]
+__all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets", "METHODS",
+           "DEFAULT_METHODS", "design_with_band"]
 
 METHODS = ("closed-form", "fir", "norm-optimal", "robust", "robust-set")
 #: The designs that comparisons and campaigns run unless told otherwise (robust-set takes a
 #: minute or more per source vehicle: on request).
 DEFAULT_METHODS = ("closed-form", "fir", "norm-optimal", "robust")
+
+Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class LearningSignal:
+    """The learning signal of one trial and how it was made.
+
+    Attributes
+    ----------
+    d_f : numpy.ndarray, m/s^2
+        The learning signal to feed forward on the learning vehicle's next flight.
+    band : LearningBand
+        The learning band it was computed with.
+    limit : LimitReport or None
+        Its check against the learning vehicle's acceleration limit (None: no limit stated).
+    """
+
+    d_f: np.ndarray
+    band: LearningBand
+    limit: LimitReport | None = None
 
 
 @dataclass(frozen=True)
@@ -46,30 +88,50 @@ class PairDesign:
         Design method (one of :data:`METHODS`).
     filters : dict
         ``filters.json`` content.
+    raw : callable (e, df) -> d_f
+        The method's learning filter on its own (no band, no reference terms, no limit).
     lifted : dict of str -> array, or None
         ``L1``, ``L2`` (N x N) for the norm-optimal method.
-    learn : callable (e_prev, df_prev) -> d_f
-        Learning signal of the target from a trial of the source (m, m/s^2 -> m/s^2).
     robust : RobustPairDesigner or None
         For the robust method: the per-trial SOCP (its ``design`` gives ratios per model).
     law : str
         Learning law (:mod:`ilcdob.design.laws`): ``"paper"`` or ``"exact-reference"``.
     reference : ReferenceTerms or None
-        ``exact-reference``: the pair's reference terms, already applied by ``learn`` (callers of
-        ``robust.design`` apply ``reference.error_in`` / ``reference.signal_out`` themselves).
+        ``exact-reference``: the pair's reference terms, applied by :meth:`learning`.
+    band : LearningBand or None
+        The learning band fixed at design time (what ``filters.json`` and the C code carry):
+        stated, or chosen from the trial given to :func:`design_pair` or from the fleet.
+    choose : callable or None
+        With ``bandwidth="auto"``: ``choose(error=e)`` chooses the band of each trial from its
+        error (:func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound).
+    path : numpy.ndarray or None
+        Sections of the airframe correction W (disturbance on the airframe).
+    limits : LimitSpec or None
+        The learning vehicle's acceleration limit.
+    on_limit : str
+        ``"clip"`` or ``"refuse"`` a learning signal beyond the limit.
+    source_gf : control.StateSpace or None
+        ``Gf_hat_{j-1}`` of the source's model (the band's choice, :meth:`band_for`).
     """
 
     method: str
     filters: dict[str, Any]
-    learn: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    raw: Learn
     lifted: dict[str, np.ndarray] | None = field(default=None)
     robust: RobustPairDesigner | None = field(default=None, repr=False)
     law: str = DEFAULT_LAW
     reference: ReferenceTerms | None = field(default=None, repr=False)
+    band: LearningBand | None = None
+    choose: Callable[..., LearningBand] | None = field(default=None, repr=False)
+    path: np.ndarray | None = field(default=None, repr=False)
+    limits: LimitSpec | None = None
+    on_limit: str = "clip"
+    source_gf: Any = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         pair = f"{self.filters.get('from', '?')} -> {self.filters.get('to', '?')}"
-        return f"<PairDesign {self.method} {pair}, law {self.law}: {self.order}>"
+        band = self.band.describe() if self.band is not None else "chosen per trial"
+        return f"<PairDesign {self.method} {pair}, law {self.law}, band {band}: {self.order}>"
 
     def _repr_html_(self) -> str:
         rows = [[k, v] for k, v in self.filters.items() if isinstance(v, (str, int, float, bool))]
@@ -87,6 +149,85 @@ class PairDesign:
         if self.method == "robust":
             return f"per-trial SOCP, {f['models']} models"
         return ", ".join(f"{k}: {_filter_size(f[k])}" for k in ("L1", "L2"))
+
+    def band_for(self, e_prev: object, df_prev: object | None = None) -> LearningBand:
+        """The learning band for a trial of the source (its law-adjusted error ``e_prev``, m, and
+        the learning signal it flew, ``df_prev``, m/s^2).
+
+        ``bandwidth="auto"``: chosen from the error the source would have had without learning,
+        ``e' = e + Gf_hat_{j-1}{d_f,{j-1}}`` (its spectrum carries the whole disturbance, even
+        when learning has already removed most of it from ``e``), and the fleet
+        (:mod:`.band`); otherwise the band fixed at design time.
+
+        Parameters
+        ----------
+        e_prev : array, m
+            The source's (law-adjusted) measured tracking error.
+        df_prev : array, m/s^2, optional
+            The learning signal it flew.
+
+        Returns
+        -------
+        LearningBand
+        """
+        if self.choose is None:
+            if self.band is None:  # a design built without one: the method's filter as it is
+                return LearningBand(float(self.filters.get("sample_time", 1.0)), None, source="off",
+                                    reason="no band given")
+            return self.band
+        e = as_signal(e_prev, "e_prev")
+        if df_prev is not None and self.source_gf is not None and np.any(df_prev):
+            e = e + simulate_map(self.source_gf, as_signal(df_prev, "df_prev", e.size))
+        return self.choose(error=e)
+
+    def learning(self, e_prev: object, df_prev: object, gain: float = 1.0, learn: Learn | None = None
+                 ) -> LearningSignal:
+        """The learning signal of the target from one trial of the source (module docstring).
+
+        Parameters
+        ----------
+        e_prev : array, m
+            The source's measured tracking error over the trial.
+        df_prev : array, m/s^2
+            The learning signal the source flew (zeros if none).
+        gain : float
+            Learning gain ``gamma`` in (0, 1] on the new error (1: the Theorem's law).
+        learn : callable, optional
+            Use this filter instead of :attr:`raw` (e.g. one that records the robust SOCP's
+            result for the caller).
+
+        Returns
+        -------
+        LearningSignal
+
+        Raises
+        ------
+        LearningLimitError
+            ``on_limit="refuse"`` and the signal exceeds the limit.
+        """
+        e = as_signal(e_prev, "e_prev")
+        df = as_signal(df_prev, "df_prev", e.size)
+        if self.reference is not None:
+            e = self.reference.error_in(e)
+        band = self.band_for(e, df)
+        d_f = band.apply(learn or self.raw, e, df, self.path, gain)
+        if self.reference is not None:
+            d_f = self.reference.signal_out(d_f)
+        what = f"learning signal of {self.filters.get('to', '?')} from {self.filters.get('from', '?')}"
+        d_f, report = enforce_limit(d_f, self.limits, self.on_limit, what, band.describe())
+        return LearningSignal(d_f, band, report)
+
+    def learn(self, e_prev: object, df_prev: object) -> np.ndarray:
+        """The learning signal only (``learning(e_prev, df_prev).d_f``), m/s^2.
+
+        Parameters
+        ----------
+        e_prev : array, m
+            The source's measured tracking error.
+        df_prev : array, m/s^2
+            The learning signal the source flew (zeros if none).
+        """
+        return self.learning(e_prev, df_prev).d_f
 
 
 def _filter_size(coeffs: dict[str, Any]) -> str:
@@ -126,12 +267,85 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
                             scale=scale, bound=bound) for name in names}
 
 
+def _sos_gain(sos: np.ndarray | None, w: np.ndarray, ts: float) -> np.ndarray:
+    if sos is None:
+        return np.ones_like(w)
+    from scipy import signal as sps
+
+    return np.abs(sps.sosfreqz(sos, worN=w * ts)[1])
+
+
+def _band_inputs(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, path: np.ndarray | None,
+                 deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters]) -> dict[str, Any]:
+    """What the band's choice knows from the fleet (:func:`~ilcdob.design.band.choose_band` keywords)."""
+    specs = {s.name: s for s in fleet.systems}
+    s_spec, t_spec = specs[src.name], specs[tgt.name]
+    if deltas is not None and src.name in deltas:
+        found = (deltas[src.name].w, deltas[src.name].bound)
+    else:
+        b = delta_bound(s_spec, fleet.sample_time)
+        found = None if b is None else b[:2]
+    trust = None
+    if found is not None:
+        w = np.asarray(found[0], float)
+        trust = (w, np.asarray(found[1], float) / theorem_rhs(src, w))
+    return {"noise_std": s_spec.sensor.noise_std if s_spec.sensor is not None else None,
+            "a_max": t_spec.limits.max_acceleration if t_spec.limits is not None else None,
+            "l1_gain": lambda w: np.abs(closed_form().l1_response(w)) * _sos_gain(path, w, fleet.sample_time),
+            "trust": trust}
+
+
+def _band_chooser(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, request: object, path: np.ndarray | None,
+                  deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters]
+                  ) -> Callable[..., LearningBand]:
+    """``choose(error=...)``: :func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound."""
+    return partial(choose_band, fleet.sample_time, request, **_band_inputs(fleet, src, tgt, path, deltas, closed_form))
+
+
+def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto", *, error: object | None = None,
+              deltas: dict[str, DeltaSet] | None = None, disturbance: str = "command") -> LearningBand:
+    """The learning band of a pair without designing it (what :func:`design_pair` would fix).
+
+    Parameters
+    ----------
+    fleet : Fleet
+    source, target : str
+        Systems j-1 and j.
+    bandwidth : "auto", float or None
+        As in :func:`design_pair`.
+    error : array, m, optional
+        The error of the trial learned from (``"auto"``: chooses from it).
+    deltas : dict name -> DeltaSet, optional
+        Delta set of the source (default: its identification or stated bound).
+    disturbance : {"command", "airframe"}
+        Where the disturbance acts (the airframe correction enters the noise budget).
+
+    Returns
+    -------
+    LearningBand
+    """
+    if disturbance not in DISTURBANCE_PATHS:
+        raise SpecError(f"`disturbance`: got {disturbance!r}, expected one of {list(DISTURBANCE_PATHS)}")
+    src, tgt = fleet.loop(source), fleet.loop(target)
+    path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
+    cache: list[LearningFilters] = []
+
+    def closed_form() -> LearningFilters:
+        if not cache:
+            cache.append(closed_form_filters(src, tgt))
+        return cache[0]
+
+    request = check_bandwidth(bandwidth, fleet.sample_time)
+    return _band_chooser(fleet, src, tgt, request, path, deltas, closed_form)(error=error)
+
+
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
                 norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
                 deltas: dict[str, DeltaSet] | None = None, robust: RobustOptions | None = None,
                 relax: bool = False, lifted: bool = True, law: str = DEFAULT_LAW,
                 reference: np.ndarray | None = None, acceleration: np.ndarray | None = None,
-                robust_set: RobustSetOptions | None = None) -> PairDesign:
+                robust_set: RobustSetOptions | None = None, bandwidth: object = "auto",
+                disturbance: str = "command", on_limit: str = "clip") -> PairDesign:
     """Design the learning filters of ``target`` from ``source`` with ``method``.
 
     Parameters
@@ -149,7 +363,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     deltas : dict name -> DeltaSet, optional
         Sampled true loops of ``source`` and ``target`` for the robust constraint of the FIR
         design and the models of the robust design (default: :func:`fleet_delta_sets` with
-        K = 8 from the identifications).
+        K = 8 from the identifications); the source's bound also sets the band's ``model`` edge.
     robust : RobustOptions, optional
         Options of the robust SOCP; its models are the nominal pair plus the paired samples.
     relax : bool
@@ -158,9 +372,9 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     lifted : bool
         Norm-optimal: build the N x N matrices L1, L2 (O(N^2) memory; not needed to learn).
     law : {"paper", "exact-reference"}
-        Learning law (:mod:`ilcdob.design.laws`). ``exact-reference`` wraps the method's learning
-        (its filters act on the disturbance part of the source's error) with the reference terms
-        of ``reference``; ``multi-source`` learns from several trials and is refused here.
+        Learning law (:mod:`ilcdob.design.laws`). ``exact-reference`` adds the reference terms
+        of ``reference`` around the method's learning; ``multi-source`` learns from several
+        trials and is refused here.
     reference : array, m, optional
         ``exact-reference``: reference position of the trial (required).
     acceleration : array, m/s^2, optional
@@ -168,11 +382,23 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     robust_set : RobustSetOptions, optional
         Options of the robust-set design (default: ``rho`` of ``robust``, capped at 1, else 0.95);
         its bound is ``deltas[source].bound``.
-
+    bandwidth : "auto", float or None
+        The learning band's corner (:mod:`.band`): ``"auto"`` (default) chooses it per trial
+        from the trial's error and the fleet (sensor noise, the target's acceleration limit, the
+        source's Delta set); a number states it (rad/s); ``None`` or ``"off"``: the method's
+        filter as it is. ``robust`` with ``"auto"`` flies its SOCP's signal as it is: its
+        guarantee holds for that signal, and its weights already bound it.
+    disturbance : {"command", "airframe"}
+        Where the disturbance acts (:mod:`.flown`): at the command, as in the paper's loop, or
+        on the airframe (adds the correction W; models with a rigid body to split off).
+    on_limit : {"clip", "refuse"}
+        A learning signal beyond the target's acceleration limit (fleet ``limits``) is clipped
+        with a warning, or refused.
     Raises
     ------
     SpecError
-        Unknown method or law, ``multi-source``, ``exact-reference`` without ``reference``.
+        Unknown method, law, disturbance path or limit policy; ``multi-source``;
+        ``exact-reference`` without ``reference``; a bad bandwidth.
     """
     if check_law(law) != DEFAULT_LAW:  # every other argument forwarded as given (locals() holds only them here)
         given = {k: v for k, v in locals().items() if k not in ("law", "reference", "acceleration")}
@@ -182,15 +408,77 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
                         "got one with law 'paper' (pass law='exact-reference')")
     if method not in METHODS:
         raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
+    if disturbance not in DISTURBANCE_PATHS:
+        raise SpecError(f"`disturbance`: got {disturbance!r}, expected one of {list(DISTURBANCE_PATHS)} (command: "
+                        "added to the command as in the paper's loop; airframe: an acceleration on the rigid body)")
+    if on_limit not in LIMIT_POLICIES:
+        raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
+    request = check_bandwidth(bandwidth, fleet.sample_time)
     src, tgt = fleet.loop(source), fleet.loop(target)
+    path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
+    cache: dict[str, LearningFilters] = {}
+
+    def closed_form() -> LearningFilters:
+        if "cf" not in cache:
+            cache["cf"] = closed_form_filters(src, tgt)
+        return cache["cf"]
+
     head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
+    if method in ("fir", "robust", "robust-set"):
+        deltas = deltas or fleet_delta_sets(fleet, [source, target])
+    design = _method_design(method, fleet, src, tgt, head, closed_form, n, norm_optimal, fir, deltas, robust,
+                            relax, lifted, robust_set)
+    if method == "robust" and request == "auto":
+        band = LearningBand(fleet.sample_time, None, source="off",
+                            reason="the robust design's guarantee covers the learning signal its SOCP computes (whose "
+                                   "weights lam, mu already bound it): no band unless one is stated")
+        chooser = lambda error=None: band  # noqa: E731
+        request = None
+    else:
+        chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form)
+    limits = {s.name: s for s in fleet.systems}[target].limits
+    filters = {**design.filters, "disturbance": {"at": disturbance,
+                                                 **({"W": {"sos": path.tolist()}} if path is not None else {})}}
+    if limits is not None:
+        filters["limit"] = {"acceleration_m_s2": limits.max_acceleration, "from": limits.describe(),
+                            "on_limit": on_limit}
+    design = replace(design, filters=filters, choose=chooser if request == "auto" else None, path=path,
+                     limits=limits, on_limit=on_limit, source_gf=src.nominal.G_f)
+    return design_with_band(design, chooser(error=None))
+
+
+def design_with_band(design: PairDesign, band: LearningBand) -> PairDesign:
+    """``design`` with its fixed band (and the ``band`` entry of ``filters.json``) set to ``band``.
+
+    With ``bandwidth="auto"``, :func:`design_pair` fixes the band the fleet alone gives;
+    ``design_with_band(design, design.band_for(e, d_f))`` fixes it to the band of one trial
+    (what ``ilcdob design --trial`` writes into ``filters.json`` and the C code). Learning
+    (:meth:`PairDesign.learning`) still chooses per trial.
+
+    Parameters
+    ----------
+    design : PairDesign
+    band : LearningBand
+
+    Returns
+    -------
+    PairDesign
+    """
+    request = "auto" if design.choose is not None else band.cutoff
+    return replace(design, band=band, filters={**design.filters, "band": {"request": request, **band.to_dict()}})
+
+
+def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, head: dict[str, Any],
+                   closed_form: Callable[[], LearningFilters], n: int | None, norm_optimal: NormOptimalOptions | None,
+                   fir: FIROptions | None, deltas: dict[str, DeltaSet] | None, robust: RobustOptions | None,
+                   relax: bool, lifted: bool, robust_set: RobustSetOptions | None) -> PairDesign:
+    """The method's filters and ``filters.json`` content (:func:`design_pair`), before the band."""
+    source, target = src.name, tgt.name
     if method == "closed-form":
-        lf = closed_form_filters(src, tgt)
+        lf = closed_form()
         filters = {**head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
                    "units": {"L1": "(m/s^2)/m", "L2": "1"}}
         return PairDesign(method, filters, lf.apply)
-    if method in ("fir", "robust", "robust-set"):
-        deltas = deltas or fleet_delta_sets(fleet, [source, target])
     if method == "robust-set":
         rs_opts = robust_set or RobustSetOptions(rho=min(1.0, robust.rho) if robust is not None else 0.95)
         rs = design_robust_set(src, tgt, deltas[source].w, deltas[source].bound, rs_opts)
@@ -228,8 +516,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         matrices = {"L1": l1, "L2": l2}
     filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
                "lifted": "lifted.npz (L1, L2: d_f,j = L1 e_{j-1} + L2 d_f,{j-1})"}
-    return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts),
-                      matrices)
+    return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts), matrices)
 
 
 def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: str,
@@ -272,4 +559,4 @@ def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: st
                                    "rule": "d_f,j = learning{e_{j-1} - e_ref,{j-1}, d_f,{j-1}} + correction "
                                            "(reference_terms.csv: e_ref_source in m, correction in m/s^2)",
                                    "law": LAW_DESCRIPTIONS[law]}}
-    return PairDesign(design.method, filters, terms.wrap(design.learn), design.lifted, design.robust, law, terms)
+    return replace(design, filters=filters, law=law, reference=terms)

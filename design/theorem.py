@@ -12,6 +12,16 @@ discrete model ``P_hat`` and PID ``C`` of system j-1 (:func:`ilcdob.loop.freqres
 bound) or from its sampled plants (``max_k |Delta_k|``). The margin is ``rhs / lhs`` (> 1:
 the condition holds). At high frequency ``P C -> 0``, so ``rhs -> 1/2``: any uncertainty
 above 50 % there breaks the condition.
+
+The law a vehicle flies passes the learning band F (:mod:`ilcdob.design.band`): per
+frequency it leaves ``e_j = (1 - F) e'_j + F e_j,Theorem``, so to the same first order its
+error ratio is at most::
+
+    1 - F + F |Delta_{j-1}| / (|1 + P C|/2)
+
+(F: the band's real gain in [0, 1]). Where the paper's condition fails but F is small the
+filtered law is still safe. The check reports both; the verdict of :attr:`PairCheck.holds_filtered`
+is that this ratio stays within 1 + :data:`~ilcdob.design.band.AMPLIFICATION_TOL` at every frequency.
 """
 
 from __future__ import annotations
@@ -21,11 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ilcdob.errors import SpecError
-from ilcdob.loop import freqresp
+from ilcdob.loop import LoopSystem, freqresp
 
+from .band import AMPLIFICATION_TOL, LearningBand
 from .delta import DeltaSet
 
-__all__ = ["PairCheck", "theorem_check", "format_theorem_table", "learning_pairs"]
+__all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", "learning_pairs"]
 
 _SOURCES = ("bound", "samples")
 
@@ -57,6 +68,9 @@ class PairCheck:
         Frequency of ``min_margin``, rad/s.
     delta_source : str
         ``"bound"`` or ``"samples"``.
+    band : LearningBand or None
+        The learning band of the law flown for this pair (None: the Theorem's filters
+        unfiltered, as the paper).
     """
 
     source: str
@@ -69,11 +83,30 @@ class PairCheck:
     min_margin: float
     worst_w: float
     delta_source: str
+    band: LearningBand | None = None
 
     @property
     def holds_everywhere(self) -> bool:
-        """Whether the condition holds at every frequency of ``w``."""
+        """Whether the paper's condition holds at every frequency of ``w`` (unfiltered law)."""
         return bool(np.all(self.holds))
+
+    @property
+    def filtered_ratio(self) -> np.ndarray:
+        """First-order worst-case error ratio of the law with its band, ``1 - F + F / margin``."""
+        f = self.band.response(self.w) if self.band is not None else np.ones_like(self.w)
+        with np.errstate(divide="ignore"):
+            inv = np.where(np.isfinite(self.margin), 1.0 / self.margin, 0.0)
+        return 1.0 - f + f * inv
+
+    @property
+    def amplification(self) -> float:
+        """Largest :attr:`filtered_ratio` (<= 1: the filtered law never makes a frequency worse)."""
+        return float(np.max(self.filtered_ratio))
+
+    @property
+    def holds_filtered(self) -> bool:
+        """The verdict for the law as flown: :attr:`amplification` <= 1 + AMPLIFICATION_TOL."""
+        return self.amplification <= 1.0 + AMPLIFICATION_TOL
 
     @property
     def failing_band(self) -> tuple[float, float] | None:
@@ -88,7 +121,8 @@ class PairCheck:
         -------
         dict
             Every attribute (arrays as lists; infinite margins as None) plus
-            ``holds_everywhere`` and ``failing_band``.
+            ``holds_everywhere`` and ``failing_band`` (the paper's condition) and
+            ``filtered_ratio``, ``amplification`` and ``holds_filtered`` (the law with its band).
         """
         band = self.failing_band
         return {"source": self.source, "target": self.target, "w": self.w.tolist(),
@@ -96,7 +130,29 @@ class PairCheck:
                 "margin": [float(m) if np.isfinite(m) else None for m in self.margin],
                 "min_margin": self.min_margin if np.isfinite(self.min_margin) else None,
                 "worst_w": self.worst_w, "holds_everywhere": self.holds_everywhere,
-                "failing_band": list(band) if band else None, "delta_source": self.delta_source}
+                "failing_band": list(band) if band else None, "delta_source": self.delta_source,
+                "learning_band": self.band.to_dict() if self.band is not None else None,
+                "filtered_ratio": self.filtered_ratio.tolist(), "amplification": self.amplification,
+                "holds_filtered": self.holds_filtered, "amplification_tolerance": AMPLIFICATION_TOL}
+
+
+def theorem_rhs(loop: LoopSystem, w: np.ndarray) -> np.ndarray:
+    """The Theorem's bound ``|1 + P_hat C| / 2`` of a source's model on ``w`` (rad/s).
+
+    Parameters
+    ----------
+    loop : LoopSystem
+        System j-1 (its model's loop is used).
+    w : array_like
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray
+        The bound per frequency.
+    """
+    model = loop.nominal
+    return np.abs(1.0 + freqresp(model.P, w) * freqresp(model.C, w)) / 2.0
 
 
 def learning_pairs(names: list[str], order: list[str] | tuple[str, ...]) -> list[tuple[str, str]]:
@@ -132,7 +188,8 @@ def learning_pairs(names: list[str], order: list[str] | tuple[str, ...]) -> list
 
 
 def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict[str, DeltaSet],
-                  w: np.ndarray | None = None, source: str = "bound") -> list[PairCheck]:
+                  w: np.ndarray | None = None, source: str = "bound",
+                  bands: dict[tuple[str, str], LearningBand | None] | None = None) -> list[PairCheck]:
     """Check ``|Delta_{j-1}| < |1 + P_{j-1} C_{j-1}| / 2`` for every cyclic pair of ``order``.
 
     Parameters
@@ -149,6 +206,8 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
         interpolated (log-log) onto ``w``, which must lie inside the set's grid.
     source : {"bound", "samples"}
         ``|Delta|`` from the set's bound, or ``max_k |Delta_k|`` of its sampled plants.
+    bands : dict of (source, target) to LearningBand, optional
+        The learning band of each pair's law (missing pairs: unfiltered).
 
     Returns
     -------
@@ -180,19 +239,18 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
             delta = bb if w is None else np.exp(np.interp(np.log(ww), np.log(bw), np.log(np.maximum(bb, 1e-300))))
         else:
             delta = np.max(np.abs(ds.deltas(ww)), axis=0)
-        model = loops[src].nominal
-        rhs = np.abs(1.0 + freqresp(model.P, ww) * freqresp(model.C, ww)) / 2.0
+        rhs = theorem_rhs(loops[src], ww)
         with np.errstate(divide="ignore"):
             margin = np.where(delta > 0, rhs / np.where(delta > 0, delta, 1.0), np.inf)
         i = int(np.argmin(margin))
         out.append(PairCheck(source=src, target=tgt, w=ww, delta=np.asarray(delta, float), rhs=rhs,
                              holds=delta < rhs, margin=margin, min_margin=float(margin[i]),
-                             worst_w=float(ww[i]), delta_source=source))
+                             worst_w=float(ww[i]), delta_source=source, band=(bands or {}).get((src, tgt))))
     return out
 
 
 def format_theorem_table(checks: list[PairCheck]) -> str:
-    """Plain-text table: one row per pair with verdict, minimum margin, worst frequency, failing band.
+    """Plain-text table: per pair the paper's condition (unfiltered) and the law with its band.
 
     Parameters
     ----------
@@ -202,14 +260,22 @@ def format_theorem_table(checks: list[PairCheck]) -> str:
     Returns
     -------
     str
-        The table, a header row and a rule first.
+        The table, a header row and a rule first: the paper's condition (holds, minimum
+        margin, worst frequency, failing band), the learning band and the filtered law's
+        largest first-order error ratio and verdict.
     """
-    head = f"{'pair':<16} {'holds':<6} {'min margin':>10} {'worst w [rad/s]':>16}  failing band [rad/s]"
+    head = (f"{'pair':<16} {'paper':<6} {'min margin':>10} {'worst w':>9}  {'failing band':<18} "
+            f"{'band [rad/s]':>12} {'max ratio':>10}  {'verdict':<7}")
     rows = [head, "-" * len(head)]
     for c in checks:
         band = c.failing_band
         band_s = "-" if band is None else f"{band[0]:.4g} .. {band[1]:.4g}"
         mm = f"{c.min_margin:.3g}" if np.isfinite(c.min_margin) else "inf"
+        cutoff = "off" if c.band is None or c.band.cutoff is None else f"{c.band.cutoff:.4g}"
         rows.append(f"{c.source + ' -> ' + c.target:<16} {'yes' if c.holds_everywhere else 'NO':<6} "
-                    f"{mm:>10} {c.worst_w:>16.4g}  {band_s}")
+                    f"{mm:>10} {c.worst_w:>9.4g}  {band_s:<18} {cutoff:>12} {c.amplification:>10.4g}  "
+                    f"{'holds' if c.holds_filtered else 'FAILS':<7}")
+    rows.append("paper: |Delta| < |1 + P C|/2 at every frequency (the Theorem's filters unfiltered); "
+                f"max ratio: largest 1 - F + F |Delta|/(|1 + P C|/2) with the learning band F; verdict: "
+                f"max ratio <= 1 + {AMPLIFICATION_TOL:g}")
     return "\n".join(rows)

@@ -27,12 +27,10 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Callable
 
-import numpy as np
-
 from ilcdob.errors import FleetError
 from ilcdob.fleet import Fleet
 from ilcdob.fleet_io import fleet_to_toml
-from ilcdob.signals import FlightData
+from ilcdob.signals import FlightData, segments
 from ilcdob.specs import IdentificationSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.quadrotor import TABLE_I, QuadrotorParams, fly, table_i_vehicles
@@ -51,33 +49,8 @@ INPUT, OUTPUT = "acc_cmd", "x"
 #: ``source`` of the identification tables written for the identified plants.
 IDENTIFICATION_SOURCE = "synthetic step + chirp flights of the nonlinear vehicle (ilcdob.identification.fleet_id)"
 
-SEGMENT_S = 10.0  # s, window of each fitted segment (own initial state)
-
-
-def segments(flights: list[FlightData], length: float = SEGMENT_S) -> list[FlightData]:
-    """Cut flights into consecutive windows of ``length`` seconds.
-
-    The tail shorter than half a window is merged into the last one.
-
-    Parameters
-    ----------
-    flights : list of FlightData
-        The flights, each cut on its own.
-    length : float
-        Window length, s.
-
-    Returns
-    -------
-    list of FlightData
-        The windows of every flight, in order.
-    """
-    out = []
-    for fd in flights:
-        starts = np.arange(fd.t[0], fd.t[-1] - 0.5 * length + 1e-9, length)
-        for i, t0 in enumerate(starts):
-            stop = fd.t[-1] if i == len(starts) - 1 else t0 + length - 0.5 * fd.ts
-            out.append(fd.segment(t0, stop))
-    return out
+#: Window of each fitted segment, s (own initial state; :func:`ilcdob.signals.segments`).
+SEGMENT_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -153,8 +126,8 @@ def identify_vehicle(name: str, fleet: Fleet, seed: int = 0, noise_std: float = 
                     noise_std=noise_std, seed=seed + 3, experiment="chirp-validation")
     say(1, 2, f"{name}: flew 4 experiments ({sum(len(f) for f in (step_est, chirp_est, step_val, chirp_val))} "
               "samples)")
-    est = tfest(segments([step_est, chirp_est]), INPUT, OUTPUT, PLANT_STRUCTURE, FitOptions(delay=0.0),
-                validation=segments([step_val, chirp_val]))
+    est = tfest(segments([step_est, chirp_est], SEGMENT_S), INPUT, OUTPUT, PLANT_STRUCTURE, FitOptions(delay=0.0),
+                validation=segments([step_val, chirp_val], SEGMENT_S))
     say(2, 2, f"{name}: fit {est.fit_estimation:.2f} % (estimation), {est.fit_validation:.2f} % (validation)")
     return VehicleIdentification(name, est, (step_est, chirp_est), (step_val, chirp_val))
 

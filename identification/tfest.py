@@ -59,7 +59,7 @@ from .oe import Discretisation, delayed_input, discretise, response, zoh_inputs
 from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
-__all__ = ["FitOptions", "tfest", "Progress"]
+__all__ = ["FitOptions", "tfest", "Progress", "min_samples"]
 
 #: ``progress(done, total, what)``: how :func:`tfest` reports as it advances.
 Progress = Callable[[int, int, str], None]
@@ -73,6 +73,22 @@ MIN_RESPONSE_FIT = 1.0
 
 def _silent(done: int, total: int, what: str) -> None:
     """The default ``progress``: reports nothing."""
+
+
+def min_samples(structure: ModelStructure) -> int:
+    """Fewest samples :func:`tfest` fits an experiment (or a piece between gaps) with.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model orders.
+
+    Returns
+    -------
+    int
+        ``10 (n_params + n_poles)``: ten samples per estimated parameter and initial state.
+    """
+    return 10 * (structure.n_params + structure.n_poles)
 
 
 @dataclass(frozen=True)
@@ -559,7 +575,7 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
     if not data:
         raise SignalError("`data`: no experiments given")
     ts = data[0].ts
-    need = 10 * (structure.n_params + structure.n_poles)
+    need = min_samples(structure)
     exps = []
     for fd in data:
         if abs(fd.ts - ts) > 1e-9 * ts:

@@ -43,7 +43,8 @@ from .fleet import Fleet, default_fleet, fleet_from_dict, fleet_from_systems, lo
 from .fleet_io import add_system, fleet_to_toml
 from .identified import IdentifiedModel, load_model
 from .loop import LoopSystem, build_loop, freqresp
-from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
+from .specs import (DOBSpec, IdentificationSpec, LimitSpec, NoiseSpec, PIDSpec, PlantSpec, SensorSpec, SystemSpec,
+                    UncertaintySpec)
 
 try:
     from importlib.metadata import PackageNotFoundError as _NotFound, version as _version
@@ -58,4 +59,5 @@ __all__ = [
     "IdentifiedModel", "load_model",
     "LoopSystem", "build_loop", "freqresp",
     "PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "SystemSpec", "IdentificationSpec", "UncertaintySpec",
+    "LimitSpec", "SensorSpec",
 ]

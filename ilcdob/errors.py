@@ -9,7 +9,7 @@ what is valid and, where there is one, the next step.
 from __future__ import annotations
 
 __all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError",
-           "NumericalError"]
+           "NumericalError", "LearningLimitError"]
 
 
 class IlcdobError(Exception):
@@ -40,3 +40,8 @@ class SignalError(IlcdobError, ValueError):
 class NumericalError(IlcdobError, ArithmeticError):
     """A computation produced no usable number: overflow, a non-finite result, a solver that
     failed (the command exits with status 3, not as bad input)."""
+
+
+class LearningLimitError(IlcdobError, ValueError):
+    """A learning signal exceeds the learning vehicle's acceleration limit and was refused
+    (a check that ran and did not hold: the command exits with status 1)."""

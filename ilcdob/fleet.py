@@ -17,6 +17,9 @@ Schema (one ``[[system]]`` table per vehicle; units in comments)::
                        covariance = [[...]], fit_estimation = 98.0, fit_validation = 97.5,
                        source = "..." }   # written by `ilcdob identify-fleet`
     uncertainty = { bound = 0.2 }   # |Delta(jw)| <= 0.2: the Delta set, ahead of the identification
+    limits = { tilt = 35.0 }        # deg; or thrust_to_weight = 2.0, or acceleration = 6.0 (m/s^2):
+                                    # bounds the learning signal (the smallest stated bound counts)
+    sensor = { noise_std = 0.0005 } # m, white position-sensor noise: sets the learning band without a trial
 
 An identified plant can instead come straight from the ``model.json`` of ``ilcdob identify``
 (path relative to the fleet file's folder, or absolute; see :mod:`ilcdob.identified`)::
@@ -51,7 +54,8 @@ from typing import Any, Sequence
 from .errors import FleetError, ModelFileError, SpecError, UnstableLoopError
 from .identified import IdentifiedModel, load_model
 from .loop import LoopSystem, build_loop
-from .specs import DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec
+from .specs import (DOBSpec, IdentificationSpec, LimitSpec, NoiseSpec, PIDSpec, PlantSpec, SensorSpec, SystemSpec,
+                    UncertaintySpec)
 
 __all__ = ["Fleet", "load_fleet", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict",
            "fleet_from_systems", "MODEL_FILE_KEY"]
@@ -60,7 +64,8 @@ DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_flee
 
 _TOP_KEYS = {"sample_time": True, "system": True, "description": False}
 _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
-                "delay": False, "model": False, "noise": False, "identification": False, "uncertainty": False}
+                "delay": False, "model": False, "noise": False, "identification": False, "uncertainty": False,
+                "limits": False, "sensor": False}
 _TABLE_KEYS = {
     "plant": {"num": True, "den": True},
     "model": {"num": True, "den": True, "delay": False},
@@ -72,11 +77,14 @@ _TABLE_KEYS = {
                        "covariance": True, "delay_estimated": False, "fit_estimation": False,
                        "fit_validation": False, "source": False},
     "uncertainty": {"bound": True},
+    "limits": {"tilt": False, "thrust_to_weight": False, "acceleration": False},
+    "sensor": {"noise_std": True},
 }
 #: Key of a ``plant``/``model`` table naming a model file instead of giving num/den.
 MODEL_FILE_KEY = "model"
 _SPEC_CLASS = {"plant": PlantSpec, "model": PlantSpec, "controller": PIDSpec, "dob": DOBSpec,
-               "noise": NoiseSpec, "identification": IdentificationSpec, "uncertainty": UncertaintySpec}
+               "noise": NoiseSpec, "identification": IdentificationSpec, "uncertainty": UncertaintySpec,
+               "limits": LimitSpec, "sensor": SensorSpec}
 
 
 @dataclass(frozen=True)

@@ -135,6 +135,11 @@ def system_table(spec: SystemSpec, model_file: str | None = None) -> dict[str, A
             "fit_estimation": i.fit_estimation, "fit_validation": i.fit_validation, "source": i.source}
     if spec.uncertainty is not None:
         table["uncertainty"] = {"bound": spec.uncertainty.bound}
+    if spec.limits is not None:
+        table["limits"] = {k: getattr(spec.limits, k) for k in ("tilt", "thrust_to_weight", "acceleration")
+                           if getattr(spec.limits, k) is not None}
+    if spec.sensor is not None:
+        table["sensor"] = {"noise_std": spec.sensor.noise_std}
     return table
 
 

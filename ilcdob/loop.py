@@ -27,7 +27,7 @@ import control as ct
 import numpy as np
 
 from .discretize import discretize_m, discretize_pid, discretize_plant, discretize_q
-from .errors import UnstableLoopError
+from .errors import SpecError, UnstableLoopError
 from .specs import SystemSpec
 
 __all__ = ["LoopSystem", "build_loop", "freqresp", "STABILITY_MARGIN"]

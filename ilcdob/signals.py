@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_path
-from .errors import SignalError
+from .errors import SignalError, SpecError
 
-__all__ = ["FlightData", "as_signal", "check_time", "check_signal", "extend_smoothly", "resample_onto"]
+__all__ = ["FlightData", "as_signal", "check_time", "check_signal", "extend_smoothly", "resample_onto",
+           "segments", "MIN_WINDOW_SAMPLES"]
 
 #: Relative tolerance on the spacing of a "uniform" time grid.
 UNIFORM_RTOL = 1e-6
@@ -27,6 +28,9 @@ UNIFORM_RTOL = 1e-6
 #: ``metadata["gaps"]`` and :meth:`FlightData.pieces` cuts the record there, instead of
 #: fitting a model to the straight line that interpolation draws across it.
 GAP_FACTOR = 5.0
+
+#: Fewest samples a window of :func:`segments` may hold.
+MIN_WINDOW_SAMPLES = 10
 
 
 def as_signal(x: object, name: str, n: int | None = None) -> np.ndarray:
@@ -391,3 +395,61 @@ class FlightData:
             {"ilcdob.units": json.dumps({"time": "s", **self.units})})
         with atomic_path(path) as tmp:
             pq.write_table(table, tmp)
+
+
+def segments(flights: list[FlightData], length: float, *, min_samples: int = MIN_WINDOW_SAMPLES,
+             name: str = "length") -> list[FlightData]:
+    """Cut flights into consecutive windows of ``length`` seconds (one fit initial condition each).
+
+    Each flight is cut on its own, from its first sample, into windows of ``round(length / Ts)``
+    samples (:meth:`FlightData.segment`, so ``metadata["segment"]`` holds each window's first
+    and last time stamp). A last piece of more than half a window (and at least ``min_samples``
+    samples) is kept as a window of its own; a shorter one is merged into the window before it,
+    which then holds up to one and a half windows. A flight shorter than one window stays
+    whole. Every sample lands in exactly one window.
+
+    Parameters
+    ----------
+    flights : list of FlightData
+        The flights, each cut on its own.
+    length : float
+        Window length, s (finite, > 0).
+    min_samples : int
+        Fewest samples a window may hold (default :data:`MIN_WINDOW_SAMPLES`).
+    name : str
+        What ``length`` is called where it was given (e.g. ``"--segment"``), for messages.
+
+    Returns
+    -------
+    list of FlightData
+        The windows of every flight, in order.
+
+    Raises
+    ------
+    SpecError
+        ``length`` is not a finite number > 0, or a window of it holds fewer than
+        ``min_samples`` samples at a flight's sample time.
+    """
+    if isinstance(length, (bool, np.bool_, str, bytes)):
+        raise SpecError(f"`{name}`: got {length!r}, expected a window length in s (a finite number > 0)")
+    try:
+        seconds = float(length)
+    except (TypeError, ValueError):
+        raise SpecError(f"`{name}`: got {length!r}, expected a window length in s (a finite number > 0)") from None
+    if not (np.isfinite(seconds) and seconds > 0):
+        raise SpecError(f"`{name}`: got {length!r}, expected a window length in s (a finite number > 0)")
+    out = []
+    for fd in flights:
+        n = int(round(seconds / fd.ts))
+        if n < min_samples:
+            raise SpecError(f"`{name}`: got {seconds:g} s, a window of {n} samples at the sample time {fd.ts:g} s "
+                            f"of {fd.source}; a window must hold at least {min_samples} samples: give at least "
+                            f"{min_samples * fd.ts:g} s")
+        full, tail = divmod(len(fd), n)
+        bounds = [k * n for k in range(max(full, 1))]
+        if full >= 1 and tail > 0.5 * n and tail >= min_samples:
+            bounds.append(full * n)
+        for i, lo in enumerate(bounds):
+            hi = bounds[i + 1] - 1 if i + 1 < len(bounds) else len(fd) - 1
+            out.append(fd.segment(fd.t[lo], fd.t[hi]))
+    return out

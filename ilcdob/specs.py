@@ -19,11 +19,15 @@ import numpy as np
 
 from .errors import SpecError
 
-__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "SystemSpec",
+__all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "LimitSpec",
+           "SensorSpec", "SystemSpec", "GRAVITY",
            "LTI_NUMERATOR_RTOL", "MAX_NOISE_AMPLITUDE", "COVARIANCE_RTOL", "as_polynomial", "check_covariance"]
 
 #: Largest process-noise amplitude a fleet may state, m/s^2 (about 100 g: far beyond any vehicle).
 MAX_NOISE_AMPLITUDE = 1e3
+
+#: Standard gravity, m/s^2 (the tilt and thrust limits of :class:`LimitSpec`).
+GRAVITY = 9.80665
 
 #: Relative tolerance (of the largest entry) of the symmetry and positive-semi-definiteness
 #: checks of a covariance matrix: files store 10 significant digits, so the two triangles of
@@ -451,6 +455,86 @@ class IdentificationSpec:
 
 
 @dataclass(frozen=True)
+class LimitSpec:
+    """What the vehicle can fly: the bound on its learning signal (m/s^2).
+
+    A multirotor makes horizontal acceleration by tilting its thrust: at most
+    ``g tan(tilt)`` with a tilt limit, ``g sqrt(k^2 - 1)`` with a thrust-to-weight ratio ``k``
+    while holding its altitude. Give any of the three; the smallest bound counts
+    (:attr:`max_acceleration`). The learning signal is checked against it
+    (:mod:`ilcdob.design.limit`).
+
+    Attributes
+    ----------
+    tilt : float or None
+        Tilt limit of the attitude controller, degrees, in (0, 90).
+    thrust_to_weight : float or None
+        Maximum total thrust over weight, > 1.
+    acceleration : float or None
+        A direct bound on the commanded horizontal acceleration, m/s^2, > 0.
+    """
+
+    tilt: float | None = None
+    thrust_to_weight: float | None = None
+    acceleration: float | None = None
+
+    def __post_init__(self) -> None:
+        given = [k for k in ("tilt", "thrust_to_weight", "acceleration") if getattr(self, k) is not None]
+        if not given:
+            raise SpecError("`limits`: give at least one of `tilt` (degrees), `thrust_to_weight` (> 1) or "
+                            "`acceleration` (m/s^2)")
+        for key in given:
+            object.__setattr__(self, key, _real(f"limits.{key}", getattr(self, key)))
+        if self.tilt is not None and not 0.0 < self.tilt < 90.0:
+            raise SpecError(f"`limits.tilt`: got {self.tilt!r}, expected a tilt limit in (0, 90) degrees")
+        if self.thrust_to_weight is not None and not (math.isfinite(self.thrust_to_weight)
+                                                      and self.thrust_to_weight > 1.0):
+            raise SpecError(f"`limits.thrust_to_weight`: got {self.thrust_to_weight!r}, expected a ratio > 1 "
+                            "(a vehicle must lift more than its weight to accelerate sideways)")
+        if self.acceleration is not None:
+            _positive("limits.acceleration", self.acceleration)
+
+    @property
+    def max_acceleration(self) -> float:
+        """The smallest of the stated bounds, m/s^2."""
+        bounds = []
+        if self.tilt is not None:
+            bounds.append(GRAVITY * math.tan(math.radians(self.tilt)))
+        if self.thrust_to_weight is not None:
+            bounds.append(GRAVITY * math.sqrt(self.thrust_to_weight ** 2 - 1.0))
+        if self.acceleration is not None:
+            bounds.append(self.acceleration)
+        return min(bounds)
+
+    def describe(self) -> str:
+        """The bound and where it comes from, e.g. ``"6.87 m/s^2 (tilt 35 deg)"``."""
+        parts = [f"tilt {self.tilt:g} deg" if self.tilt is not None else "",
+                 f"thrust/weight {self.thrust_to_weight:g}" if self.thrust_to_weight is not None else "",
+                 f"stated {self.acceleration:g} m/s^2" if self.acceleration is not None else ""]
+        return f"{self.max_acceleration:.3g} m/s^2 ({', '.join(p for p in parts if p)})"
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """The position sensor of the vehicle.
+
+    Attributes
+    ----------
+    noise_std : float
+        Standard deviation of its white noise, m (>= 0, < 0.1). Sets the learning band when
+        no trial is given to measure it from (:mod:`ilcdob.design.band`).
+    """
+
+    noise_std: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "noise_std", _real("sensor.noise_std", self.noise_std))
+        if not (math.isfinite(self.noise_std) and 0.0 <= self.noise_std < 0.1):
+            raise SpecError(f"`sensor.noise_std`: got {self.noise_std!r}, expected a standard deviation in "
+                            "[0, 0.1) m")
+
+
+@dataclass(frozen=True)
 class SystemSpec:
     """One vehicle: its true plant, the model its DOB and learning filters use, PID, DOB.
 
@@ -474,6 +558,10 @@ class SystemSpec:
         How the plant model was identified (None: derived or given).
     uncertainty : UncertaintySpec or None
         A stated multiplicative bound on the model error (defines the Delta set).
+    limits : LimitSpec or None
+        What the vehicle can fly: bounds its learning signal.
+    sensor : SensorSpec or None
+        Its position sensor's noise.
     """
 
     name: str
@@ -484,6 +572,8 @@ class SystemSpec:
     noise: NoiseSpec = field(default_factory=NoiseSpec)
     identification: IdentificationSpec | None = None
     uncertainty: UncertaintySpec | None = None
+    limits: LimitSpec | None = None
+    sensor: SensorSpec | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -13,8 +14,9 @@ import pytest
 from ilcdob.app.cli import main
 from ilcdob.app.output import OutputFolder, Provenance
 from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
-from ilcdob.design.export import DIRECT_FORM_RTOL, apply_coefficients, direct_form_disagreement
+from ilcdob.design.export import DIRECT_FORM_RTOL, apply_coefficients, apply_learning, direct_form_disagreement
 from ilcdob.design.pair import design_pair
+from ilcdob.design.limit import LearningLimitWarning
 from ilcdob.errors import SpecError
 from ilcdob.fleet import default_fleet, load_fleet
 
@@ -116,6 +118,74 @@ def _run(exe: Path, x: np.ndarray) -> np.ndarray:
     return np.loadtxt(res.stdout.splitlines(), ndmin=2)
 
 
+def _learn_driver(prefix: str) -> str:
+    """Read n, then n samples of e and n of df_prev from stdin; print the return codes, then per
+    sample learn's output into a separate array, in place over e and in place over df_prev."""
+    p, m = prefix, prefix.upper()
+    return f"""#include <stdio.h>
+#include "filters.h"
+#define NMAX 6000
+static double e[NMAX], df[NMAX], out[NMAX], in_e[NMAX], in_df[NMAX], work[{m}LEARN_WORK(NMAX)];
+int main(void)
+{{
+    unsigned long count = 0;
+    size_t n, k;
+    int empty, null_e, null_df, null_out, null_work, rc, rc_e, rc_df;
+
+    if (scanf("%lu", &count) != 1 || count > NMAX)
+        return 9;
+    n = (size_t)count;
+    for (k = 0; k < 2 * n; ++k)
+        if (scanf("%lf", k < n ? &e[k] : &df[k - n]) != 1)
+            return 9;
+    out[0] = 12345.0;
+    empty = {p}learn(e, df, out, 0, work);
+    null_e = {p}learn(NULL, df, out, n, work);
+    null_df = {p}learn(e, NULL, out, n, work);
+    null_out = {p}learn(e, df, NULL, n, work);
+    null_work = {p}learn(e, df, out, n, NULL);
+    printf("%d %d %d %d %d %d\\n", empty, null_e, null_df, null_out, null_work, out[0] == 12345.0);
+    for (k = 0; k < n; ++k) {{
+        in_e[k] = e[k];
+        in_df[k] = df[k];
+    }}
+    rc = {p}learn(e, df, out, n, work);
+    rc_e = {p}learn(in_e, df, in_e, n, work);
+    rc_df = {p}learn(e, in_df, in_df, n, work);
+    printf("%d %d %d\\n", rc, rc_e, rc_df);
+    for (k = 0; k < n; ++k)
+        printf("%.17g %.17g %.17g\\n", out[k], in_e[k], in_df[k]);
+    return 0;
+}}
+"""
+
+
+def _build_learn(cc: str, folder: Path, filters: dict, prefix: str = "p_") -> Path:
+    """Write ``filters.h``/``filters.c`` of ``filters`` into ``folder`` and compile the learn driver."""
+    code = c_code(filters, prefix=prefix)
+    (folder / "filters.h").write_text(code.header)
+    (folder / "filters.c").write_text(code.source)
+    (folder / "learn.c").write_text(_learn_driver(prefix))
+    exe = folder / "learn"
+    res = subprocess.run([cc, *CFLAGS, f"-I{folder}", str(folder / "learn.c"), str(folder / "filters.c"), "-o",
+                          str(exe)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return exe
+
+
+def _run_learn(exe: Path, e: np.ndarray, df: np.ndarray) -> np.ndarray:
+    """``learn(e, df)`` by the compiled driver; checks its return codes and that in place gives the same."""
+    text = "\n".join([str(e.size), *(f"{v:.17g}" for v in np.concatenate([e, df]))])
+    res = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
+    lines = res.stdout.splitlines()
+    assert lines[0].split() == ["1", "2", "2", "2", "2", "1"]   # n == 0, each NULL pointer; nothing written
+    assert lines[1].split() == ["0", "0", "0"]
+    out = np.loadtxt(lines[2:], ndmin=2)
+    np.testing.assert_array_equal(out[:, 1], out[:, 0])   # df_next == e: the same numbers
+    np.testing.assert_array_equal(out[:, 2], out[:, 0])   # df_next == df_prev
+    return out[:, 0]
+
+
 def write_design_folder(out, filters, float_variant=False):
     """Write a design folder as ``ilcdob design`` does; returns the filters.json content."""
     files, data = design_files(filters, float_variant=float_variant)
@@ -211,7 +281,9 @@ def test_two_pairs_link_into_one_program(cc, lagged, tmp_path):
                       "int main(void)\n{\n    double x[40] = {0.0};\n    float xf[40] = {0.0f};\n"
                       "    ilcdob_a_b_l1_apply(x, x, 40);\n    ilcdob_b_c_l1_apply(x, x, 40);\n"
                       "    ilcdob_a_b_l2_apply_f(xf, xf, 40);\n    ilcdob_b_c_l2_apply_f(xf, xf, 40);\n"
-                      "    return (int)(x[39] + xf[39]) + ILCDOB_A_B_L2_ADVANCE + ILCDOB_B_C_L2_ADVANCE;\n}\n")
+                      "    static double work[ILCDOB_A_B_LEARN_WORK(40) + ILCDOB_B_C_LEARN_WORK(40)];\n"
+                      "    int rc = ilcdob_a_b_learn(x, x, x, 40, work) + ilcdob_b_c_learn(x, x, x, 40, work);\n"
+                      "    return rc + (int)(x[39] + xf[39]) + ILCDOB_A_B_L2_ADVANCE + ILCDOB_B_C_L2_ADVANCE;\n}\n")
     exe = tmp_path / "both"
     res = subprocess.run([cc, *CFLAGS, f"-I{tmp_path}", str(main_c), *(str(f / "filters.c") for f in folders),
                           "-o", str(exe)], capture_output=True, text=True)
@@ -264,3 +336,244 @@ def test_default_fleet_code_compiles_cleanly(cc, tmp_path):
     x = reference_trial(filters["sample_time"])
     out = _run(exe, x)
     assert _rel(out[:, 0], apply_coefficients(filters["L1"], x)) < 1e-9
+
+
+# --------------------------------------------------------------------------- the learning law in C
+
+
+@pytest.fixture(scope="module")
+def learn_designs():
+    """Closed-form UAV1 -> UAV2 designs: a stated band, the band with the airframe correction, no band."""
+    fleet = default_fleet()
+    return {"band": design_pair(fleet, "UAV1", "UAV2", bandwidth=10.0),
+            "band + airframe": design_pair(fleet, "UAV1", "UAV2", bandwidth=10.0, disturbance="airframe"),
+            "no band": design_pair(fleet, "UAV1", "UAV2", bandwidth=None),
+            "no band + airframe": design_pair(fleet, "UAV1", "UAV2", bandwidth=None, disturbance="airframe")}
+
+
+@pytest.fixture(scope="module")
+def fir_design():
+    """The FIR design of UAV1 -> UAV2 with a band (about 5 s)."""
+    return design_pair(default_fleet(), "UAV1", "UAV2", method="fir", bandwidth=10.0)
+
+
+def _learn_trials(ts: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Trials (e in m, df_prev in m/s^2): a noisy one with a learning signal flown, and ones shorter
+    than the band's pad and end fit (5 samples) down to a single sample."""
+    rng = np.random.default_rng(11)
+    t = np.arange(1500) * ts
+    e = 0.01 * np.sin(0.7 * t) + 0.003 * np.sin(2.1 * t + 0.3) + 5e-4 * rng.standard_normal(t.size)
+    df = 0.2 * np.sin(0.4 * t + 1.0) + 0.01 * rng.standard_normal(t.size)
+    return {"noisy, df flown": (e, df), "5 samples": (rng.standard_normal(5) * 0.01, rng.standard_normal(5) * 0.1),
+            "2 samples": (np.array([0.004, -0.002]), np.array([0.1, 0.3])),
+            "1 sample": (np.array([0.003]), np.array([-0.2]))}
+
+
+def _check_learn(exe: Path, design) -> dict[str, tuple[float, float]]:
+    """C learn against apply_learning (1e-12) and against the design's own Python law (1e-9).
+
+    The Python law clips to the learning vehicle's acceleration limit and C learn does not (the
+    header says so): a trial whose learning signal goes beyond the limit is scaled down for the
+    comparison (the law is linear), and on the trial as it is the clipped C output must be the
+    Python one. Returns the two measured errors per trial.
+    """
+    filters = design.filters
+    lim = design.limits.max_acceleration if design.limits is not None else np.inf
+    measured = {}
+    for label, (e, df) in _learn_trials(filters["sample_time"]).items():
+        y = _run_learn(exe, e, df)
+        ref = apply_learning(filters, e, df)
+        peak = np.max(np.abs(ref))
+        if peak > lim:
+            with pytest.warns(LearningLimitWarning):
+                assert _rel(np.clip(y, -lim, lim), design.learn(e, df)) < 1e-9, label
+            scale = 0.5 * lim / peak
+            e, df = scale * e, scale * df
+            y = _run_learn(exe, e, df)
+            ref = apply_learning(filters, e, df)
+        measured[label] = (_rel(y, ref), _rel(y, design.learn(e, df)))
+        assert measured[label][0] < 1e-12, (label, measured[label])
+        assert measured[label][1] < 1e-9, (label, measured[label])
+    return measured
+
+
+@pytest.mark.parametrize("case", ["band", "band + airframe", "no band", "no band + airframe"])
+def test_c_learn_matches_python(cc, learn_designs, case, tmp_path):
+    design = learn_designs[case]
+    band = design.filters["band"]
+    assert (band.get("sos") is not None) == case.startswith("band")
+    assert ("W" in design.filters["disturbance"]) == case.endswith("airframe")
+    if case.startswith("band"):
+        assert band["pad"] > 5 and band["end_fit"] > 5   # the 5-sample trial is shorter than both
+    _check_learn(_build_learn(cc, tmp_path, design.filters), design)
+
+
+def test_c_learn_matches_python_for_a_fir_design(cc, fir_design, tmp_path):
+    filters = fir_design.filters
+    assert "sos" not in filters["L1"] and filters["band"]["cutoff_rad_s"] == 10.0
+    _check_learn(_build_learn(cc, tmp_path, filters), fir_design)
+
+
+@pytest.mark.parametrize("disturbance", ["command", "airframe"])
+def test_c_learn_is_the_paper_filter_times_the_band_on_a_sinusoid(cc, tmp_path, disturbance):
+    """Independent of the exported coefficients: inside a long trial, a sinusoid comes out of C learn
+    multiplied by L1(e^{jwTs}) |F(w)| W(e^{jwTs}), each built here from its definition.
+
+    L1 is the paper's block formula ``-(1 - Q_j) (1/P_hat + (M + C)/(1 - Q_{j-1}))`` of the loop
+    blocks evaluated at ``z = e^{jwTs}`` (python-control); ``|F| = |B|^4`` with B the Butterworth
+    prototype from ``scipy.signal.butter`` at the stated corner (two forward-backward passes); W
+    the ratio of the two continuous models ``P_hat_{j-1}(s)/P_hat_j(s)`` (their rigid bodies
+    1/s^2 cancel: ``A_hat_{j-1}/A_hat_j``) at the Tustin map ``s = 2/Ts (z - 1)/(z + 1)``.
+
+    L1 has a pole at z = 1 (the PID integrator): a sinusoid switched on would leave a constant
+    (the integral of the switch-on) in its output. The input is therefore the first difference
+    ``e(k) = g(k) - g(k-1)`` of a sinusoid ``g`` faded in over 6 s: the integrator's state is
+    ``g`` itself, and past the fade ``e`` is the sinusoid of complex amplitude
+    ``B (1 - e^{-jwTs})``.
+
+    Tolerance 1e-7 of the output's amplitude. Measured: ~1e-10, what the coefficients
+    reproduce of the block formula (zeros and poles from eigenvalue solvers; the integrator pole
+    lands within 1e-8 of z = 1; the stable-inversion series is cut at 1e-12). The compared
+    samples start two pads (12 periods of the corner) after the fade and end two pads before
+    the trial's end, where F's transients (slowest decay rate ``w_c sin(pi/8)``) have fallen
+    below 1e-12. 1e-7 leaves room for other LAPACK builds and is far below what a wrong law
+    gives: one pass of F instead of two is off by 4e-3 at 5 rad/s, a missing W by ~1e-2.
+    """
+    import control as ct
+
+    from ilcdob.design.band import FILTER_ORDER
+    from scipy import signal
+
+    fleet = default_fleet()
+    ts, wc = fleet.sample_time, 10.0
+    design = design_pair(fleet, "UAV1", "UAV2", bandwidth=wc, disturbance=disturbance)
+    pad = design.filters["band"]["pad"]
+    exe = _build_learn(cc, tmp_path, design.filters)
+    src, tgt = fleet.loop("UAV1").nominal, fleet.loop("UAV2")
+    specs = {s.name: s.nominal_plant for s in fleet.systems}
+    assert specs["UAV1"].delay == specs["UAV2"].delay
+
+    def at(sys: ct.LTI, w: float) -> complex:
+        return complex(np.squeeze(sys(np.exp(1j * w * sys.dt))))
+
+    def l1(w: float) -> complex:
+        return -(1 - at(tgt.Q, w)) * (1 / at(src.P, w) + (at(src.M, w) + at(src.C, w)) / (1 - at(src.Q, w)))
+
+    def w_corr(w: float) -> complex:
+        if disturbance == "command":
+            return 1.0
+        z = np.exp(1j * w * ts)
+        s = 2.0 / ts * (z - 1) / (z + 1)
+        p = {k: np.polyval(v.num, s) / np.polyval(v.den, s) for k, v in specs.items()}
+        return p["UAV1"] / p["UAV2"]
+
+    b, a = signal.butter(FILTER_ORDER, wc / (np.pi / ts))
+    n, fade = 3000, 300
+    k = np.arange(n)
+    inside = slice(fade + 2 * pad, n - 2 * pad)
+    for w in (0.5, 5.0, 8.0):
+        amp_g = 0.01 * np.exp(0.3j)
+        g = np.real(amp_g * np.exp(1j * w * k * ts)) * np.where(k < fade, np.sin(0.5 * np.pi * k / fade) ** 2, 1.0)
+        e = np.diff(np.concatenate([[0.0], g]))
+        amp = amp_g * (1 - np.exp(-1j * w * ts))
+        gain_f = abs(signal.freqz(b, a, worN=[w * ts])[1][0]) ** 4
+        expect = np.real(l1(w) * gain_f * w_corr(w) * amp * np.exp(1j * w * k * ts))
+        y = _run_learn(exe, e, np.zeros(n))
+        assert _rel(y[inside], expect[inside]) < 1e-7, w
+
+
+def _band_filters() -> dict:
+    """A small valid design with a band and the airframe correction, for breaking one entry at a time."""
+    from scipy import signal
+
+    sos = signal.butter(4, 0.2, output="sos")
+    return {"from": "X", "to": "Y", "method": "closed-form", "sample_time": 0.02,
+            "L1": {"sos": [[1.0, -1.0, 0.0, 1.0, -0.5, 0.0]], "advance": 2},
+            "L2": {"sos": [[1.0, 0.0, 0.0, 1.0, 0.0, 0.0]], "advance": 0},
+            "band": {"cutoff_rad_s": 31.4, "sos": sos.tolist(), "zi": signal.sosfilt_zi(sos).tolist(),
+                     "pad": 20, "end_fit": 6},
+            "disturbance": {"at": "airframe", "W": {"sos": [[1.0, -0.9, 0.0, 1.0, -0.8, 0.0]]}}}
+
+
+@pytest.mark.parametrize("where, value, key", [
+    ("band", [1, 2], "`band`"),
+    ("band.sos", [[1.0, 2.0, 1.0, 1.0, 0.5]], "`band.sos`"),
+    ("band.sos", [[1.0, 2.0, float("nan"), 1.0, 0.5, 0.1]], "`band.sos`"),
+    ("band.sos", [[1.0, 2.0, 1.0, 2.0, 0.5, 0.1]], "`band.sos`"),
+    ("band.zi", [[0.1, 0.2]], "`band.zi`"),
+    ("band.zi", [[0.1, float("inf")]], "`band.zi`"),
+    ("band.zi", None, "`band.zi`"),
+    ("band.pad", -1, "`band.pad`"),
+    ("band.pad", 2.5, "`band.pad`"),
+    ("band.pad", True, "`band.pad`"),
+    ("band.end_fit", 0, "`band.end_fit`"),
+    ("band.end_fit", None, "`band.end_fit`"),
+    ("band.cutoff_rad_s", None, "`band.cutoff_rad_s`"),
+    ("band.cutoff_rad_s", -3.0, "`band.cutoff_rad_s`"),
+    ("band.sos", None, "`band.sos`"),            # a corner without sections
+    ("disturbance.W", {"num": [1.0]}, "`disturbance.W`"),
+    ("disturbance.W", None, "`disturbance.W`"),  # at 'airframe' without W
+    ("disturbance.W.sos", [[1.0, 0.0, 0.0, 1.0]], "`disturbance.W.sos`"),
+    ("disturbance.W.sos", [[1.0, 0.0, 0.0, 0.5, 0.1, 0.0]], "`disturbance.W.sos`"),
+    ("disturbance.W.sos", "loud", "`disturbance.W.sos`"),
+])
+def test_c_code_refuses_bad_band_and_w(where, value, key):
+    filters = _band_filters()
+    c_code(filters)   # the unbroken design is fine
+    parts = where.split(".")
+    node = filters
+    for part in parts[:-1]:
+        node = node[part]
+    node[parts[-1]] = value
+    with pytest.raises(SpecError, match="expected") as err:
+        c_code(filters)
+    assert str(err.value).startswith(key), str(err.value)
+
+
+def test_c_learn_on_a_hand_made_band(cc, tmp_path):
+    """A band of 2 sections with a short pad and end fit, W of 1 section, L1 with an advance."""
+    filters = _band_filters()
+    exe = _build_learn(cc, tmp_path, filters)
+    rng = np.random.default_rng(5)
+    for n in (400, 7, 1):
+        e, df = rng.standard_normal(n), rng.standard_normal(n)
+        assert _rel(_run_learn(exe, e, df), apply_learning(filters, e, df)) < 1e-12, n
+    filters["band"]["pad"] = 0   # no extension: H is the trial itself
+    exe = _build_learn(cc, tmp_path, filters)
+    e, df = rng.standard_normal(50), rng.standard_normal(50)
+    assert _rel(_run_learn(exe, e, df), apply_learning(filters, e, df)) < 1e-12
+
+
+def test_header_and_readme_recommend_learn(learn_designs):
+    for case, design in learn_designs.items():
+        files, data = design_files(design.filters)
+        header, readme = files["filters.h"], files["README.md"]
+        p, m = "ilcdob_uav1_uav2_", "ILCDOB_UAV1_UAV2_"
+        assert data["c"]["functions"][0] == f"{p}learn"
+        assert data["c"]["learn"]["work"].startswith(f"{m}LEARN_WORK(n)")
+        assert f"int {p}learn(const double *e, const double *df_prev, double *df_next, size_t n, double *work);" \
+            in header
+        for macro in ("PAD", "BAND_CUTOFF", "LEARN_WORK(n)", "LEARN_EMPTY 1", "LEARN_NULL 2"):
+            assert f"#define {m}{macro}" in header, (case, macro)
+        assert f"{p}learn(e, d_f, d_next, n, work)" in readme and f"{m}LEARN_WORK(N_MAX)" in readme
+        if case.startswith("band"):
+            assert f"#define {m}BAND_CUTOFF 10.0 " in header and f"#define {m}PAD {design.filters['band']['pad']} " \
+                in header
+            assert "corner 10 rad/s" in readme and "crop(F{" in readme
+        else:
+            assert f"#define {m}BAND_CUTOFF 0.0 /* no learning band" in header and f"#define {m}PAD 0 " in header
+            assert "No learning band (no filter)" in readme
+        assert ("W is the airframe correction" in readme) == case.endswith("airframe")
+        assert bool(re.search(r"W +is the airframe correction", header)) == case.endswith("airframe")
+        if design.limits is not None:
+            assert "does not apply the learning vehicle's acceleration limit" in header
+            assert "does not apply the acceleration limit" in readme
+    # exact-reference: the reference terms go around learn
+    design = learn_designs["band"]
+    readme = design_files({**design.filters, "law": "exact-reference"})[0]["README.md"]
+    assert "pass `e - e_ref_source` instead of `e` to `ilcdob_uav1_uav2_learn`" in readme
+    assert "add `correction` to `d_next`" in readme
+    # the float variant covers L1, L2 only
+    files, data = design_files(design.filters, float_variant=True)
+    assert "learn" not in " ".join(data["c"]["float"]["functions"])
+    assert "has no float variant" in files["filters.h"] and "`learn` runs in double" in files["README.md"]

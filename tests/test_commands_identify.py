@@ -87,3 +87,65 @@ def test_time_in_milliseconds_and_dropouts_are_reported(tmp_path, capsys):
     rc = main(["identify", "log.ulg", "--input", "a.b", "--output", "c.d", "--poles", "1", "--time-unit", "ms",
                "--out", str(tmp_path / "m2.json")])
     assert rc == 2 and "--time-unit applies to .csv/.parquet files only" in capsys.readouterr().err
+
+
+def _pieced_flight(path, seed, pieces=6, piece_s=10.0):
+    """One log of ``pieces`` back-to-back 10 s chirp runs of P(s) = 1/(s^2 (0.1 s + 1)), each
+    starting from its own position and velocity (as when a long flight is logged in one file
+    across repositioning manoeuvres): one initial condition cannot explain the whole file."""
+    rng = np.random.default_rng(seed)
+    n = int(round(piece_s / TS))
+    tau = np.arange(n) * TS
+    u, y = [], []
+    for _ in range(pieces):
+        f1, phase = rng.uniform(2.5, 3.5), rng.uniform(0, 2 * np.pi)
+        uk = 0.8 * np.cos(2 * np.pi * (0.3 * tau + (f1 - 0.3) * tau**2 / (2 * piece_s)) + phase)
+        p0, v0 = rng.uniform(-2, 2), rng.uniform(-0.5, 0.5)
+        u.append(uk)
+        y.append(simulate_zoh(STRUCTURE, SLOW, uk, TS) + p0 + v0 * tau)
+    y = np.concatenate(y) + 0.002 * rng.standard_normal(pieces * n)
+    t = np.arange(pieces * n) * TS
+    FlightData(t, {"acc_cmd": np.concatenate(u), "x": y}, {"acc_cmd": "m/s^2", "x": "m"},
+               source=str(path)).to_csv(path)
+
+
+SLOW = STRUCTURE.join([10.0], [1.0, 10.0, 0.0, 0.0])  # 1/(s^2 (0.1 s + 1))
+
+
+def test_segment_fits_each_window_with_its_own_initial_condition(tmp_path, capsys):
+    est, val = tmp_path / "long.csv", tmp_path / "long_val.csv"
+    _pieced_flight(est, 5)
+    _pieced_flight(val, 6)
+    common = ["identify", str(est), "--input", "acc_cmd", "--output", "x", "--poles", "3", "--integrators", "2",
+              "--validate", str(val)]
+    out = tmp_path / "model.json"
+    assert main([*common, "--segment", "10", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "--segment 10 s: 6 estimation and 6 held-out windows" in err
+    model = json.loads(out.read_text())
+    # truth: num [10], den [1, 10, 0, 0]; 2 mm noise on 0.1-1 m responses
+    np.testing.assert_allclose(model["num"], [10.0], rtol=0.01)
+    np.testing.assert_allclose(model["den"], [1.0, 10.0, 0.0, 0.0], rtol=0.01, atol=1e-12)
+    assert model["fit_percent"]["validation"] > 99.0
+    assert model["segment_s"] == 10.0
+    # the same files whole: one initial condition per file cannot follow the runs' jumps
+    whole = tmp_path / "whole.json"
+    assert main([*common, "--out", str(whole), "--quiet"]) == 0
+    bad = json.loads(whole.read_text())
+    assert bad["segment_s"] is None
+    assert bad["fit_percent"]["validation"] < 90.0 and abs(bad["den"][1] - 10.0) > 1.0
+
+
+def test_segment_values_that_cannot_cut_the_files(tmp_path, capsys):
+    est = tmp_path / "long.csv"
+    _pieced_flight(est, 5, pieces=2)
+    base = ["identify", str(est), "--input", "acc_cmd", "--output", "x", "--poles", "3", "--integrators", "2"]
+    for value in ("0", "-5", "nan", "inf"):
+        assert main([*base, "--segment", value, "--out", str(tmp_path / "m.json")]) == 2
+        err = capsys.readouterr().err
+        assert "`--segment`" in err and "finite number > 0" in err, err
+    # 0.5 s at 0.02 s = 25 samples; 3 poles and 2 parameters need 10 (2 + 3) = 50 per window
+    assert main([*base, "--segment", "0.5", "--out", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert "`--segment`" in err and "25 samples" in err and "at least 50 samples" in err and "1 s" in err, err
+    assert not (tmp_path / "m.json").exists()

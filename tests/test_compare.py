@@ -71,7 +71,8 @@ def test_every_design_improves_inside_the_identified_uncertainty(identified):
 
 
 def test_robust_never_worse_than_its_bound_on_its_own_sample_set(fleet):
-    """Large errors (|Delta| <= 0.6): the closed form's worst case exceeds rho, the robust design's does not.
+    """Large errors (|Delta| <= 0.6): the closed form's worst case exceeds rho, the robust design's does not
+    (both learn through their learning band, which the 0.6 bound closes at a few rad/s).
 
     rho = 0.13 is just above the smallest rho feasible for every case's trial (0.1286 by bisection), so the
     improvement constraint is active (the minimax design alone reaches 0.139)."""
@@ -79,11 +80,13 @@ def test_robust_never_worse_than_its_bound_on_its_own_sample_set(fleet):
     cmp = compare_designs(fleet, 1, ["closed-form", "norm-optimal", "robust"],
                           CompareOptions(samples=6, bound=0.6, duration=20.0, robust=RobustOptions(rho=rho)))
     cf, rb = cmp.row("closed-form"), cmp.row("robust")
-    assert cf.ratio_worst > rho + 0.05  # measured 0.2295
+    assert cf.ratio_worst > rho + 0.01  # measured 0.146 (0.23 without the learning band)
     # the robust predictions hold exactly (<= rho); the flights differ from them only by the two
     # systems' own noises (0.03 m/s^2 at 2-3 Hz), hence the 0.005 allowance (measured max 0.1300)
     assert rb.ratio_worst <= rho + 0.005
-    assert rb.ratio_nominal >= cf.ratio_nominal  # the price of robustness on the nominal plants
+    # both pay for robustness on the nominal plants (Case I, where the unfiltered closed form reaches ~1e-8):
+    # the closed form through the band that the 0.6 bound closes (measured 0.074), robust through its SOCP (0.066)
+    assert min(rb.ratio_nominal, cf.ratio_nominal) > 0.02
 
 
 def test_compare_cli_writes_outputs(tmp_path, capsys):

@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ilcdob import PIDSpec, UnstableLoopError, build_loop, freqresp
+from ilcdob import PIDSpec, PlantSpec, SpecError, UnstableLoopError, build_loop, freqresp
 from ilcdob.design import simulate_map
 from ilcdob.validation.simulate import simulate_flight
 
@@ -60,3 +60,16 @@ def test_unstable_loop_is_a_clear_error(fleet):
         build_loop(spec, 0.02)
     msg = str(info.value)
     assert "'UAV1'" in msg and "|z|=" in msg
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning", "ignore::scipy.signal.BadCoefficients")
+def test_overflowing_loop_is_a_spec_error_naming_the_system(fleet):
+    # Each block discretises to finite matrices (plant gain 1e100, kp 1e100 are both in range),
+    # but the interconnection's products (about 1e100 * 1e100 * 1e100) overflow to inf: the
+    # loop check must say so as a SpecError naming the system, not end in another exception.
+    spec = replace(fleet.systems[0], plant=PlantSpec([1e100], [0.1, 1.0, 0.0, 0.0]), model=None,
+                   controller=PIDSpec(1e100, 0.3, 2.4, 0.05))
+    with pytest.raises(SpecError) as info:
+        build_loop(spec, 0.02)
+    msg = str(info.value)
+    assert "'UAV1'" in msg and "non-finite" in msg and "PID loop without DOB" in msg

@@ -23,10 +23,14 @@ def test_one_source_is_the_closed_form(fleet):
     f = simulate_flight(src, sc.reference(t), sc.disturbance(t), d_f=0.1 * np.sin(0.3 * t), a_ref=sc.acceleration(t))
     cf = closed_form_filters(src, tgt).apply(f.e, f.d_f)
     ms = multi_source_learning(tgt, [SourceTrial(src, f.e, f.d_f)])
-    # the same operator factored differently ((1 - Q_j) after Gd^-1 instead of one zpk L1): they differ only
-    # in the non-causal filters' start-up transient (measured 4.8e-6 relative, first samples)
-    assert np.max(np.abs(ms - cf)) <= 2e-5 * np.max(np.abs(cf))
-    assert np.max(np.abs(ms - cf)[100:]) <= 1e-8 * np.max(np.abs(cf))  # measured 2.4e-9
+    # the same operator factored differently ((1 - Q_j) after Gd^-1 instead of one zpk L1): they differ in
+    # the non-causal filters' start-up transient (measured 5.1e-6 relative, first samples) and in the last
+    # samples, where the closed form runs L2 on d_f itself and multi-source continues e + Gf{d_f} past the
+    # end by a cubic (measured 1.4e-4 relative, last 20 samples = 0.4 s)
+    scale = np.max(np.abs(cf))
+    assert np.max(np.abs(ms - cf)[:-20]) <= 2e-5 * scale
+    assert np.max(np.abs(ms - cf)[100:-20]) <= 1e-8 * scale  # measured 2.6e-9
+    assert np.max(np.abs(ms - cf)) <= 5e-4 * scale
 
 
 def test_equal_weights_average_the_reconstructions(fleet):

@@ -1,5 +1,5 @@
 """The paper's validation on the nonlinear quadrotors (ilcdob.validation.nonlinear); the learning
-law it flies is tested in test_flown.py.
+law it flies is tested in test_band.py, test_flown.py and test_commands_design.py.
 
 The reproduction's acceptance (``NonlinearReproduction.acceptance``) is checked on a shortened
 run (two scenarios of 30 s, the built-in fleet whose plants were identified from these
@@ -82,7 +82,7 @@ def test_files_add_the_fleet_file_of_the_models(short_run):
     files = short_run.files(figures=False)
     assert list(files)[-2:] == ["identified_fleet.toml", "results.json"]  # results.json stays last
     assert files["identified_fleet.toml"] == short_run.identified_toml
-    assert "README.md" in files and "ilcdob.design.flown" in files["README.md"]
+    assert "README.md" in files and "ilcdob.design.band" in files["README.md"] and "ilcdob.design.flown" in files["README.md"]
 
 
 def test_learning_flights_keep_the_true_and_measured_signals_apart(short_run):
@@ -138,9 +138,9 @@ def test_scenario_run_rejects_fleets_without_vehicles(fleet_file):
     ({"sensor_noise_std": 0.5}, "sensor_noise_std"),
     ({"seed": -1}, "seed"),
     ({"identify": "yes"}, "identify"),
-    ({"learning_cutoff": 0.0}, "learning_cutoff"),
-    ({"learning_cutoff": float("nan")}, "learning_cutoff"),
-    ({"learning_filter_order": 9}, "learning_filter_order"),
+    ({"bandwidth": 0.0}, "bandwidth"),
+    ({"bandwidth": float("nan")}, "bandwidth"),
+    ({"bandwidth": "wide"}, "bandwidth"),
     ({"learning_gain": 0.0}, "learning_gain"),
     ({"learning_gain": 1.5}, "learning_gain"),
     ({"airframe_disturbance": 1}, "airframe_disturbance"),
@@ -201,3 +201,24 @@ def test_cli_plant_option(tmp_path, capsys):
     assert "invalid choice: 'quadrotor'" in capsys.readouterr().err
     assert main(["reproduce", "--plant", "nonlinear", "--seed", "-3", "--out", str(tmp_path)]) == 2
     assert "`seed`: got -3" in capsys.readouterr().err
+
+
+def test_a_given_order_is_flown_on_the_nonlinear_vehicles():
+    sc = dataclasses.replace(scenario(1), duration=4.0)
+    order = ["UAV2", "UAV1", "UAV3"]
+    res = reproduce_nonlinear(ilcdob.default_fleet(), iterations=1, settings=NonlinearSettings(identify=False),
+                              scenarios=[sc, dataclasses.replace(scenario(4), duration=4.0)], order=order)
+    for sr in res.scenarios:
+        assert sr.order == order and list(sr.systems) == order
+        assert sr.chain == [("UAV2", "UAV1"), ("UAV1", "UAV3"), ("UAV3", "UAV2")]
+    one = run_nonlinear_scenario(ilcdob.default_fleet(), None, sc, 1, settings=NonlinearSettings(identify=False),
+                                 order=["UAV3", "UAV2"])
+    assert one.order == ["UAV3", "UAV2"] and one.chain == [("UAV3", "UAV2"), ("UAV2", "UAV3")]
+
+
+def test_a_bad_order_fails_before_any_flight():
+    # checked against the fleet before the vehicles are identified (which takes seconds)
+    with pytest.raises(SpecError, match=r"`order`: unknown system\(s\) 'UAV7'"):
+        reproduce_nonlinear(order=["UAV1", "UAV7"])
+    with pytest.raises(SpecError, match=r"`order`: 'UAV2' given more than once"):
+        reproduce_nonlinear(order=["UAV2", "UAV2"])

@@ -191,3 +191,62 @@ def test_cli_reports_bad_input_with_exit_status_2(tmp_path, capsys):
     assert main(["reproduce", "--fleet", str(bad), "--out", str(tmp_path / "y")]) == 2
     assert str(bad) in capsys.readouterr().err
     assert not (tmp_path / "y" / "results.json").exists()
+
+
+def test_a_given_order_is_flown_in_every_scenario(fleet):
+    order = ["UAV3", "UAV1", "UAV2"]
+    res = reproduce(fleet, [1, 4], 2, progress=lambda *args: None, order=order)
+    for sr in res.scenarios:
+        assert sr.order == order
+        # the chain passes learning around the order: UAV3's DOB-only trial teaches UAV1, ...
+        assert sr.chain == [("UAV3", "UAV1"), ("UAV1", "UAV2"), ("UAV2", "UAV3")] * 2
+        assert list(sr.systems) == order
+    data = res.to_dict()
+    assert [sc["order"] for sc in data["scenarios"]] == [order, order]
+    # exact models: learning converges in the first iteration whatever the order (<= 5 % of DOB only
+    # on the hover, as test_learning_converges_in_the_first_iteration for the paper's orders)
+    for name, sys in res.scenarios[0].systems.items():
+        assert sys.learning[0].rmse <= 0.05 * sys.dob.rmse, name
+
+
+def test_order_default_is_unchanged_and_a_subset_flies_alone(fleet):
+    sc = dataclasses.replace(scenario(4), duration=12.0)
+    default = run_scenario(fleet, sc, 1)
+    same = run_scenario(fleet, sc, 1, order=["UAV1", "UAV3", "UAV2"])  # scenario 4's own order, by name
+    assert default.order == same.order and default.chain == same.chain
+    for name in default.order:
+        for a, b in zip(default.systems[name].learning, same.systems[name].learning):
+            np.testing.assert_array_equal(a.e, b.e)
+    pair = run_scenario(fleet, sc, 2, order=["UAV2", "UAV3"])
+    assert pair.order == ["UAV2", "UAV3"] and list(pair.systems) == ["UAV2", "UAV3"]
+    assert pair.chain == [("UAV2", "UAV3"), ("UAV3", "UAV2")] * 2
+    # the DOB-only flights do not depend on the order: UAV2's is the same as in the default run
+    np.testing.assert_array_equal(pair.systems["UAV2"].dob.e, default.systems["UAV2"].dob.e)
+
+
+@pytest.mark.parametrize("order, match", [
+    (["UAV1", "UAV9", "UAVX"],
+     r"`order`: unknown system\(s\) 'UAV9', 'UAVX' in .*the fleet has \['UAV1', 'UAV2', 'UAV3'\]"),
+    (["UAV1", "UAV2", "UAV1"], r"`order`: 'UAV1' given more than once"),
+    (["UAV2"], r"`order`: got \['UAV2'\], expected at least two system names"),
+    ("UAV1,UAV2", r"`order`: got 'UAV1,UAV2', expected a list of system names"),
+])
+def test_bad_orders_name_what_is_wrong(fleet, order, match):
+    with pytest.raises(SpecError, match=match):
+        reproduce(fleet, [1], 1, order=order)
+    with pytest.raises(SpecError, match=match):
+        run_scenario(fleet, scenario(1), 1, order=order)
+
+
+def test_cli_order_option(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["reproduce", "--scenarios", "1,4", "--iterations", "1", "--no-figures", "--order",
+                 "UAV2, UAV3,UAV1", "--out", str(out)]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert [sc["order"] for sc in data["scenarios"]] == [["UAV2", "UAV3", "UAV1"]] * 2
+    assert data["scenarios"][1]["chain"] == [["UAV2", "UAV3"], ["UAV3", "UAV1"], ["UAV1", "UAV2"]]
+    capsys.readouterr()
+    assert main(["reproduce", "--order", "UAV1,UAV4", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "`--order`: unknown system(s) 'UAV4'" in err and "UAV1" in err
+    assert not (tmp_path / "bad").exists()

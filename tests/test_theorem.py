@@ -78,3 +78,37 @@ def test_to_dict_is_json_and_bad_inputs_raise(fleet, deltas):
         theorem_check(fleet, None, deltas, source="max")
     with pytest.raises(SpecError, match="at least two"):
         learning_pairs(fleet.names, ["UAV1"])
+
+
+def test_the_law_with_its_band_is_judged_with_the_band_in_the_ratio(fleet_file, good_fleet_text):
+    """A stated bound of 0.6: the paper's condition fails from a few rad/s up to Nyquist (|1 + P C|/2 -> 0.5).
+    With the automatic band the law's first-order ratio 1 - F + F |Delta|/(|1 + P C|/2), recomputed here with
+    F = |Butterworth|^4 from scipy.signal.butter (sections: the b/a form of a corner at 1e-2 of Nyquist loses
+    1e-8 near DC) at the band's corner, stays within 1 + AMPLIFICATION_TOL (the
+    verdict holds) while it exceeds 1 without the band (the verdict fails); both views are in the table."""
+    import ilcdob
+    from scipy import signal as sps
+
+    from ilcdob.design.band import AMPLIFICATION_TOL
+    from ilcdob.design.pair import pair_band
+
+    text = good_fleet_text.replace("dob = { q_order = 3, q_time_constant = 0.15 }",
+                                   "dob = { q_order = 3, q_time_constant = 0.15 }\nuncertainty = { bound = 0.6 }")
+    flt = ilcdob.load_fleet(fleet_file(text))
+    ds = {s.name: delta_set(s, flt.sample_time, k=2) for s in flt.systems}
+    bands = {(a, b): pair_band(flt, a, b, deltas=ds) for a, b in learning_pairs(flt.names, flt.names)}
+    checks = theorem_check(flt, None, ds, bands=bands)
+    off = theorem_check(flt, None, ds)
+    for c, u in zip(checks, off):
+        lo, hi = c.failing_band
+        assert not c.holds_everywhere and hi == pytest.approx(c.w[-1]) and lo > 1.0
+        assert c.band.cutoff is not None and c.band.cutoff < lo and c.holds_filtered
+        sos = sps.butter(c.band.order, c.band.cutoff / (np.pi / flt.sample_time), output="sos")
+        f = np.abs(sps.sosfreqz(sos, worN=c.w * flt.sample_time)[1]) ** 4
+        ratio = 1 - f + f * c.delta / c.rhs
+        np.testing.assert_allclose(c.filtered_ratio, ratio, rtol=1e-9, atol=1e-12)
+        assert np.max(ratio) <= 1 + AMPLIFICATION_TOL and np.min(ratio) < 0.2  # it still learns below the band
+        assert u.band is None and not u.holds_filtered and u.amplification == pytest.approx(1 / u.min_margin)
+    table = format_theorem_table(checks)
+    assert "NO" in table and "holds" in table and "FAILS" not in table
+    assert "FAILS" in format_theorem_table(off)

@@ -33,10 +33,11 @@ each scenario starts with ``r = 0``, ``dr/dt = 0`` and ``d = 0``.
 Tracking error and RMSE are those of the *true* position (``e = r - x``); the controller,
 the DOB and the learning only see the measured position ``x_m``, as on a real vehicle.
 
-Each learning flight flies the signal :class:`~ilcdob.design.flown.VehicleLearning` computes
-from the previous flight's *measured* error: the Theorem's law as flown on a vehicle with
-wrong models (robustness filter, trial horizon, airframe correction, learning gain;
-:mod:`ilcdob.design.flown` explains and measures each).
+Each learning flight flies the signal that ``ilcdob design`` computes from the previous
+flight's *measured* error (:meth:`ilcdob.design.pair.PairDesign.learning`): the learning law
+``law`` through the learning band chosen from that trial (:mod:`ilcdob.design.band`), with the
+airframe correction for wind on the rigid body (:mod:`ilcdob.design.flown`) and the learning
+vehicle's acceleration limit (:mod:`ilcdob.design.limit`).
 
 Disturbance estimate against the truth: ``d_hat + d_f`` is a command-side signal (what
 the vehicle must be commanded to cancel the wind), the true disturbance is the airframe's
@@ -57,8 +58,10 @@ import numpy as np
 from scipy import signal as sps
 
 from ilcdob.design import closed_form_filters
-from ilcdob.design.flown import (LEARNING_CUTOFF, LEARNING_FILTER_ORDER, VehicleLearning, model_attitude,
-                                 vehicle_learning)
+from ilcdob.design.band import check_bandwidth
+from ilcdob.design.flown import model_attitude
+from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.fleet_io import fleet_to_toml
@@ -68,7 +71,7 @@ from ilcdob.signals import as_signal
 from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
 
 from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain
-from .scenarios import Scenario, scenario
+from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, rmse
 
 __all__ = ["NonlinearSettings", "NonlinearFlight", "NonlinearReproduction", "fly_loop", "identify_vehicles",
@@ -92,23 +95,20 @@ class NonlinearSettings:
     identify : bool
         Identify the vehicles from step and chirp flights (the paper's pipeline, default).
         ``False`` keeps the fleet file's plants as the models.
-    learning_cutoff : float or None
-        Corner frequency ``w_c`` of the zero-phase robustness filter F on the learning
-        signal, rad/s (> 0; ``None`` disables it). Default
-        :data:`~ilcdob.design.flown.LEARNING_CUTOFF` (10 rad/s; :mod:`ilcdob.design.flown`
-        explains the choice).
-    learning_filter_order : int
-        Order ``n`` of the Butterworth prototype (1..8); applied forwards and backwards.
+    bandwidth : "auto", float or None
+        The learning band's corner (:mod:`ilcdob.design.band`): ``"auto"`` (default) chooses
+        it from each trial learned from, a number states it in rad/s, ``None`` flies the
+        Theorem's filters unfiltered.
     airframe_disturbance : bool
         Learn with the wind's true path (it acts on the airframe): the correction
-        ``W = P_hat_{j-1}/P_hat_j`` of :func:`~ilcdob.design.flown.airframe_path_filter`
+        ``W = A_hat_{j-1}/A_hat_j`` of :func:`~ilcdob.design.flown.airframe_path_filter`
         (default). ``False`` flies the paper's law as is, which assumes the wind at the
         command input.
     learning_gain : float
         ``gamma`` in (0, 1]: the share of the newly reconstructed error learned per flight
-        (:class:`~ilcdob.design.flown.VehicleLearning`). 1 (default) is the Theorem's law,
+        (:meth:`~ilcdob.design.pair.PairDesign.learning`). 1 (default) is the Theorem's law,
         which reaches its fixed point in one pass; a smaller gain changes the path to the
-        same floor, not the floor (measured in :mod:`ilcdob.design.flown`).
+        same floor, not the floor.
     inner_rate_hz : float
         Integration and inner-loop rate of the vehicles, Hz (a multiple of ``1/Ts``).
     """
@@ -116,8 +116,7 @@ class NonlinearSettings:
     sensor_noise_std: float = 0.0005
     seed: int = 0
     identify: bool = True
-    learning_cutoff: float | None = LEARNING_CUTOFF
-    learning_filter_order: int = LEARNING_FILTER_ORDER
+    bandwidth: object = "auto"
     airframe_disturbance: bool = True
     learning_gain: float = 1.0
     inner_rate_hz: float = 500.0
@@ -133,14 +132,7 @@ class NonlinearSettings:
             raise SpecError(f"`airframe_disturbance`: got {self.airframe_disturbance!r}, expected True or False")
         if not isinstance(self.identify, bool):
             raise SpecError(f"`identify`: got {self.identify!r}, expected True or False")
-        wc = self.learning_cutoff
-        if wc is not None:
-            if isinstance(wc, bool) or not isinstance(wc, (int, float)) or not (math.isfinite(wc) and wc > 0):
-                raise SpecError(f"`learning_cutoff`: got {wc!r}, expected a frequency > 0 rad/s or None")
-            object.__setattr__(self, "learning_cutoff", float(wc))
-        n = self.learning_filter_order
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 8:
-            raise SpecError(f"`learning_filter_order`: got {n!r}, expected an integer in 1..8")
+        object.__setattr__(self, "bandwidth", check_bandwidth(self.bandwidth, None, "bandwidth"))
         g = self.learning_gain
         if isinstance(g, bool) or not isinstance(g, (int, float)) or not (0.0 < g <= 1.0):
             raise SpecError(f"`learning_gain`: got {g!r}, expected a number in (0, 1]")
@@ -152,8 +144,8 @@ class NonlinearSettings:
     def to_dict(self) -> dict[str, object]:
         """The settings as plain JSON types (the ``settings`` of a report)."""
         return {"sensor_noise_std_m": self.sensor_noise_std, "seed": int(self.seed),
-                "identify": self.identify, "learning_cutoff_rad_s": self.learning_cutoff,
-                "learning_filter_order": int(self.learning_filter_order),
+                "identify": self.identify,
+                "bandwidth_rad_s": self.bandwidth,
                 "airframe_disturbance": self.airframe_disturbance, "learning_gain": self.learning_gain,
                 "inner_rate_hz": self.inner_rate_hz}
 
@@ -173,10 +165,9 @@ class NonlinearFlight(Flight):
         *True* position and tracking error ``r - y``.
     d : array, m/s^2
         The disturbance acting on the airframe at ``t_k`` (wind + the vehicle's noise).
-    y_meas : array, m
-        Measured position ``x_m`` (true position + sensor noise).
-    e_meas : array, m
-        Measured tracking error ``r - x_m`` (what the learning uses).
+    y_meas, e_meas : array, m
+        Measured position ``x_m`` (true position + sensor noise) and tracking error
+        ``r - x_m`` (what the learning uses).
     d_est : array, m/s^2
         The total estimate ``d_hat + d_f`` (command side) expressed as the acceleration it
         stands for on the airframe: ``A_hat{d_hat + d_f}`` with the model's attitude chain
@@ -186,8 +177,6 @@ class NonlinearFlight(Flight):
         command actually sent).
     """
 
-    y_meas: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    e_meas: np.ndarray = field(default_factory=lambda: np.zeros(0))
     d_est: np.ndarray = field(default_factory=lambda: np.zeros(0))
     saturated: int = 0
 
@@ -391,13 +380,15 @@ def _check_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams] | None,
     return {name: vehicles[name] for name in fleet.names}
 
 
-def _learning_for(fleet: Fleet, cache: dict, src: str, tgt: str, settings: NonlinearSettings) -> VehicleLearning:
-    """The learning law of the pair; ``cache`` holds the closed-form filters (for figures)."""
+def _pair_design(fleet: Fleet, cache: dict, src: str, tgt: str, settings: NonlinearSettings, law: str,
+                 r: np.ndarray, a_ref: np.ndarray) -> PairDesign:
+    """The pair's closed-form design as ``ilcdob design`` makes it for these vehicles;
+    ``cache`` also receives its closed-form filters (for the figures)."""
     if (src, tgt) not in cache:
         cache[(src, tgt)] = closed_form_filters(fleet.loop(src), fleet.loop(tgt))
-    return vehicle_learning(fleet.loop(src), fleet.loop(tgt), cutoff=settings.learning_cutoff,
-                            order=settings.learning_filter_order, airframe_disturbance=settings.airframe_disturbance,
-                            gain=settings.learning_gain, filters=cache[(src, tgt)])
+    reference = {"reference": r, "acceleration": a_ref} if law == "exact-reference" else {}
+    return design_pair(fleet, src, tgt, "closed-form", law=law, bandwidth=settings.bandwidth,
+                       disturbance="airframe" if settings.airframe_disturbance else "command", **reference)
 
 
 def _rng(settings: NonlinearSettings, sid: int, index: int, trial: int) -> np.random.Generator:
@@ -406,11 +397,12 @@ def _rng(settings: NonlinearSettings, sid: int, index: int, trial: int) -> np.ra
 
 def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], sc: Scenario,
                            iterations: int = 3, filters: dict | None = None,
-                           settings: NonlinearSettings | None = None) -> ScenarioResult:
+                           settings: NonlinearSettings | None = None, law: str = DEFAULT_LAW,
+                           order: list[str] | None = None) -> ScenarioResult:
     """Fly one scenario with every nonlinear vehicle: no DOB, only DOB, ``iterations``
     learning trials passed around the fleet in ``sc``'s order (the chain of
     :mod:`ilcdob.validation.reproduce`), each learning signal from the previous flight's
-    *measured* error by :class:`~ilcdob.design.flown.VehicleLearning`.
+    *measured* error as ``ilcdob design`` computes it (module docstring).
 
     Parameters
     ----------
@@ -426,6 +418,11 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
         Cache of closed-form filters keyed by (source, target), filled as needed.
     settings : NonlinearSettings, optional
         Default: ``NonlinearSettings()``.
+    law : {"paper", "exact-reference"}
+        Learning law (:mod:`ilcdob.design.laws`).
+    order : list of str, optional
+        Learning order by system name (:func:`~ilcdob.validation.scenarios.check_order`);
+        None (default): the scenario's.
 
     Returns
     -------
@@ -443,7 +440,7 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
     t = sc.time(ts)
     r = sc.reference(t)
     a_ref = sc.acceleration(t)
-    order = sc.order(fleet.names)
+    order = sc.order(fleet.names) if order is None else check_order(fleet.names, order)
     specs = {s.name: s for s in fleet.systems}
     index = {name: i for i, name in enumerate(fleet.names)}
 
@@ -455,11 +452,17 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
         return fly_loop(vehicles[name], fleet.loop(name), r, dist(name), d_f=d_f, mode=mode, a_ref=a_ref,
                         noise_std=settings.sensor_noise_std, rng=_rng(settings, sc.id, index[name], trial))
 
+    if check_law(law) == "multi-source":
+        raise SpecError("`law`: the nonlinear reproduction learns one pair at a time (the airframe correction "
+                        "is per pair); use 'paper' or 'exact-reference'")
     base = {name: (flight(name, 0, "no_dob"), flight(name, 1, "dob")) for name in order}
     flown = {name: 0 for name in order}  # learning flights so far: trial index of the noise seed
+    designs: dict[tuple[str, str], PairDesign] = {}
 
     def step(src: str, tgt: str, prev: NonlinearFlight) -> NonlinearFlight:
-        df = _learning_for(fleet, filters, src, tgt, settings).apply(prev.e_meas, prev.d_f)
+        if (src, tgt) not in designs:
+            designs[(src, tgt)] = _pair_design(fleet, filters, src, tgt, settings, law, r, a_ref)
+        df = designs[(src, tgt)].learning(prev.e_meas, prev.d_f, gain=settings.learning_gain).d_f
         flown[tgt] += 1
         return flight(tgt, 1 + flown[tgt], "dob", df)
 
@@ -475,9 +478,10 @@ class NonlinearReproduction(ReproductionResult):
 
     Attributes
     ----------
-    fleet, scenarios, iterations, filters, elapsed_s, law
+    fleet, scenarios, iterations, filters, elapsed_s, law, sensor_noise_std, bandwidth
         As in :class:`~ilcdob.validation.reproduce.ReproductionResult`; ``fleet`` holds the
-        models flown, ``law`` is always ``"paper"`` (flown as :mod:`ilcdob.design.flown`).
+        models flown, ``law`` is ``"paper"`` or ``"exact-reference"`` (the sensor noise and
+        band of the run are in ``settings``).
     settings : NonlinearSettings
         The settings of the run.
     vehicles : dict
@@ -560,12 +564,18 @@ class NonlinearReproduction(ReproductionResult):
             "the airframe as external forces. "
             + ("Models identified from step and chirp flights of the same vehicles "
                "(`identified_fleet.toml`, fits below); " if s.identify else "Models from the fleet file; ")
-            + f"filters designed from the models; {self.iterations} learning iterations. Learning law: the "
-            "Theorem's closed-form filters with the airframe-wind correction, a zero-phase robustness filter "
-            f"at {s.learning_cutoff} rad/s and learning gain {s.learning_gain:g} "
-            "(`ilcdob.design.flown` explains each). Tracking RMSE: true position; disturbance "
+            + f"filters designed from the models; {self.iterations} learning iterations. Each learning signal is "
+            "what `ilcdob design --trial` computes from the previous flight: the closed-form filters through "
+            "the learning band "
+            + ("chosen from that flight's measured error" if s.bandwidth == "auto" else
+               ("switched off" if s.bandwidth is None else f"stated at {s.bandwidth:g} rad/s"))
+            + " (`ilcdob.design.band`)"
+            + (", with the airframe-wind correction (`ilcdob.design.flown`)" if s.airframe_disturbance else "")
+            + f", learning gain {s.learning_gain:g}. Tracking RMSE: true position; disturbance "
             "estimate: A_hat{d_hat + d_f} against the wind + noise acceleration on the airframe. Regenerate "
-            "with `ilcdob reproduce --plant nonlinear --out <dir>`; numbers are in `results.json`.",
+            "with `ilcdob reproduce --plant nonlinear"
+            + ("" if self.law == DEFAULT_LAW else f" --law {self.law}")
+            + " --out <dir>`; numbers are in `results.json`.",
         ]
         if self.iterations >= 3:
             lines += ["", "Acceptance: learning 3 / only DOB <= 0.10 and d est. learning 3 / only DOB <= 0.3 "
@@ -583,7 +593,8 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
                         iterations: int = 3, settings: NonlinearSettings | None = None,
                         vehicles: dict[str, QuadrotorParams] | None = None,
                         progress: Callable[[int, int, str], None] | None = None,
-                        scenarios: list[Scenario] | None = None) -> NonlinearReproduction:
+                        scenarios: list[Scenario] | None = None, law: str = DEFAULT_LAW,
+                        order: list[str] | None = None) -> NonlinearReproduction:
     """Identify the vehicles, design the filters and fly the scenarios (module docstring).
 
     Nothing is written: the fleet file of the models is returned as
@@ -609,6 +620,11 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
         None (default): silent.
     scenarios : list of Scenario, optional
         Fly these instead of ``scenario_ids`` (e.g. shortened copies, for tests).
+    law : {"paper", "exact-reference"}
+        Learning law (:mod:`ilcdob.design.laws`).
+    order : list of str, optional
+        Learning order by system name, flown in every scenario
+        (:func:`~ilcdob.validation.scenarios.check_order`); None (default): each scenario's.
 
     Returns
     -------
@@ -623,6 +639,7 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     if not isinstance(base, Fleet):
         raise SpecError(f"`fleet`: got {type(base).__name__}, expected a Fleet or None")
     vehicles = _check_vehicles(base, vehicles, settings.inner_rate_hz)
+    order = None if order is None else check_order(base.names, order)
     scs = list(scenarios) if scenarios is not None else [scenario(sid) for sid in scenario_ids]
     n_ident = len(base.names) if settings.identify else 0
     total = n_ident + len(scs)
@@ -638,8 +655,9 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     results = []
     for i, sc in enumerate(scs, 1):
         t0 = time.perf_counter()
-        results.append(run_nonlinear_scenario(models, vehicles, sc, iterations, filters, settings))
+        results.append(run_nonlinear_scenario(models, vehicles, sc, iterations, filters, settings, law, order))
         say(n_ident + i, total, f"scenario {sc.id} ({sc.title}, nonlinear): {time.perf_counter() - t0:.1f} s")
     return NonlinearReproduction(fleet=models, scenarios=results, iterations=iterations, filters=filters,
                                  elapsed_s=time.perf_counter() - start, settings=settings, vehicles=vehicles,
-                                 identification=ident, identified_toml=toml_text)
+                                 identification=ident, identified_toml=toml_text, law=check_law(law),
+                                 sensor_noise_std=settings.sensor_noise_std, bandwidth=settings.bandwidth)

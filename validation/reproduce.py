@@ -22,6 +22,14 @@ system's (i+1)-th learning trial. Each learning signal comes from the learning l
 With one earlier flight (each scenario's first learning flight) ``multi-source`` is the
 paper's law; with a hover (no reference motion) ``exact-reference`` is.
 
+Every learning signal is what ``ilcdob design`` computes from the previous flight
+(:meth:`ilcdob.design.pair.PairDesign.learning`): the law through the learning band chosen
+from that flight's measured error (:mod:`ilcdob.design.band`; ``bandwidth``), bounded by the
+learning vehicle's acceleration limit (fleet ``limits``). With ``sensor_noise_std > 0`` every
+flight measures its position with white noise (seeded per scenario, system and flight) and
+learns from its measured error; the RMSE is that of the true error. Without noise and with
+trusted models the band is off and the law is the Theorem's filters as they are.
+
 The report of a reproduction is :meth:`ReproductionResult.files`: ``results.json``, the
 figures (:mod:`ilcdob.validation.figures`) and a ``README.md`` (:func:`markdown_index`), as
 content to be written by the caller.
@@ -38,13 +46,15 @@ import numpy as np
 
 from ilcdob.design import LearningFilters, closed_form_filters
 from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law, reference_terms
+from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law
+from ilcdob.design.limit import enforce_limit
 from ilcdob.design.multi_source import SourceTrial, multi_source_learning
+from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.display import html_table
 
-from .scenarios import Scenario, scenario
+from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, simulate_flight
 
 __all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "learning_chain", "law_delta_sets", "run_scenario",
@@ -83,13 +93,14 @@ class SystemResult:
     learning: tuple[Flight, ...]
 
     def metrics(self) -> dict[str, object]:
-        """RMSE figures for results.json (m, and m/s^2 for ``rmse_dhat_*``)."""
+        """RMSE figures for results.json (m, and m/s^2 for ``rmse_dhat_*`` and ``peak_d_f_learning``)."""
         return {
             "rmse_no_dob": self.no_dob.rmse,
             "rmse_dob": self.dob.rmse,
             "rmse_learning": [f.rmse for f in self.learning],
             "rmse_dhat_dob": self.dob.rmse_dhat,
             "rmse_dhat_learning": [f.rmse_dhat for f in self.learning],
+            "peak_d_f_learning": [float(np.max(np.abs(f.d_f))) for f in self.learning],
         }
 
 
@@ -148,6 +159,10 @@ class ReproductionResult:
         Run time of the simulations, s.
     law : str
         The learning law (:mod:`ilcdob.design.laws`).
+    sensor_noise_std : float
+        Position-sensor noise of every flight, m (0: exact sensors).
+    bandwidth : "auto", float or None
+        The learning band asked for (:mod:`ilcdob.design.band`).
     """
 
     fleet: Fleet
@@ -156,6 +171,8 @@ class ReproductionResult:
     filters: dict[tuple[str, str], LearningFilters]
     elapsed_s: float
     law: str = DEFAULT_LAW
+    sensor_noise_std: float = 0.0
+    bandwidth: object = "auto"
 
     def _ratios(self) -> list[tuple[int, str, dict[str, float]]]:
         return [(sr.scenario.id, name, sr.systems[name].metrics()) for sr in self.scenarios for name in sr.order]
@@ -181,7 +198,9 @@ class ReproductionResult:
             "fleet": self.fleet.source,
             "sample_time": self.fleet.sample_time,
             "iterations": self.iterations,
-            "units": {"rmse": "m", "rmse_dhat": "m/s^2"},
+            "sensor_noise_std_m": self.sensor_noise_std,
+            "bandwidth": self.bandwidth,
+            "units": {"rmse": "m", "rmse_dhat": "m/s^2", "peak_d_f": "m/s^2"},
             "scenarios": [s.to_dict() for s in self.scenarios],
         }
 
@@ -190,7 +209,9 @@ class ReproductionResult:
         return [
             f"Fleet: `{PurePath(self.fleet.source).name}` ({', '.join(self.fleet.names)}), sample time "
             f"{self.fleet.sample_time} s, exact models (Case I of the Theorem: each simulated plant is its "
-            f"model), {self.iterations} learning "
+            f"model), "
+            + (f"{1e3 * self.sensor_noise_std:g} mm of white position-sensor noise, " if self.sensor_noise_std else "")
+            + f"{self.iterations} learning "
             "iterations. Regenerate with `ilcdob reproduce"
             + ("" if self.law == "paper" else f" --law {self.law}")
             + " --out <dir>`; numbers are in `results.json`."]
@@ -374,9 +395,17 @@ def law_delta_sets(fleet: Fleet, k: int = 8, seed: int = 0) -> dict[str, DeltaSe
             if s.identification is not None or s.uncertainty is not None}
 
 
+def _check_noise(sensor_noise_std: object) -> float:
+    v = sensor_noise_std
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= v < 0.1):
+        raise SpecError(f"`sensor_noise_std`: got {v!r}, expected a standard deviation in [0, 0.1) m")
+    return float(v)
+
+
 def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
                  filters: dict | None = None, law: str = DEFAULT_LAW,
-                 deltas: dict[str, DeltaSet] | None = None) -> ScenarioResult:
+                 deltas: dict[str, DeltaSet] | None = None, sensor_noise_std: float = 0.0, seed: int = 0,
+                 bandwidth: object = "auto", order: list[str] | None = None) -> ScenarioResult:
     """Fly one scenario for every system: no DOB, only DOB, ``iterations`` learning trials.
 
     Parameters
@@ -391,46 +420,74 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
         Learning law (module docstring, :mod:`ilcdob.design.laws`).
     deltas : dict name -> DeltaSet, optional
         ``multi-source``: the confidence weights' Delta sets (default :func:`law_delta_sets`).
+    sensor_noise_std : float
+        White position-sensor noise of every flight, m (module docstring).
+    seed : int
+        Seed of the sensor noise.
+    bandwidth : "auto", float or None
+        The learning band (:func:`ilcdob.design.pair.design_pair`).
+    order : list of str, optional
+        Learning order by system name (:func:`~ilcdob.validation.scenarios.check_order`);
+        None (default): the scenario's (:meth:`Scenario.order`).
 
     Raises
     ------
     SpecError
-        ``iterations`` or ``law`` invalid.
+        ``iterations``, ``law``, ``sensor_noise_std`` or ``order`` invalid.
     """
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
         raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
     law = check_law(law)
+    noise_std = _check_noise(sensor_noise_std)
     filters = {} if filters is None else filters
     ts = fleet.sample_time
     t = sc.time(ts)
     r = sc.reference(t)
     a_ref = sc.acceleration(t)
     wind = sc.disturbance(t)
-    order = sc.order(fleet.names)
+    order = sc.order(fleet.names) if order is None else check_order(fleet.names, order)
     specs = {s.name: s for s in fleet.systems}
     dist = {name: wind + specs[name].noise(t) for name in order}
-    base = {}
-    for name in order:
-        lp = fleet.loop(name)
-        base[name] = (simulate_flight(lp, r, dist[name], mode="no_dob", a_ref=a_ref),
-                      simulate_flight(lp, r, dist[name], mode="dob", a_ref=a_ref))
+    index = {name: i for i, name in enumerate(fleet.names)}
+    trials = {name: 0 for name in order}
+
+    def fly(name: str, mode: str, d_f: np.ndarray | None = None) -> Flight:
+        noise = None
+        if noise_std > 0:
+            rng = np.random.default_rng(np.random.SeedSequence([int(seed), 2000 + sc.id, index[name], trials[name]]))
+            noise = rng.normal(0.0, noise_std, t.size)
+        trials[name] += 1
+        return simulate_flight(fleet.loop(name), r, dist[name], d_f=d_f, mode=mode, a_ref=a_ref, sensor_noise=noise)
+
+    base = {name: (fly(name, "no_dob"), fly(name, "dob")) for name in order}
     latest: dict[str, Flight] = {order[0]: base[order[0]][1]}  # multi-source: each system's last trial
     if law == "multi-source" and deltas is None:
         deltas = law_delta_sets(fleet)
-    refs: dict[tuple[str, str], object] = {}
+    designs: dict[tuple[str, str], PairDesign] = {}
     powers: dict = {}  # multi-source: error powers of the Delta sets, computed once per system
 
     def step(src: str, tgt: str, prev: Flight) -> Flight:
+        if law != "multi-source":
+            _filters_for(fleet, filters, src, tgt)  # the pair's L1, L2 for the figures
+        if (src, tgt) not in designs:
+            reference = {"reference": r, "acceleration": a_ref} if law == "exact-reference" else {}
+            designs[(src, tgt)] = design_pair(fleet, src, tgt, "closed-form", bandwidth=bandwidth,
+                                              law=DEFAULT_LAW if law == "multi-source" else law, **reference)
+        design = designs[(src, tgt)]
         if law == "multi-source":
-            trials = [SourceTrial(fleet.loop(name), f.e, f.d_f, deltas.get(name)) for name, f in latest.items()]
-            df = multi_source_learning(fleet.loop(tgt), trials, power_cache=powers)
-        elif law == "exact-reference":
-            if (src, tgt) not in refs:
-                refs[(src, tgt)] = reference_terms(fleet.loop(src), fleet.loop(tgt), r, a_ref)
-            df = refs[(src, tgt)].wrap(_filters_for(fleet, filters, src, tgt).apply)(prev.e, prev.d_f)
+            names = list(latest)
+            band = design.band_for(prev.measured_error, prev.d_f)
+
+            def learn(*signals: np.ndarray) -> np.ndarray:
+                srcs = [SourceTrial(fleet.loop(nm), signals[2 * i], signals[2 * i + 1], deltas.get(nm))
+                        for i, nm in enumerate(names)]
+                return multi_source_learning(fleet.loop(tgt), srcs, power_cache=powers)
+
+            df = band.apply_trials(learn, [x for nm in names for x in (latest[nm].measured_error, latest[nm].d_f)])
+            df, _ = enforce_limit(df, design.limits, design.on_limit, f"learning signal of {tgt}", band.describe())
         else:
-            df = _filters_for(fleet, filters, src, tgt).apply(prev.e, prev.d_f)
-        flight = simulate_flight(fleet.loop(tgt), r, dist[tgt], d_f=df, a_ref=a_ref)
+            df = design.learning(prev.measured_error, prev.d_f).d_f
+        flight = fly(tgt, "dob", df)
         latest[tgt] = flight
         return flight
 
@@ -441,7 +498,9 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
 
 
 def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: int = 3,
-              progress: Callable[[int, int, str], None] | None = None, law: str = DEFAULT_LAW) -> ReproductionResult:
+              progress: Callable[[int, int, str], None] | None = None, law: str = DEFAULT_LAW,
+              sensor_noise_std: float = 0.0, seed: int = 0, bandwidth: object = "auto",
+              order: list[str] | None = None) -> ReproductionResult:
     """Run the listed scenarios on ``fleet`` (see module docstring).
 
     Parameters
@@ -457,6 +516,15 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
         ``total``, and a line saying which one finished and its run time. None: silent.
     law : {"paper", "exact-reference", "multi-source"}
         Learning law (module docstring); recorded in the result.
+    sensor_noise_std : float
+        White position-sensor noise of every flight, m (0: exact sensors).
+    seed : int
+        Seed of the sensor noise.
+    bandwidth : "auto", float or None
+        The learning band (:func:`ilcdob.design.pair.design_pair`).
+    order : list of str, optional
+        Learning order by system name, flown in every scenario
+        (:func:`~ilcdob.validation.scenarios.check_order`); None (default): each scenario's.
 
     Returns
     -------
@@ -466,9 +534,11 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
     Raises
     ------
     SpecError
-        Bad scenario id, ``iterations`` or ``law``.
+        Bad scenario id, ``iterations``, ``law`` or ``order``.
     """
     law = check_law(law)
+    order = None if order is None else check_order(fleet.names, order)
+    noise_std = _check_noise(sensor_noise_std)
     start = time.perf_counter()
     filters: dict = {}
     deltas = law_delta_sets(fleet) if law == "multi-source" else None
@@ -476,9 +546,10 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
     for i, sid in enumerate(scenario_ids, 1):
         sc = scenario(sid)
         t0 = time.perf_counter()
-        results.append(run_scenario(fleet, sc, iterations, filters, law, deltas))
+        results.append(run_scenario(fleet, sc, iterations, filters, law, deltas, noise_std, seed, bandwidth, order))
         if progress is not None:
             progress(i, len(scenario_ids), f"scenario {sid} ({sc.title}, law {law}): "
                                            f"{time.perf_counter() - t0:.1f} s")
     return ReproductionResult(fleet=fleet, scenarios=results, iterations=iterations,
-                              filters=filters, elapsed_s=time.perf_counter() - start, law=law)
+                              filters=filters, elapsed_s=time.perf_counter() - start, law=law,
+                              sensor_noise_std=noise_std, bandwidth=bandwidth)

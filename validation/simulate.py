@@ -13,11 +13,15 @@ the maps. Per sample ``k``::
     plant input = u2[k] + d[k]
 
 Modes: ``"no_dob"`` (d_hat = 0 and no learning signal), ``"dob"`` (with ``d_f`` if given).
+
+With position-sensor noise ``n`` the controller and the DOB see the measured position
+``y_m = y + n`` (``e_m = r - y_m``, ``d_hat = M{y_m} - Q{u2}``); the flight records both the
+true and the measured signals, and its RMSE is that of the true error.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -59,6 +63,9 @@ class Flight:
         Learning signal flown (zeros if none).
     u2 : array, m/s^2
         Signal sent to the plant.
+    y_meas, e_meas : arrays, m
+        Measured position and tracking error (what the controller, the DOB and the learning
+        see); empty when the sensor is exact (then :attr:`measured_error` is ``e``).
     """
 
     system: str
@@ -71,6 +78,13 @@ class Flight:
     d_hat: np.ndarray
     d_f: np.ndarray
     u2: np.ndarray
+    y_meas: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    e_meas: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def measured_error(self) -> np.ndarray:
+        """The tracking error as measured (``e_meas``; ``e`` when the sensor is exact), m."""
+        return self.e_meas if self.e_meas.size else self.e
 
     @property
     def rmse(self) -> float:
@@ -89,7 +103,7 @@ def _mats(sys):
 
 
 def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None = None,
-                    mode: str = "dob", a_ref: object | None = None) -> Flight:
+                    mode: str = "dob", a_ref: object | None = None, sensor_noise: object | None = None) -> Flight:
     """Simulate one trial of ``loop`` from rest.
 
     Parameters
@@ -105,6 +119,8 @@ def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None =
     a_ref : array, m/s^2, optional
         Reference acceleration ``d^2 r/dt^2``; fed forward when the controller's
         ``acceleration_feedforward`` is on, ignored (by design) otherwise.
+    sensor_noise : array, m, optional
+        Position-sensor noise added to the measured output (module docstring).
     """
     if mode not in ("dob", "no_dob"):
         raise SpecError(f"`mode`: got {mode!r}, expected 'dob' or 'no_dob'")
@@ -115,6 +131,7 @@ def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None =
     aff = np.zeros(n)
     if a_ref is not None and loop.spec.controller.acceleration_feedforward:
         aff = as_signal(a_ref, "a_ref", n)
+    noise = None if sensor_noise is None else as_signal(sensor_noise, "sensor_noise", n)
     if mode == "no_dob" and np.any(df):
         raise SpecError("`d_f`: a learning signal needs the DOB loop (mode='dob')")
     ap, bp, cp, dp = _mats(loop.P)
@@ -127,15 +144,17 @@ def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None =
     xq, xm = np.zeros(aq.shape[0]), np.zeros(am.shape[0])
     y, e, dh, u2 = (np.zeros(n) for _ in range(4))
     use_dob = mode == "dob"
+    nz = np.zeros(n) if noise is None else noise
     for k in range(n):
         yk = cp @ xp
-        ek = r[k] - yk
+        ymk = yk + nz[k]
+        ek = r[k] - ymk
         u1 = cc @ xc + dc * ek + aff[k]
         if use_dob:
-            dhk = (cm @ xm + dm * yk) - cq @ xq
+            dhk = (cm @ xm + dm * ymk) - cq @ xq
             u2k = u1 - dhk - df[k]
             xq = aq @ xq + bq * u2k
-            xm = am @ xm + bm * yk
+            xm = am @ xm + bm * ymk
         else:
             dhk = 0.0
             u2k = u1
@@ -143,4 +162,7 @@ def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None =
         xc = ac @ xc + bc * ek
         y[k], e[k], dh[k], u2[k] = yk, ek, dhk, u2k
     t = np.arange(n) * loop.ts
-    return Flight(system=loop.name, mode=mode, t=t, r=r, y=y, e=e, d=d, d_hat=dh, d_f=df, u2=u2)
+    if noise is None:
+        return Flight(system=loop.name, mode=mode, t=t, r=r, y=y, e=e, d=d, d_hat=dh, d_f=df, u2=u2)
+    return Flight(system=loop.name, mode=mode, t=t, r=r, y=y, e=r - y, d=d, d_hat=dh, d_f=df, u2=u2,
+                  y_meas=y + noise, e_meas=e)

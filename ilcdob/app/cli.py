@@ -2,7 +2,8 @@
 
 Argument parsing and dispatch only: every command is a use case of
 :mod:`ilcdob.app.commands`, which Python users can call directly. Exit status: 0 success;
-1 a check that ran and did not hold (``check``; ``identify --min-fit``); 2 bad input or
+1 a check that ran and did not hold (``check``; ``identify --min-fit``; a learning signal beyond
+the acceleration limit with ``design --on-limit refuse``); 2 bad input or
 usage; 3 a solver or numerical failure, or an internal error (a bug: reported in one line).
 """
 
@@ -13,7 +14,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 
-from ilcdob.errors import IlcdobError, NumericalError
+from ilcdob.errors import IlcdobError, LearningLimitError, NumericalError
 
 from .console import CheckFailed, Console, run_command
 from .output import version
@@ -94,6 +95,10 @@ def _ids(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _names(text: str) -> list[str]:
+    return [n.strip() for n in text.split(",")]
+
+
 def _methods(text: str) -> list[str]:
     return [m.strip() for m in text.split(",") if m.strip()]
 
@@ -111,7 +116,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--plant", choices=("linear", "nonlinear"), default="linear",
                    help="linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors")
-    p.add_argument("--seed", type=int, default=0, help="--plant nonlinear: seed of the sensor noise")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    p.add_argument("--sensor-noise", type=float, default=None,
+                   help="white position-sensor noise of every flight, m (default: 0 linear, 0.0005 nonlinear)")
+    _band_options(p)
+    p.add_argument("--order", type=_names, default=None,
+                   help="learning order of every scenario, comma-separated system names, each once, at least two "
+                        "(default: scenario 4 flies the 1st, 3rd, 2nd system of a three-system fleet, the others "
+                        "the file order)")
     p = _sub(sub, "identify", "fit a continuous-time transfer function to flight data; write model.json")
     p.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
     p.add_argument("--input", required=True, help="input signal: COLUMN, TOPIC.FIELD (ULog) or MESSAGE.FIELD")
@@ -130,6 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--validate", nargs="*", default=[], help="held-out data files")
     p.add_argument("--start", type=float, default=None, help="segment start, s (log clock)")
     p.add_argument("--stop", type=float, default=None, help="segment end, s (log clock)")
+    p.add_argument("--segment", type=float, default=None, metavar="SECONDS",
+                   help="cut every file (estimation and --validate alike) into consecutive windows of SECONDS, each "
+                        "fitted with its own initial condition; a last piece of at most half a window joins the one "
+                        "before it (default: each file whole)")
     p.add_argument("--out", required=True, help="model.json to write")
     p.add_argument("--plot", default=None, help="folder for the compare/residual/Bode figures")
     p = _sub(sub, "design", "design the learning filters of one system from another; write filters and C code")
@@ -144,11 +160,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trial", default=None, help="CSV of the source's trial: time (s), error (m), learning (m/s^2)")
     p.add_argument("--c-prefix", default=None, help="prefix of the C symbols (default: ilcdob_<from>_<to>_)")
     p.add_argument("--c-float", action="store_true", help="also emit float C functions, with their measured error")
+    _band_options(p)
+    p.add_argument("--disturbance", choices=("command", "airframe"), default="command",
+                   help="where the disturbance acts: added to the command (the paper's loop) or on the airframe "
+                        "(wind: adds the attitude-chain correction)")
+    p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
+                   help="a learning signal beyond the fleet's acceleration limit of --to: clip it (with a warning) or "
+                        "refuse it (exit 1)")
     p = _sub(sub, "check", "the Theorem's condition |Delta| < |1 + P C|/2 per pair and frequency (exit 1: fails)")
     _common(p, None)
     p.add_argument("--order", default=None, help="learning order, comma-separated names (default: file order)")
     p.add_argument("--bound", type=float, default=None, help="multiplicative uncertainty bound (default: identified)")
     p.add_argument("--scale", type=float, default=1.0, help="scale of the identified standard deviations")
+    _band_options(p)
     p.add_argument("--out", default=None, help="JSON file for the check (default: print only)")
     p = _sub(sub, "compare", "fly every design through a scenario, nominal and over the Delta set")
     _common(p, "optional", law=True)
@@ -197,6 +221,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _band_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bandwidth", default="auto",
+                   help="corner of the learning band, rad/s; 'auto' chooses it from the trial's noise and the "
+                        "models' trusted band (the fleet's sensor noise, limits and Delta sets without a trial); "
+                        "'off': the Theorem's filters unfiltered")
+
+
 def _delta_options(p: argparse.ArgumentParser, samples: bool = True) -> None:
     if samples:
         p.add_argument("--samples", type=_pos, default=8, help="Delta-set samples per system")
@@ -221,7 +252,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     console = Console(quiet=args.quiet)
     try:
         return run_command(args, argv, console)
-    except CheckFailed as exc:
+    except (CheckFailed, LearningLimitError) as exc:
         console.error(str(exc), kind="check")
         return 1
     except NumericalError as exc:

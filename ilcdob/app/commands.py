@@ -74,7 +74,8 @@ def _write_folder(out: str | Path, provenance: Provenance, *maps: dict[str, Any]
 def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, scenarios: Sequence[int] = (1, 2, 3, 4),
                         iterations: int = 3, plant: str = "linear", seed: int = 0, law: str = "paper",
                         figures: bool = True, overwrite: bool = False, progress: Progress | None = None,
-                        argv: Sequence[str] | None = None) -> Any:
+                        argv: Sequence[str] | None = None, order: Sequence[str] | None = None,
+                        sensor_noise: float | None = None, bandwidth: object = "auto") -> Any:
     """Run the paper's scenarios on a fleet and write the reproduction folder (paper Sec. IV).
 
     Parameters
@@ -90,9 +91,9 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     plant : {"linear", "nonlinear"}
         linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors.
     seed : int
-        Nonlinear plant: seed of the sensor noise.
+        Seed of the sensor noise.
     law : str
-        Learning law (:mod:`ilcdob.design.laws`).
+        Learning law (:mod:`ilcdob.design.laws`; the nonlinear plant: paper or exact-reference).
     figures : bool
         Write the PNG figures.
     overwrite : bool
@@ -101,31 +102,48 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         ``progress(done, total, what)``.
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
+    order : sequence of str, optional
+        Learning order by system name, flown in every scenario
+        (:func:`ilcdob.validation.scenarios.check_order`); None: each scenario's (scenario 4
+        flies the 1st, 3rd, 2nd system of a three-system fleet, the others the file order).
+    sensor_noise : float, optional
+        White position-sensor noise of every flight, m (default: 0 on the linear plant,
+        0.5 mm on the nonlinear one).
+    bandwidth : "auto", float or None
+        The learning band (:mod:`ilcdob.design.band`).
 
     Returns
     -------
     ReproductionResult
     """
     from ilcdob.design.laws import check_law
+    from ilcdob.validation.scenarios import check_order
 
     law = check_law(law, "--law")
     if plant not in ("linear", "nonlinear"):
         raise SpecError(f"`plant`: got {plant!r}, expected 'linear' or 'nonlinear'")
-    if plant == "nonlinear" and law != "paper":
-        raise SpecError(f"`--law {law}` with `--plant nonlinear`: the nonlinear reproduction flies the paper's law "
-                        "with its flight-implementation additions (ilcdob.design.flown) and has no other law; use "
-                        "--plant linear, or --law paper")
+    if plant == "nonlinear" and law == "multi-source":
+        raise SpecError("`--law multi-source` with `--plant nonlinear`: the nonlinear vehicles learn one pair at a time "
+                        "(the airframe correction is per pair); use --law paper or exact-reference, or --plant linear")
+    from ilcdob.design.band import check_bandwidth
+
+    bandwidth = check_bandwidth(bandwidth, None)
     check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet)
+    order = None if order is None else check_order(flt.names, order, "--order")
     if plant == "nonlinear":
         from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
 
-        res = reproduce_nonlinear(flt if fleet else None, list(scenarios), iterations, NonlinearSettings(seed=seed),
-                                  progress=progress)
+        noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
+        settings = NonlinearSettings(seed=seed, bandwidth=bandwidth, **noise)
+        res = reproduce_nonlinear(flt if fleet else None, list(scenarios), iterations, settings, progress=progress,
+                                  order=order, law=law)
     else:
         from ilcdob.validation.reproduce import reproduce
 
-        res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress)
+        res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress, order=order,
+                        sensor_noise_std=0.0 if sensor_noise is None else sensor_noise, seed=seed,
+                        bandwidth=bandwidth)
     _write_folder(out, _provenance("reproduce", argv, digest, res.law), res.files(figures=figures),
                   report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures), overwrite=overwrite)
     return res
@@ -146,6 +164,15 @@ class IdentifyInputs:
         Unit of that column: s, ms, us or ns (None: the file's ``# units:`` line, else s).
     start, stop : float or None
         Segment of the log, s on its clock.
+    segment : float or None
+        Cut every loaded file (estimation and held-out alike) into consecutive windows of this
+        many seconds, each fitted with its own initial condition (:func:`ilcdob.signals.segments`:
+        a last piece of at most half a window joins the window before it). None: each file whole.
+
+    Raises
+    ------
+    SpecError
+        ``segment`` is not a finite number > 0.
     """
 
     input: str
@@ -154,6 +181,13 @@ class IdentifyInputs:
     time_unit: str | None = None
     start: float | None = None
     stop: float | None = None
+    segment: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.segment is not None:
+            from ilcdob.signals import segments
+
+            segments([], self.segment, name="--segment")  # the value alone; window sizes once the files are read
 
     def load(self, files: Sequence[str | Path]) -> list[Any]:
         """Load ``files`` as FlightData with signals ``u`` and ``y``.
@@ -206,21 +240,34 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     Returns
     -------
     tuple of (TFEstimate, list of FlightData, list of FlightData)
-        The estimate, the estimation and the held-out data.
+        The estimate, the estimation and the held-out data as fitted (the windows of
+        ``inputs.segment``, else one FlightData per file).
+
+    Raises
+    ------
+    SpecError
+        A window of ``inputs.segment`` holds fewer samples than the fit needs
+        (:func:`ilcdob.identification.tfest.min_samples`).
     """
     from ilcdob.identification.plots import fit_figures
-    from ilcdob.identification.tfest import tfest
+    from ilcdob.identification.tfest import min_samples, tfest
+    from ilcdob.signals import segments
 
     check_output_path(out, folder=False)
     if plot is not None:
         check_output_path(plot, folder=True)
     est_data = inputs.load(files)
     val_data = inputs.load(validate)
+    if inputs.segment is not None:
+        need = min_samples(structure)
+        est_data = segments(est_data, inputs.segment, min_samples=need, name="--segment")
+        val_data = segments(val_data, inputs.segment, min_samples=need, name="--segment")
     est = tfest(est_data, "u", "y", structure, options, validation=val_data or None, progress=progress)
     prov = _provenance("identify", argv)
     data = est.to_dict()
     data["signals"] = {"input": inputs.input, "output": inputs.output}
     data["files"] = {"estimation": [str(f) for f in files], "validation": [str(f) for f in validate]}
+    data["segment_s"] = None if inputs.segment is None else float(inputs.segment)
     data["provenance"] = prov.to_dict()
     if plot is not None:
         _write_folder(plot, prov, fit_figures(est, est_data, val_data))
@@ -276,7 +323,8 @@ def _csv_header(path: str | Path) -> list[str]:
 def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | Path | None = None,
                      method: str = "closed-form", rho: float = 0.95, samples: int = 8, bound: float | None = None,
                      n: int | None = None, law: str = "paper", trial: str | Path | None = None,
-                     c_prefix: str | None = None, c_float: bool = False, overwrite: bool = False,
+                     c_prefix: str | None = None, c_float: bool = False, bandwidth: object = "auto",
+                     disturbance: str = "command", on_limit: str = "clip", overwrite: bool = False,
                      argv: Sequence[str] | None = None) -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
@@ -307,6 +355,14 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         Prefix of the C symbols.
     c_float : bool
         Also emit float C functions.
+    bandwidth : "auto", float or None
+        The learning band's corner, rad/s (:mod:`ilcdob.design.band`): ``"auto"`` chooses it
+        from the trial (or the fleet without one); None or ``"off"``: no filter.
+    disturbance : {"command", "airframe"}
+        Where the disturbance acts (:mod:`ilcdob.design.flown`).
+    on_limit : {"clip", "refuse"}
+        A learning signal beyond the target's acceleration limit: clip it (with a
+        :class:`~ilcdob.design.limit.LearningLimitWarning`) or refuse it.
     overwrite : bool
         Replace a non-empty folder that ilcdob did not write.
     argv : sequence of str, optional
@@ -320,7 +376,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     from ilcdob.design.c_export import check_c_prefix, design_files
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.design.laws import check_law
-    from ilcdob.design.pair import design_pair, fleet_delta_sets
+    from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
     from ilcdob.identification.loaders import load_csv
     from ilcdob.lifted import check_lifted_size
@@ -369,19 +425,34 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         reference = {"reference": data["r"], "acceleration": data["a"] if "a" in data.signals else None}
     design = design_pair(flt, source, target, method, n=n, deltas=deltas,
                          robust=RobustOptions(rho=rho) if method in ("robust", "robust-set") else None,
-                         law=law, **reference)
+                         law=law, bandwidth=bandwidth, disturbance=disturbance, on_limit=on_limit,
+                         **reference)
+    if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
+        e_in = design.reference.error_in(data["e"]) if design.reference is not None else data["e"]
+        design = design_with_band(design, design.band_for(e_in, data["d_f"]))
     filters = dict(design.filters)
     others: dict[str, Any] = {}
     arrays = design.lifted
-    if data is not None and design.robust is not None:
-        terms = design.reference
-        res = design.robust.design(terms.error_in(data["e"]) if terms else data["e"], data["d_f"])
-        d_f = terms.signal_out(res.d_f) if terms else res.d_f
-        filters["trial"] = {"worst_ratio": res.worst_ratio, "ratios": res.ratios.tolist(), "rho": res.rho,
-                            "status": res.status, "solve_time_s": res.solve_time}
-        arrays = {"d_f": res.d_f, "ratios": res.ratios, "predicted_errors": res.errors}
-    elif data is not None:
-        d_f = design.learn(data["e"], data["d_f"])
+    if data is not None:
+        socp: list[Any] = []  # the robust SOCP's result on the (band-filtered) trial
+
+        def robust_learn(e: np.ndarray, df: np.ndarray) -> np.ndarray:
+            socp.append(design.robust.design(e, df))
+            return socp[-1].d_f
+
+        signal = design.learning(data["e"], data["d_f"], learn=robust_learn if design.robust is not None else None)
+        d_f = signal.d_f
+        filters["trial"] = {"file": str(trial), "samples": len(data),
+                            "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))),
+                                                "rms_m_s2": float(np.sqrt(np.mean(d_f ** 2)))}}
+        if signal.limit is not None:
+            filters["trial"]["limit"] = signal.limit.to_dict()
+        if socp:
+            res = socp[-1]
+            filters["trial"].update({"worst_ratio": res.worst_ratio, "ratios": res.ratios.tolist(), "rho": res.rho,
+                                     "status": res.status, "solve_time_s": res.solve_time,
+                                     "horizon_samples": int(res.d_f.size)})
+            arrays = {"d_f": d_f, "ratios": res.ratios, "predicted_errors": res.errors}
     if arrays is not None:
         others["lifted.npz"] = lambda path, a=arrays: np.savez(path, **a)
     if data is not None:
@@ -399,9 +470,10 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
 
 
 def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, order: Sequence[str] | None = None,
-                  bound: float | None = None, scale: float = 1.0, samples: int = 8,
+                  bound: float | None = None, scale: float = 1.0, samples: int = 8, bandwidth: object = "auto",
                   argv: Sequence[str] | None = None) -> list[Any]:
-    """The Theorem's condition per pair and frequency (paper Sec. III), optionally as JSON.
+    """The Theorem's condition per pair and frequency (paper Sec. III), unfiltered and with the
+    learning band of each pair's law, optionally as JSON.
 
     Parameters
     ----------
@@ -417,6 +489,9 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
         Scale of the identified standard deviations.
     samples : int
         Sampled plants per Delta set.
+    bandwidth : "auto", float or None
+        The learning band of every pair's law (:mod:`ilcdob.design.band`; "auto": chosen from
+        the fleet's sensor noise, limits and the same Delta sets).
     argv : sequence of str, optional
         Command line, recorded in the file.
 
@@ -424,8 +499,8 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     -------
     list of PairCheck
     """
-    from ilcdob.design.pair import fleet_delta_sets
-    from ilcdob.design.theorem import theorem_check
+    from ilcdob.design.pair import fleet_delta_sets, pair_band
+    from ilcdob.design.theorem import learning_pairs, theorem_check
 
     if out is not None:
         check_output_path(out, folder=False)
@@ -434,7 +509,8 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     for name in order:
         flt.loop(name)  # unknown names: a clear error
     deltas = fleet_delta_sets(flt, order, k=samples, bound=bound, scale=scale)
-    checks = theorem_check(flt, order, deltas)
+    bands = {(s, t): pair_band(flt, s, t, bandwidth, deltas=deltas) for s, t in learning_pairs(flt.names, order)}
+    checks = theorem_check(flt, order, deltas, bands=bands)
     if out is not None:
         write_file(out, {"order": order, "pairs": [c.to_dict() for c in checks],
                          "provenance": _provenance("check", argv, digest).to_dict()})

@@ -1,0 +1,524 @@
+"""The learning band: where learning acts, and how its corner is chosen (docs/theory.md section 6).
+
+Every learning filter of the Theorem contains the inverse of the previous vehicle's
+disturbance map, ``L1_j = -(1 - Q_j) Gd_{j-1}^{-1}`` (paper Sec. III), whose gain grows like
+``1/P_hat ~ s^2 (tau s + 1)``. On recorded trials two things break the exact inverse:
+
+* **sensor noise**: white position noise of 0.5 mm through ``1/P_hat`` becomes tens to
+  thousands of m/s^2 of learning signal at the Nyquist frequency, far beyond what a vehicle
+  can fly;
+* **model error**: where ``|Delta_{j-1}|`` reaches the Theorem's bound ``|1 + P C|/2`` the
+  learning makes the error worse, not better.
+
+The learning law therefore passes a zero-phase low-pass *F* (Butterworth of order ``n``,
+run forwards and backwards) before and after the learning filter, over a horizon extended
+at both ends::
+
+    d_f,j = crop( F{ W{ learn( F{H{gamma e_{j-1}}}, F{H{d_f,{j-1}}} ) } } )
+
+``learn`` is the method's learning filter (the Theorem's ``L1{.} + L2{.}`` for the closed
+form), ``W`` the optional airframe correction (:mod:`ilcdob.design.flown`), ``H`` the
+extension of the trial by ``pad`` samples at each end (zeros before ``t = 0``, where the
+vehicle is at rest; after the end the line fitted to the last :data:`END_FIT_S` seconds) and
+``crop`` keeps the trial's samples. With ``F = W = gamma = 1`` it is the Theorem's law. Per
+frequency the filtered law leaves ``e_j = (1 - |F|) e'_j + |F| e_j,Theorem``: where ``F = 1``
+it learns as the Theorem, where ``F = 0`` it leaves the error the DOB alone leaves.
+
+The corner ``w_c`` (:func:`choose_band`) is the smallest of three edges, each from what is
+known:
+
+``signal``
+    From a trial: the highest frequency at which the error's spectrum (Welch) stands
+    :data:`SNR_MIN` times above its noise floor (the median of the upper half of the band,
+    where a vehicle's error is sensor noise). Above it the trial carries no information
+    about the disturbance, only noise.
+``noise budget``
+    From the noise level (measured on the trial, or ``sensor.noise_std`` of the fleet) and
+    the vehicle's acceleration limit: the largest corner whose noise-driven learning signal
+    has an RMS of at most :data:`NOISE_SHARE` of the limit.
+``model``
+    From the previous vehicle's Delta set (identification covariance or stated bound): the
+    largest corner at which the filtered law's first-order worst case
+    ``1 - |F| + |F| |Delta| / (|1 + P C|/2)`` exceeds 1 by at most
+    :data:`AMPLIFICATION_TOL` at any frequency.
+
+No edge (noise-free data, no noise level, models trusted everywhere), or an edge above
+:data:`OFF_FRACTION` of the Nyquist frequency, leaves the Theorem's filters unfiltered.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from scipy import signal as sps
+from scipy.integrate import trapezoid
+
+from ilcdob.errors import SpecError
+from ilcdob.signals import as_signal
+
+__all__ = ["LearningBand", "NoiseEstimate", "estimate_noise", "choose_band", "check_bandwidth",
+           "learning_horizon", "END_FIT_S", "FILTER_ORDER", "SNR_MIN", "NOISE_RESOLUTION", "NOISE_SHARE", "AMPLIFICATION_TOL",
+           "OFF_FRACTION", "PAD_PERIODS"]
+
+#: Length of the trial end fitted by the line that extends it (:func:`learning_horizon`), s.
+END_FIT_S = 0.25
+#: Order of F's Butterworth prototype (each pass; F runs forwards and backwards, twice).
+FILTER_ORDER = 4
+#: The error's spectrum must stand this many times above the noise floor to be learned (6 dB).
+#: With about 15 Welch averages (segments of ~N/8 samples, half overlap) a bin of pure
+#: noise scatters around the floor with a standard deviation of ~0.26 of it: 4 is ~12
+#: standard deviations above, so noise alone does not cross it.
+SNR_MIN = 4.0
+#: A noise below this standard deviation, m, is rounding, not a sensor (no position sensor
+#: resolves a nanometre): the data count as noise-free.
+NOISE_RESOLUTION = 1e-9
+#: Share of the acceleration limit that the RMS of the noise-driven learning signal may use
+#: (its peaks, about 4 RMS over a trial, then stay below half the limit).
+NOISE_SHARE = 0.1
+#: The filtered law may make the error at most this much worse at any frequency (first order).
+AMPLIFICATION_TOL = 0.01
+#: A corner above this share of the Nyquist frequency leaves the law unfiltered.
+OFF_FRACTION = 0.5
+#: Samples added at each end of the trial: this many periods of the corner frequency, where
+#: F's impulse response has decayed.
+PAD_PERIODS = 6
+
+_LOWEST = 1e-3   # lowest corner, as a share of the Nyquist frequency
+
+
+def _line_tail(x: np.ndarray, n_fit: int, n_pad: int) -> np.ndarray:
+    """``n_pad`` samples continuing ``x`` along the least-squares line through its last ``n_fit`` samples."""
+    m = min(n_fit, x.size)
+    k = np.arange(m, dtype=float)
+    coef = np.polyfit(k, x[-m:], 1) if m > 1 else np.array([0.0, x[-1]])
+    return np.polyval(coef, np.arange(m, m + n_pad, dtype=float))
+
+
+def end_fit_samples(ts: float) -> int:
+    """Samples of the trial end the extension's line is fitted to: :data:`END_FIT_S` s, at least 2.
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+    """
+    return max(2, int(round(END_FIT_S / ts)))
+
+
+def learning_horizon(x: object, ts: float, pad: int) -> np.ndarray:
+    """Extend one trial by ``pad`` samples at each end, as it is flown.
+
+    Before ``t = 0`` the vehicle hovers at rest (zeros); after the end the signal continues
+    along the least-squares line through its last :data:`END_FIT_S` seconds (long enough to
+    average sensor noise, short enough to follow the trend at the end). A mirror image
+    would bend the signal flat at the end and a point reflection about the last (noisy)
+    sample adds a step; fed through the plant inverse, either grew from one learning
+    iteration to the next on the nonlinear vehicles.
+
+    Parameters
+    ----------
+    x : array
+        One trial's signal, ``N`` samples.
+    ts : float
+        Sample time, s.
+    pad : int
+        Samples added at each end (>= 0; 0 returns ``x``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``N + 2 pad`` samples, ``x`` at ``[pad:pad + N]``.
+    """
+    x = as_signal(x, "x")
+    if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or pad < 0:
+        raise SpecError(f"`pad`: got {pad!r}, expected an integer number of samples >= 0")
+    if pad == 0:
+        return x
+    return np.concatenate([np.zeros(pad), x, _line_tail(x, end_fit_samples(ts), pad)])
+
+
+def check_bandwidth(value: object, ts: float | None, what: str = "--bandwidth") -> float | str | None:
+    """A bandwidth request: ``"auto"``, ``None``/``"off"`` or a corner in (0, Nyquist) rad/s.
+
+    Parameters
+    ----------
+    value : object
+        The request; strings ``"auto"``, ``"off"`` or a number in text are accepted.
+    ts : float or None
+        Sample time, s (None: the corner is only checked to be positive and finite).
+    what : str
+        Name of the input in the message.
+
+    Returns
+    -------
+    float or "auto" or None
+        The corner (rad/s), ``"auto"`` or ``None`` (no filter).
+    """
+    if value is None or (isinstance(value, str) and value.strip().lower() == "off"):
+        return None
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    nyq = math.pi / ts if ts is not None else math.inf
+    try:
+        wc = float(value) if not isinstance(value, bool) else float("nan")  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        wc = float("nan")
+    if not (math.isfinite(wc) and 0.0 < wc < nyq):
+        where = f"(0, {nyq:.4g}) rad/s (the Nyquist frequency at Ts = {ts:g} s)" if ts is not None else "rad/s > 0"
+        raise SpecError(f"`{what}`: got {value!r}, expected 'auto', 'off' or a corner frequency in {where}")
+    return wc
+
+
+@dataclass(frozen=True)
+class LearningBand:
+    """The robustness filter F of the learning law (module docstring) and why its corner is where it is.
+
+    Attributes
+    ----------
+    ts : float
+        Sample time, s.
+    cutoff : float or None
+        Corner ``w_c`` of F's Butterworth prototype, rad/s; ``None``: no filter (the
+        Theorem's filters as they are, on the trial as recorded).
+    order : int
+        Butterworth order ``n`` of each pass (1..8).
+    source : str
+        ``"stated"`` (given), ``"data"`` (chosen from a trial), ``"fleet"`` (chosen from the
+        fleet's Delta set, sensor noise and limit) or ``"off"``.
+    edges : dict of str to float or None
+        The candidate corners (rad/s) that were computed: ``signal``, ``noise budget``,
+        ``model``; None where the edge does not limit.
+    noise_std : float or None
+        Position-noise standard deviation used, m (measured on the trial or stated).
+    reason : str
+        One sentence on the choice.
+    """
+
+    ts: float
+    cutoff: float | None
+    order: int = FILTER_ORDER
+    source: str = "stated"
+    edges: dict[str, float | None] = field(default_factory=dict)
+    noise_std: float | None = None
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.ts, (int, float)) and math.isfinite(self.ts) and self.ts > 0):
+            raise SpecError(f"`ts`: got {self.ts!r}, expected a sample time > 0 s")
+        if self.cutoff is not None:
+            object.__setattr__(self, "cutoff", check_bandwidth(self.cutoff, self.ts, "cutoff"))
+        n = self.order
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 8:
+            raise SpecError(f"`order`: got {n!r}, expected an integer in 1..8")
+
+    @property
+    def sos(self) -> np.ndarray | None:
+        """Second-order sections of one pass of F (``scipy.signal.butter``), None without a filter."""
+        if self.cutoff is None:
+            return None
+        return sps.butter(self.order, self.cutoff / (math.pi / self.ts), output="sos")
+
+    @property
+    def pad(self) -> int:
+        """Samples added at each end of the trial (:data:`PAD_PERIODS` periods of the corner)."""
+        if self.cutoff is None:
+            return 0
+        return int(PAD_PERIODS * math.ceil(2 * math.pi / self.cutoff / self.ts))
+
+    def response(self, w: object) -> np.ndarray:
+        """The gain of F on the learning signal, ``|H(e^{j w Ts})|^4`` (two forward-backward passes).
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Real gains in [0, 1] (ones without a filter).
+        """
+        w = np.asarray(w, dtype=float)
+        if self.cutoff is None:
+            return np.ones_like(w)
+        _, h = sps.sosfreqz(self.sos, worN=w * self.ts)
+        return np.abs(h) ** 4
+
+    def smooth(self, x: np.ndarray) -> np.ndarray:
+        """One forward-backward pass of F over an extended trial (``sosfiltfilt``, no padding).
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            The extended trial (:func:`learning_horizon`).
+
+        Returns
+        -------
+        numpy.ndarray
+            The filtered signal (``x`` itself without a filter).
+        """
+        if self.cutoff is None:
+            return x
+        return sps.sosfiltfilt(self.sos, x, padtype=None)
+
+    def apply_trials(self, learn: Callable[..., np.ndarray], signals: Sequence[object],
+                     path: np.ndarray | None = None) -> np.ndarray:
+        """``crop(F{W{learn(F{H{x_1}}, ..., F{H{x_k}})}})`` on one trial (module docstring).
+
+        Parameters
+        ----------
+        learn : callable
+            The learning filter: takes the ``k`` extended, filtered signals and returns the
+            learning signal on the same (extended) horizon.
+        signals : sequence of array
+            The trial's signals (errors in m, learning signals in m/s^2), all ``N`` samples.
+        path : numpy.ndarray, optional
+            Second-order sections of the airframe correction W, run causally after ``learn``.
+
+        Returns
+        -------
+        numpy.ndarray
+            The learning signal, m/s^2, ``N`` samples.
+        """
+        xs = [as_signal(x, f"signal {i}") for i, x in enumerate(signals)]
+        n = xs[0].size
+        for i, x in enumerate(xs[1:], 1):
+            as_signal(x, f"signal {i}", n)
+        pad = self.pad
+        ext = [self.smooth(learning_horizon(x, self.ts, pad)) if np.any(x) else np.zeros(n + 2 * pad) for x in xs]
+        y = np.asarray(learn(*ext), dtype=float)
+        if path is not None:
+            y = sps.sosfilt(path, y)
+        return self.smooth(y)[pad:pad + n]
+
+    def apply(self, learn: Callable[[np.ndarray, np.ndarray], np.ndarray], e_prev: object, df_prev: object,
+              path: np.ndarray | None = None, gain: float = 1.0) -> np.ndarray:
+        """The learning signal of vehicle j from vehicle j-1's trial through F (module docstring).
+
+        Parameters
+        ----------
+        learn : callable
+            ``learn(e, df) -> d_f`` of the method (m, m/s^2 -> m/s^2).
+        e_prev : array, m
+            Vehicle j-1's measured tracking error.
+        df_prev : array, m/s^2
+            The learning signal it flew (zeros if none).
+        path : numpy.ndarray, optional
+            Sections of the airframe correction W.
+        gain : float
+            Learning gain ``gamma`` in (0, 1] on the new error (1: the Theorem's law).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``d_f,j``, m/s^2, same length as ``e_prev``.
+        """
+        e = as_signal(e_prev, "e_prev")
+        df = as_signal(df_prev, "df_prev", e.size)
+        if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not 0.0 < gain <= 1.0:
+            raise SpecError(f"`gain`: got {gain!r}, expected a learning gain in (0, 1]")
+        return self.apply_trials(learn, [gain * e if gain != 1.0 else e, df], path)
+
+    def describe(self) -> str:
+        """One line: the corner (or no filter) and why."""
+        if self.cutoff is None:
+            return f"no filter ({self.reason})" if self.reason else "no filter"
+        return f"{self.cutoff:.4g} rad/s ({self.source}; {self.reason})" if self.reason else f"{self.cutoff:.4g} rad/s"
+
+    def to_dict(self) -> dict[str, Any]:
+        """What ``filters.json`` records (key ``band``): the corner, why, and F's coefficients.
+
+        Returns
+        -------
+        dict
+            ``cutoff_rad_s`` (None: no filter), ``order``, ``source``, ``reason``, ``edges_rad_s``,
+            ``noise_std_m``, and with a filter ``sos`` (one pass), ``zi`` (the steady-state
+            state per unit input, ``scipy.signal.sosfilt_zi``, that the backward passes start
+            from), ``pad`` and ``end_fit`` (samples).
+        """
+        out: dict[str, Any] = {"cutoff_rad_s": self.cutoff, "order": int(self.order), "source": self.source,
+                               "reason": self.reason, "edges_rad_s": dict(self.edges), "noise_std_m": self.noise_std}
+        if self.cutoff is not None:
+            sos = self.sos
+            out.update({"sos": sos.tolist(), "zi": sps.sosfilt_zi(sos).tolist(), "pad": self.pad,
+                        "end_fit": end_fit_samples(self.ts),
+                        "rule": "d_f = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}}): H extends the trial by `pad` "
+                                "samples (zeros before, the line through the last `end_fit` samples after); F is "
+                                "`sos` run forwards then backwards (scipy.signal.sosfiltfilt, padtype=None)"})
+        return out
+
+
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """The noise floor of a trial's error and the band where the error stands above it.
+
+    Attributes
+    ----------
+    std : float
+        Standard deviation of the white part of the error, m (``sqrt(floor fs / 2)``).
+    floor : float
+        One-sided noise power density, m^2/Hz: the median Welch density over the upper half
+        of the band.
+    edge : float or None
+        Highest frequency where the density is at least :data:`SNR_MIN` x ``floor``, rad/s;
+        None when it stays above up to the Nyquist frequency or the floor is not resolved.
+    f : numpy.ndarray
+        Welch frequencies, Hz.
+    psd : numpy.ndarray
+        Welch density, m^2/Hz.
+    """
+
+    std: float
+    floor: float
+    edge: float | None
+    f: np.ndarray
+    psd: np.ndarray
+
+
+def estimate_noise(e: object, ts: float) -> NoiseEstimate:
+    """Noise floor and signal edge of one trial's tracking error (module docstring, ``signal`` edge).
+
+    Welch's method (Hann windows of a power of two near ``N/8`` samples, 64 to 4096, half
+    overlap, each segment's line removed). The floor is the median density above half the
+    Nyquist frequency: there a vehicle's measured error is its sensor noise. A floor below
+    ``1e-14`` of the peak density, or a noise below :data:`NOISE_RESOLUTION`, is not resolved
+    (noise-free data, rounding): ``std = 0``, no edge.
+
+    Parameters
+    ----------
+    e : array, m
+        The trial's measured tracking error (at least 64 samples).
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    NoiseEstimate
+    """
+    e = as_signal(e, "e_prev")
+    if e.size < 64:
+        raise SpecError(f"`e_prev`: got {e.size} samples, expected at least 64 to estimate the noise floor")
+    nper = int(min(4096, max(64, 2 ** round(math.log2(e.size / 8)))))
+    f, p = sps.welch(e, fs=1.0 / ts, nperseg=nper, detrend="linear")
+    nyq = 0.5 / ts
+    floor = float(np.median(p[f >= 0.5 * nyq]))
+    peak = float(np.max(p))
+    std = math.sqrt(max(floor, 0.0) / (2.0 * ts))
+    if peak <= 0.0 or floor <= 1e-14 * peak or std < NOISE_RESOLUTION:
+        return NoiseEstimate(0.0, floor, None, f, p)
+    above = np.flatnonzero(p >= SNR_MIN * floor)
+    edge = None
+    if above.size and f[above[-1]] < 0.5 * nyq:
+        edge = float(2 * math.pi * max(f[above[-1]], f[1]))
+    elif not above.size:
+        edge = float(2 * math.pi * f[1])
+    return NoiseEstimate(std, floor, edge, f, p)
+
+
+def _largest_corner(ts: float, ok: Callable[[float], bool], order: int) -> float | None:
+    """The largest corner in [1e-3 Nyquist, Nyquist) with ``ok(corner)`` (monotone: true below some
+    corner), by bisection in log frequency; None when the Nyquist end is already ok."""
+    nyq = math.pi / ts
+    hi, lo = 0.999 * nyq, _LOWEST * nyq
+    if ok(hi):
+        return None
+    if not ok(lo):
+        return lo
+    for _ in range(40):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if ok(mid) else (lo, mid)
+        if hi / lo < 1.001:
+            break
+    return lo
+
+
+def _noise_budget_edge(ts: float, order: int, noise_std: float, a_max: float,
+                       l1_gain: Callable[[np.ndarray], np.ndarray]) -> float | None:
+    """Largest corner with ``noise_std sqrt(Ts/pi int |L1 W|^2 |F|^2 dw) <= NOISE_SHARE a_max``."""
+    w = np.linspace(0.0, math.pi / ts, 4097)[1:]
+    g2 = np.abs(l1_gain(w)) ** 2
+    budget = NOISE_SHARE * a_max
+
+    def ok(wc: float) -> bool:
+        f2 = LearningBand(ts, wc, order, "stated").response(w) ** 2
+        rms = noise_std * math.sqrt(ts / math.pi * trapezoid(g2 * f2, w))
+        return rms <= budget
+
+    return _largest_corner(ts, ok, order)
+
+
+def _model_edge(ts: float, order: int, w: np.ndarray, ratio: np.ndarray) -> float | None:
+    """Largest corner with ``max F(w) (ratio(w) - 1)_+ <= AMPLIFICATION_TOL`` (``ratio = |Delta|/rhs``)."""
+    excess = np.maximum(np.asarray(ratio, float) - 1.0, 0.0)
+    if not np.any(excess > 0):
+        return None
+
+    def ok(wc: float) -> bool:
+        return float(np.max(LearningBand(ts, wc, order, "stated").response(w) * excess)) <= AMPLIFICATION_TOL
+
+    return _largest_corner(ts, ok, order)
+
+
+def choose_band(ts: float, request: object = "auto", *, error: object | None = None, noise_std: float | None = None,
+                a_max: float | None = None, l1_gain: Callable[[np.ndarray], np.ndarray] | None = None,
+                trust: tuple[np.ndarray, np.ndarray] | None = None, order: int = FILTER_ORDER) -> LearningBand:
+    """The learning band for one pair: stated, or chosen from a trial and the fleet (module docstring).
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+    request : "auto", None/"off" or float
+        ``"auto"`` chooses; ``None`` or ``"off"``: no filter; a number: that corner, rad/s.
+    error : array, m, optional
+        The previous vehicle's measured tracking error on the trial learned from (``signal``
+        edge and noise level).
+    noise_std : float, optional
+        Stated position-noise standard deviation, m (used when no ``error`` is given).
+    a_max : float, optional
+        The learning vehicle's acceleration limit, m/s^2 (``noise budget`` edge).
+    l1_gain : callable, optional
+        ``w -> |L1 W|(e^{j w Ts})`` of the pair (``noise budget`` edge).
+    trust : (w, ratio), optional
+        Frequencies (rad/s) and ``|Delta_{j-1}| / (|1 + P C|/2)`` of the previous vehicle's
+        Delta set (``model`` edge).
+    order : int
+        Butterworth order of F.
+
+    Returns
+    -------
+    LearningBand
+    """
+    request = check_bandwidth(request, ts)
+    if request is None:
+        return LearningBand(ts, None, order, "off", reason="the Theorem's filters unfiltered (asked for)")
+    edges: dict[str, float | None] = {}
+    std = noise_std
+    if error is not None:
+        est = estimate_noise(error, ts)
+        edges["signal"] = est.edge
+        std = est.std
+    if std and a_max is not None and l1_gain is not None:
+        edges["noise budget"] = _noise_budget_edge(ts, order, std, a_max, l1_gain)
+    if trust is not None:
+        edges["model"] = _model_edge(ts, order, *trust)
+    if request != "auto":
+        return LearningBand(ts, float(request), order, "stated", edges, std, "stated with --bandwidth")
+    source = "data" if error is not None else "fleet"
+    finite = {k: v for k, v in edges.items() if v is not None}
+    nyq = math.pi / ts
+    if not finite:
+        why = ("the trial's error has no resolved noise floor" if error is not None
+               else "no trial, no stated sensor noise") + (" and the models are trusted at every frequency"
+                                                           if trust is not None else "")
+        return LearningBand(ts, None, order, "off", edges, std, why)
+    name = min(finite, key=finite.get)
+    wc = finite[name]
+    if wc >= OFF_FRACTION * nyq:
+        return LearningBand(ts, None, order, "off", edges, std,
+                            f"every edge is above {OFF_FRACTION:g} x Nyquist (lowest: {name}, {wc:.4g} rad/s)")
+    return LearningBand(ts, wc, order, source, edges, std, f"set by the {name} edge")
+
