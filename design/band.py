@@ -59,8 +59,8 @@ from scipy.integrate import trapezoid
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal
 
-__all__ = ["LearningBand", "NoiseEstimate", "estimate_noise", "choose_band", "check_bandwidth",
-           "learning_horizon", "END_FIT_S", "FILTER_ORDER", "SNR_MIN", "NOISE_RESOLUTION", "NOISE_SHARE", "AMPLIFICATION_TOL",
+__all__ = ["LearningBand", "NoiseEstimate", "estimate_noise", "choose_band", "check_bandwidth", "learning_horizon",
+           "END_FIT_S", "FILTER_ORDER", "SNR_MIN", "NOISE_RESOLUTION", "NOISE_SHARE", "AMPLIFICATION_TOL",
            "OFF_FRACTION", "PAD_PERIODS"]
 
 #: Length of the trial end fitted by the line that extends it (:func:`learning_horizon`), s.
@@ -108,7 +108,7 @@ def end_fit_samples(ts: float) -> int:
     return max(2, int(round(END_FIT_S / ts)))
 
 
-def learning_horizon(x: object, ts: float, pad: int) -> np.ndarray:
+def learning_horizon(x: object, ts: float, pad: int, n_fit: int | None = None) -> np.ndarray:
     """Extend one trial by ``pad`` samples at each end, as it is flown.
 
     Before ``t = 0`` the vehicle hovers at rest (zeros); after the end the signal continues
@@ -126,6 +126,8 @@ def learning_horizon(x: object, ts: float, pad: int) -> np.ndarray:
         Sample time, s.
     pad : int
         Samples added at each end (>= 0; 0 returns ``x``).
+    n_fit : int, optional
+        Samples the line is fitted to (default :func:`end_fit_samples` of ``ts``).
 
     Returns
     -------
@@ -137,7 +139,8 @@ def learning_horizon(x: object, ts: float, pad: int) -> np.ndarray:
         raise SpecError(f"`pad`: got {pad!r}, expected an integer number of samples >= 0")
     if pad == 0:
         return x
-    return np.concatenate([np.zeros(pad), x, _line_tail(x, end_fit_samples(ts), pad)])
+    n_fit = end_fit_samples(ts) if n_fit is None else n_fit
+    return np.concatenate([np.zeros(pad), x, _line_tail(x, n_fit, pad)])
 
 
 def check_bandwidth(value: object, ts: float | None, what: str = "--bandwidth") -> float | str | None:
@@ -325,7 +328,7 @@ class LearningBand:
     def describe(self) -> str:
         """One line: the corner (or no filter) and why."""
         if self.cutoff is None:
-            return f"no filter ({self.reason})" if self.reason else "no filter"
+            return f"off: {self.reason}" if self.reason else "off"
         return f"{self.cutoff:.4g} rad/s ({self.source}; {self.reason})" if self.reason else f"{self.cutoff:.4g} rad/s"
 
     def to_dict(self) -> dict[str, Any]:
@@ -418,7 +421,7 @@ def estimate_noise(e: object, ts: float) -> NoiseEstimate:
     return NoiseEstimate(std, floor, edge, f, p)
 
 
-def _largest_corner(ts: float, ok: Callable[[float], bool], order: int) -> float | None:
+def _largest_corner(ts: float, ok: Callable[[float], bool]) -> float | None:
     """The largest corner in [1e-3 Nyquist, Nyquist) with ``ok(corner)`` (monotone: true below some
     corner), by bisection in log frequency; None when the Nyquist end is already ok."""
     nyq = math.pi / ts
@@ -447,7 +450,7 @@ def _noise_budget_edge(ts: float, order: int, noise_std: float, a_max: float,
         rms = noise_std * math.sqrt(ts / math.pi * trapezoid(g2 * f2, w))
         return rms <= budget
 
-    return _largest_corner(ts, ok, order)
+    return _largest_corner(ts, ok)
 
 
 def _model_edge(ts: float, order: int, w: np.ndarray, ratio: np.ndarray) -> float | None:
@@ -459,7 +462,7 @@ def _model_edge(ts: float, order: int, w: np.ndarray, ratio: np.ndarray) -> floa
     def ok(wc: float) -> bool:
         return float(np.max(LearningBand(ts, wc, order, "stated").response(w) * excess)) <= AMPLIFICATION_TOL
 
-    return _largest_corner(ts, ok, order)
+    return _largest_corner(ts, ok)
 
 
 def choose_band(ts: float, request: object = "auto", *, error: object | None = None, noise_std: float | None = None,
@@ -494,7 +497,7 @@ def choose_band(ts: float, request: object = "auto", *, error: object | None = N
     """
     request = check_bandwidth(request, ts)
     if request is None:
-        return LearningBand(ts, None, order, "off", reason="the Theorem's filters unfiltered (asked for)")
+        return LearningBand(ts, None, order, "off", reason="the method's filters unfiltered, as asked")
     edges: dict[str, float | None] = {}
     std = noise_std
     if error is not None:

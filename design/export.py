@@ -31,6 +31,7 @@ from scipy import signal
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 
+from .band import learning_horizon
 from .noncausal import ZPKFilter
 
 __all__ = ["zpk_to_coefficients", "apply_coefficients", "apply_learning", "direct_form_grid",
@@ -203,14 +204,6 @@ def _forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndar
     return y[::-1]
 
 
-def _horizon(x: np.ndarray, pad: int, n_fit: int) -> np.ndarray:
-    """Zeros before, the least-squares line through the last ``n_fit`` samples after."""
-    m = min(n_fit, x.size)
-    k = np.arange(m, dtype=float)
-    coef = np.polyfit(k, x[-m:], 1) if m > 1 else np.array([0.0, x[-1]])
-    return np.concatenate([np.zeros(pad), x, np.polyval(coef, np.arange(m, m + pad, dtype=float))])
-
-
 def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> np.ndarray:
     """The learning law of a ``filters.json`` computed from its coefficients alone.
 
@@ -251,9 +244,9 @@ def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> 
         y = apply_coefficients(filters["L1"], e) + apply_coefficients(filters["L2"], df)
         return signal.sosfilt(np.asarray(w_sos, float), y) if w_sos is not None else y
     sos, zi = np.asarray(band["sos"], float), np.asarray(band["zi"], float)
-    pad, n_fit = int(band["pad"]), int(band["end_fit"])
-    x1 = _forward_backward(sos, zi, _horizon(e, pad, n_fit))
-    x2 = _forward_backward(sos, zi, _horizon(df, pad, n_fit))
+    pad, n_fit, ts = int(band["pad"]), int(band["end_fit"]), float(filters["sample_time"])
+    x1 = _forward_backward(sos, zi, learning_horizon(e, ts, pad, n_fit))
+    x2 = _forward_backward(sos, zi, learning_horizon(df, ts, pad, n_fit))
     y = apply_coefficients(filters["L1"], x1) + apply_coefficients(filters["L2"], x2)
     if w_sos is not None:
         y = signal.sosfilt(np.asarray(w_sos, float), y)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ilcdob.errors import LearningLimitError, SpecError
+from ilcdob.errors import LearningLimitError, LearningLimitWarning, SpecError
 from ilcdob.signals import as_signal
 from ilcdob.specs import LimitSpec
 
@@ -27,10 +27,6 @@ __all__ = ["LimitReport", "LearningLimitError", "LearningLimitWarning", "enforce
 
 #: What to do with a learning signal beyond the limit: clip it (with a warning) or refuse it.
 LIMIT_POLICIES = ("clip", "refuse")
-
-
-class LearningLimitWarning(UserWarning):
-    """A learning signal exceeded the learning vehicle's acceleration limit and was clipped."""
 
 
 @dataclass(frozen=True)

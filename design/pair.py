@@ -22,10 +22,11 @@ acceleration limit (:mod:`.limit`). The C code of a design runs the same chain f
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import partial
+from functools import cache, partial
 from typing import Any, Callable
 
 import numpy as np
+from scipy import signal as sps
 
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
@@ -52,6 +53,10 @@ __all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law
            "DEFAULT_METHODS", "design_with_band"]
 
 METHODS = ("closed-form", "fir", "norm-optimal", "robust", "robust-set")
+#: The designs whose improvement is guaranteed over the Delta set by their own construction (the
+#: robust SOCP over its models, robust-set over the whole set): their learning band takes the
+#: noise edges only, the model edge is theirs (:func:`design_pair`).
+GUARANTEED = ("robust", "robust-set")
 #: The designs that comparisons and campaigns run unless told otherwise (robust-set takes a
 #: minute or more per source vehicle: on request).
 DEFAULT_METHODS = ("closed-form", "fir", "norm-optimal", "robust")
@@ -270,17 +275,19 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
 def _sos_gain(sos: np.ndarray | None, w: np.ndarray, ts: float) -> np.ndarray:
     if sos is None:
         return np.ones_like(w)
-    from scipy import signal as sps
-
     return np.abs(sps.sosfreqz(sos, worN=w * ts)[1])
 
 
 def _band_inputs(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, path: np.ndarray | None,
-                 deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters]) -> dict[str, Any]:
-    """What the band's choice knows from the fleet (:func:`~ilcdob.design.band.choose_band` keywords)."""
+                 deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters],
+                 model_edge: bool = True) -> dict[str, Any]:
+    """What the band's choice knows from the fleet (:func:`~ilcdob.design.band.choose_band` keywords);
+    without ``model_edge`` the Delta set is left out (designs that are robust to it themselves)."""
     specs = {s.name: s for s in fleet.systems}
     s_spec, t_spec = specs[src.name], specs[tgt.name]
-    if deltas is not None and src.name in deltas:
+    if not model_edge:
+        found = None
+    elif deltas is not None and src.name in deltas:
         found = (deltas[src.name].w, deltas[src.name].bound)
     else:
         b = delta_bound(s_spec, fleet.sample_time)
@@ -296,10 +303,11 @@ def _band_inputs(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, path: np.ndarra
 
 
 def _band_chooser(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, request: object, path: np.ndarray | None,
-                  deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters]
-                  ) -> Callable[..., LearningBand]:
+                  deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters],
+                  model_edge: bool = True) -> Callable[..., LearningBand]:
     """``choose(error=...)``: :func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound."""
-    return partial(choose_band, fleet.sample_time, request, **_band_inputs(fleet, src, tgt, path, deltas, closed_form))
+    return partial(choose_band, fleet.sample_time, request,
+                   **_band_inputs(fleet, src, tgt, path, deltas, closed_form, model_edge))
 
 
 def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto", *, error: object | None = None,
@@ -328,15 +336,9 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
         raise SpecError(f"`disturbance`: got {disturbance!r}, expected one of {list(DISTURBANCE_PATHS)}")
     src, tgt = fleet.loop(source), fleet.loop(target)
     path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
-    cache: list[LearningFilters] = []
-
-    def closed_form() -> LearningFilters:
-        if not cache:
-            cache.append(closed_form_filters(src, tgt))
-        return cache[0]
-
     request = check_bandwidth(bandwidth, fleet.sample_time)
-    return _band_chooser(fleet, src, tgt, request, path, deltas, closed_form)(error=error)
+    return _band_chooser(fleet, src, tgt, request, path, deltas, cache(partial(closed_form_filters, src, tgt)))(
+        error=error)
 
 
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
@@ -386,8 +388,9 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         The learning band's corner (:mod:`.band`): ``"auto"`` (default) chooses it per trial
         from the trial's error and the fleet (sensor noise, the target's acceleration limit, the
         source's Delta set); a number states it (rad/s); ``None`` or ``"off"``: the method's
-        filter as it is. ``robust`` with ``"auto"`` flies its SOCP's signal as it is: its
-        guarantee holds for that signal, and its weights already bound it.
+        filter as it is. For the designs of :data:`GUARANTEED` the automatic band leaves out
+        the model edge: they are robust to the Delta set by construction, and a band closed on
+        it only takes learning away (and, on whole trials, some of their guarantee).
     disturbance : {"command", "airframe"}
         Where the disturbance acts (:mod:`.flown`): at the command, as in the paper's loop, or
         on the airframe (adds the correction W; models with a rigid body to split off).
@@ -416,26 +419,13 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     request = check_bandwidth(bandwidth, fleet.sample_time)
     src, tgt = fleet.loop(source), fleet.loop(target)
     path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
-    cache: dict[str, LearningFilters] = {}
-
-    def closed_form() -> LearningFilters:
-        if "cf" not in cache:
-            cache["cf"] = closed_form_filters(src, tgt)
-        return cache["cf"]
-
+    closed_form = cache(partial(closed_form_filters, src, tgt))  # built once, when first needed
     head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
     if method in ("fir", "robust", "robust-set"):
         deltas = deltas or fleet_delta_sets(fleet, [source, target])
     design = _method_design(method, fleet, src, tgt, head, closed_form, n, norm_optimal, fir, deltas, robust,
                             relax, lifted, robust_set)
-    if method == "robust" and request == "auto":
-        band = LearningBand(fleet.sample_time, None, source="off",
-                            reason="the robust design's guarantee covers the learning signal its SOCP computes (whose "
-                                   "weights lam, mu already bound it): no band unless one is stated")
-        chooser = lambda error=None: band  # noqa: E731
-        request = None
-    else:
-        chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form)
+    chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=method not in GUARANTEED)
     limits = {s.name: s for s in fleet.systems}[target].limits
     filters = {**design.filters, "disturbance": {"at": disturbance,
                                                  **({"W": {"sos": path.tolist()}} if path is not None else {})}}

@@ -9,7 +9,7 @@ what is valid and, where there is one, the next step.
 from __future__ import annotations
 
 __all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError",
-           "NumericalError", "LearningLimitError"]
+           "NumericalError", "LearningLimitError", "LearningLimitWarning"]
 
 
 class IlcdobError(Exception):
@@ -45,3 +45,7 @@ class NumericalError(IlcdobError, ArithmeticError):
 class LearningLimitError(IlcdobError, ValueError):
     """A learning signal exceeds the learning vehicle's acceleration limit and was refused
     (a check that ran and did not hold: the command exits with status 1)."""
+
+
+class LearningLimitWarning(UserWarning):
+    """A learning signal exceeded the learning vehicle's acceleration limit and was clipped."""

@@ -430,12 +430,10 @@ def segments(flights: list[FlightData], length: float, *, min_samples: int = MIN
         ``length`` is not a finite number > 0, or a window of it holds fewer than
         ``min_samples`` samples at a flight's sample time.
     """
-    if isinstance(length, (bool, np.bool_, str, bytes)):
-        raise SpecError(f"`{name}`: got {length!r}, expected a window length in s (a finite number > 0)")
     try:
-        seconds = float(length)
+        seconds = float("nan") if isinstance(length, (bool, np.bool_, str, bytes)) else float(length)
     except (TypeError, ValueError):
-        raise SpecError(f"`{name}`: got {length!r}, expected a window length in s (a finite number > 0)") from None
+        seconds = float("nan")
     if not (np.isfinite(seconds) and seconds > 0):
         raise SpecError(f"`{name}`: got {length!r}, expected a window length in s (a finite number > 0)")
     out = []

@@ -28,7 +28,7 @@ _EXAMPLES = {
     "identify": "ilcdob identify flight.csv --input acc_cmd --output x --poles 3 --integrators 2 --delay auto "
                 "--out model.json",
     "identify-fleet": "ilcdob identify-fleet --out identified/",
-    "design": "ilcdob design --from UAV1 --to UAV2 --out design/",
+    "design": "ilcdob design --from UAV1 --to UAV2 --out uav1_uav2/",
     "check": "ilcdob check --fleet identified/identified_fleet.toml",
     "compare": "ilcdob compare --scenario 1 --out compare/",
     "extensions": "ilcdob extensions --out extensions/",
@@ -167,7 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
                    help="a learning signal beyond the fleet's acceleration limit of --to: clip it (with a warning) or "
                         "refuse it (exit 1)")
-    p = _sub(sub, "check", "the Theorem's condition |Delta| < |1 + P C|/2 per pair and frequency (exit 1: fails)")
+    p = _sub(sub, "check", "per pair and frequency: the paper's condition |Delta| < |1 + P C|/2 and the law with its "
+                           "learning band (exit 1: the law with its band can make the error worse)")
     _common(p, None)
     p.add_argument("--order", default=None, help="learning order, comma-separated names (default: file order)")
     p.add_argument("--bound", type=float, default=None, help="multiplicative uncertainty bound (default: identified)")

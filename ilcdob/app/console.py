@@ -14,7 +14,7 @@ import warnings
 import time
 from typing import Any
 
-from ilcdob.errors import SpecError
+from ilcdob.errors import LearningLimitWarning, SpecError
 
 from . import commands as uc
 
@@ -184,19 +184,10 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
 
 def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
-    from ilcdob.design.limit import LearningLimitWarning
-
-    with warnings.catch_warnings(record=True) as seen:
-        warnings.simplefilter("always", LearningLimitWarning)
-        design, written = uc.design_to_folder(
-            a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho, samples=a.samples, bound=a.bound,
-            n=a.n, law=a.law, trial=a.trial, c_prefix=a.c_prefix, c_float=a.c_float, bandwidth=a.bandwidth,
-            disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv)
-    for w in seen:
-        if issubclass(w.category, LearningLimitWarning):
-            con.error(str(w.message), kind="warning")
-        else:
-            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    design, written = uc.design_to_folder(
+        a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho, samples=a.samples, bound=a.bound,
+        n=a.n, law=a.law, trial=a.trial, c_prefix=a.c_prefix, c_float=a.c_float, bandwidth=a.bandwidth,
+        disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv)
     band = written.get("band", {})
     cutoff = band.get("cutoff_rad_s")
     con.note(f"ilcdob: learning band {'off' if cutoff is None else f'{cutoff:.4g} rad/s'} ({band.get('reason', '')})")
@@ -319,7 +310,16 @@ def run_command(args: argparse.Namespace, argv: list[str], console: Console) -> 
     console : Console
         Where progress and notes go.
     """
+    def limit_warning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        if issubclass(category, LearningLimitWarning):  # ilcdob's own: one line, as errors are
+            console.error(str(message), kind="warning")
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    default = warnings.showwarning
     try:
-        return _COMMANDS[args.command](args, argv, console)
+        with warnings.catch_warnings():
+            warnings.showwarning = limit_warning
+            return _COMMANDS[args.command](args, argv, console)
     finally:
         console.close()

@@ -575,8 +575,8 @@ def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any]
     """The Theorem check of every learning order (``theorem.json``) and its figure (None: no check)."""
     from matplotlib.figure import Figure
 
-    from ilcdob.design.pair import fleet_delta_sets
-    from ilcdob.design.theorem import format_theorem_table, theorem_check
+    from ilcdob.design.pair import fleet_delta_sets, pair_band
+    from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
 
     missing = [s.name for s in fleet.systems if s.identification is None]
     if missing:
@@ -585,11 +585,13 @@ def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any]
     data: dict[str, Any] = {"samples": THEOREM_SAMPLES, "seed": 0, "orders": []}
     first = None
     for order in orders:
-        checks = theorem_check(fleet, order, fleet_delta_sets(fleet, order, k=THEOREM_SAMPLES, seed=0))
+        deltas = fleet_delta_sets(fleet, order, k=THEOREM_SAMPLES, seed=0)
+        bands = {(a, b): pair_band(fleet, a, b, deltas=deltas) for a, b in learning_pairs(fleet.names, order)}
+        checks = theorem_check(fleet, order, deltas, bands=bands)
         first = first or checks
         data["orders"].append({"order": order, "table": format_theorem_table(checks),
-                               "pairs": [{k: v for k, v in c.to_dict().items() if k in _THEOREM_KEYS}
-                                         for c in checks]})
+                               "pairs": [{**{k: v for k, v in c.to_dict().items() if k in _THEOREM_KEYS},
+                                          "band_rad_s": c.band.cutoff} for c in checks]})
     fig = Figure(figsize=(4.0 * len(first), 3.2))
     for ax, c in zip(fig.subplots(1, len(first), squeeze=False)[0], first):
         ax.loglog(c.w, c.delta, label="|Delta_(j-1)| (3 sigma)")
@@ -602,7 +604,8 @@ def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any]
     return data, fig
 
 
-_THEOREM_KEYS = ("source", "target", "min_margin", "worst_w", "holds_everywhere", "failing_band", "delta_source")
+_THEOREM_KEYS = ("source", "target", "min_margin", "worst_w", "holds_everywhere", "failing_band", "delta_source",
+                 "amplification", "holds_filtered")
 
 
 def _theorem_html(folder: Path) -> str:
@@ -616,13 +619,20 @@ def _theorem_html(folder: Path) -> str:
     parts = ["<p>Learning helps at frequencies where |Delta_(j-1)| &lt; "
              "|1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III); |Delta| is the 3-sigma bound of the "
              f"identification ({data['samples']} sampled plants per Delta set, seed {data['seed']}); margin "
-             "= rhs / |Delta| (&gt; 1: holds).</p>"]
+             "= rhs / |Delta| (&gt; 1: holds). The law as flown learns through its learning band F "
+             "(<code>ilcdob.design.band</code>): its first-order error ratio is at most "
+             "1 - F + F |Delta| / (|1 + P C|/2); the verdict holds where that stays within 1.01.</p>"]
     for o in data["orders"]:
         rows = [[f"{c['source']} -> {c['target']}", "yes" if c["holds_everywhere"] else "NO", _fmt(c["min_margin"]),
                  f"{c['worst_w']:.4g}", "-" if c["failing_band"] is None else
-                 f"{c['failing_band'][0]:.4g} .. {c['failing_band'][1]:.4g}"] for c in o["pairs"]]
+                 f"{c['failing_band'][0]:.4g} .. {c['failing_band'][1]:.4g}",
+                 "off" if c.get("band_rad_s") is None else f"{c['band_rad_s']:.4g}",
+                 _fmt(c.get("amplification")),
+                 "-" if "holds_filtered" not in c else ("holds" if c["holds_filtered"] else "FAILS")]
+                for c in o["pairs"]]
         parts.append(f"<h3>Order {escape(' -> '.join(o['order']))}</h3>")
-        parts.append(_table(["pair", "holds", "min margin", "worst w (rad/s)", "failing band (rad/s)"], rows))
+        parts.append(_table(["pair", "paper's condition", "min margin", "worst w (rad/s)", "failing band (rad/s)",
+                             "learning band (rad/s)", "max ratio with band", "verdict"], rows))
         parts.append("<details><summary>as printed by <code>ilcdob check</code></summary>"
                      f'<pre class="plain">{escape(o["table"])}</pre></details>')
     parts.append(_file_figure(folder, "theorem.png", "The Theorem's condition per source system of the first "
