@@ -676,19 +676,14 @@ static void {prefix}w_pass(double *x, size_t n)
                 f"{w_step}"
                 f"    {prefix}band_pass(a, len);\n"
                 f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n    return 0;\n")
-    elif lp.w_sos is not None:
-        body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
-                f"    len = n;\n    a = work;\n    b = work + n;\n"
+    else:  # no band: W{L1{e} + L2{df_prev}} (W when present)
+        body = (f"    double *a, *b;\n    size_t {'len, ' if w_step else ''}k;\n\n{checks}"
+                + (f"    len = n;\n" if w_step else "")
+                + f"    a = work;\n    b = work + n;\n"
                 f"    {prefix}l1_apply(e, a, n);{note}\n"
                 f"    {prefix}l2_apply(df_prev, b, n);\n"
                 f"    for (k = 0; k < n; ++k)\n        a[k] = a[k] + b[k];\n{w_step}"
                 f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n    return 0;\n")
-    else:
-        body = (f"    double *a, *b;\n    size_t k;\n\n{checks}"
-                f"    a = work;\n    b = work + n;\n"
-                f"    {prefix}l1_apply(e, a, n);{note}\n"
-                f"    {prefix}l2_apply(df_prev, b, n);\n"
-                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k] + b[k];\n    return 0;\n")
     out.append(f"\nint {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, "
                f"double *work)\n{{\n{body}}}\n")
     return "".join(out)

@@ -20,7 +20,7 @@ import numpy as np
 from .errors import SpecError
 
 __all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "LimitSpec",
-           "SensorSpec", "SystemSpec", "GRAVITY",
+           "SensorSpec", "SystemSpec", "GRAVITY", "check_noise_std",
            "LTI_NUMERATOR_RTOL", "MAX_NOISE_AMPLITUDE", "COVARIANCE_RTOL", "as_polynomial", "check_covariance"]
 
 #: Largest process-noise amplitude a fleet may state, m/s^2 (about 100 g: far beyond any vehicle).
@@ -514,6 +514,22 @@ class LimitSpec:
         return f"{self.max_acceleration:.3g} m/s^2 ({', '.join(p for p in parts if p)})"
 
 
+def check_noise_std(value: object, name: str) -> float:
+    """A position-noise standard deviation in [0, 0.1) m, as a float; SpecError naming ``name`` otherwise.
+
+    Parameters
+    ----------
+    value : object
+        The value given.
+    name : str
+        The input's name, for the message.
+    """
+    v = float("nan") if isinstance(value, (bool, np.bool_)) else value
+    if not isinstance(v, (int, float, np.floating)) or not (0.0 <= v < 0.1):
+        raise SpecError(f"`{name}`: got {value!r}, expected a standard deviation in [0, 0.1) m")
+    return float(v)
+
+
 @dataclass(frozen=True)
 class SensorSpec:
     """The position sensor of the vehicle.
@@ -528,10 +544,8 @@ class SensorSpec:
     noise_std: float
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "noise_std", _real("sensor.noise_std", self.noise_std))
-        if not (math.isfinite(self.noise_std) and 0.0 <= self.noise_std < 0.1):
-            raise SpecError(f"`sensor.noise_std`: got {self.noise_std!r}, expected a standard deviation in "
-                            "[0, 0.1) m")
+        object.__setattr__(self, "noise_std", check_noise_std(_real("sensor.noise_std", self.noise_std),
+                                                              "sensor.noise_std"))
 
 
 @dataclass(frozen=True)

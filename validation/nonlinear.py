@@ -68,6 +68,7 @@ from ilcdob.fleet_io import fleet_to_toml
 from ilcdob.identification.fleet_id import VehicleIdentification, identified_systems, identify_vehicle
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
+from ilcdob.specs import check_noise_std
 from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
 
 from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain
@@ -122,10 +123,7 @@ class NonlinearSettings:
     inner_rate_hz: float = 500.0
 
     def __post_init__(self) -> None:
-        v = self.sensor_noise_std
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= v < 0.1):
-            raise SpecError(f"`sensor_noise_std`: got {v!r}, expected a standard deviation in [0, 0.1) m")
-        object.__setattr__(self, "sensor_noise_std", float(v))
+        object.__setattr__(self, "sensor_noise_std", check_noise_std(self.sensor_noise_std, "sensor_noise_std"))
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise SpecError(f"`seed`: got {self.seed!r}, expected an integer >= 0")
         if not isinstance(self.airframe_disturbance, bool):
@@ -249,8 +247,7 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
         raise SpecError(f"`loop`: got {type(loop).__name__}, expected a LoopSystem")
     if mode not in ("dob", "no_dob"):
         raise SpecError(f"`mode`: got {mode!r}, expected 'dob' or 'no_dob'")
-    if isinstance(noise_std, bool) or not isinstance(noise_std, (int, float)) or not (0.0 <= noise_std < 0.1):
-        raise SpecError(f"`noise_std`: got {noise_std!r}, expected a standard deviation in [0, 0.1) m")
+    noise_std = check_noise_std(noise_std, "noise_std")
     if noise_std > 0 and not isinstance(rng, np.random.Generator):
         raise SpecError(f"`rng`: got {rng!r}, expected a numpy.random.Generator when noise_std > 0")
     ts = loop.ts

@@ -51,6 +51,7 @@ from ilcdob.design.limit import enforce_limit
 from ilcdob.design.multi_source import SourceTrial, multi_source_learning
 from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
+from ilcdob.specs import check_noise_std
 from ilcdob.fleet import Fleet
 from ilcdob.display import html_table
 
@@ -395,13 +396,6 @@ def law_delta_sets(fleet: Fleet, k: int = 8, seed: int = 0) -> dict[str, DeltaSe
             if s.identification is not None or s.uncertainty is not None}
 
 
-def _check_noise(sensor_noise_std: object) -> float:
-    v = sensor_noise_std
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= v < 0.1):
-        raise SpecError(f"`sensor_noise_std`: got {v!r}, expected a standard deviation in [0, 0.1) m")
-    return float(v)
-
-
 def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
                  filters: dict | None = None, law: str = DEFAULT_LAW,
                  deltas: dict[str, DeltaSet] | None = None, sensor_noise_std: float = 0.0, seed: int = 0,
@@ -438,7 +432,7 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
         raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
     law = check_law(law)
-    noise_std = _check_noise(sensor_noise_std)
+    noise_std = check_noise_std(sensor_noise_std, "sensor_noise_std")
     filters = {} if filters is None else filters
     ts = fleet.sample_time
     t = sc.time(ts)
@@ -538,7 +532,7 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
     """
     law = check_law(law)
     order = None if order is None else check_order(fleet.names, order)
-    noise_std = _check_noise(sensor_noise_std)
+    noise_std = check_noise_std(sensor_noise_std, "sensor_noise_std")
     start = time.perf_counter()
     filters: dict = {}
     deltas = law_delta_sets(fleet) if law == "multi-source" else None
