@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -217,9 +218,10 @@ class LearningBand:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 8:
             raise SpecError(f"`order`: got {n!r}, expected an integer in 1..8")
 
-    @property
+    @cached_property
     def sos(self) -> np.ndarray | None:
-        """Second-order sections of one pass of F (``scipy.signal.butter``), None without a filter."""
+        """Second-order sections of one pass of F (``scipy.signal.butter``, designed once), None
+        without a filter."""
         if self.cutoff is None:
             return None
         return sps.butter(self.order, self.cutoff / (math.pi / self.ts), output="sos")
@@ -234,6 +236,11 @@ class LearningBand:
     def response(self, w: object) -> np.ndarray:
         """The gain of F on the learning signal, ``|H(e^{j w Ts})|^4`` (two forward-backward passes).
 
+        ``scipy.signal.butter`` designs ``H`` by the bilinear transform with the corner
+        prewarped, so ``|H|^2 = 1 / (1 + (tan(w Ts/2) / tan(w_c Ts/2))^(2n))`` exactly: the gain
+        is evaluated from that, without designing the filter (the corner searches of
+        :func:`choose_band` evaluate it for dozens of corners per trial).
+
         Parameters
         ----------
         w : array_like
@@ -247,8 +254,8 @@ class LearningBand:
         w = np.asarray(w, dtype=float)
         if self.cutoff is None:
             return np.ones_like(w)
-        _, h = sps.sosfreqz(self.sos, worN=w * self.ts)
-        return np.abs(h) ** 4
+        ratio = np.tan(0.5 * w * self.ts) / math.tan(0.5 * self.cutoff * self.ts)
+        return 1.0 / (1.0 + ratio ** (2 * self.order)) ** 2
 
     def smooth(self, x: np.ndarray) -> np.ndarray:
         """One forward-backward pass of F over an extended trial (``sosfiltfilt``, no padding).

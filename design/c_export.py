@@ -58,7 +58,6 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -381,9 +380,7 @@ def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
             raise SpecError(f"`{key}.{part}`: non-finite coefficient(s); expected finite numbers")
     lines = []
     if coeffs.get("sos"):
-        sos = np.asarray(coeffs["sos"], float)
-        if sos.ndim != 2 or sos.shape[1] != 6 or not np.all(sos[:, 3] == 1.0):
-            raise SpecError(f"`{key}.sos`: expected rows [b0, b1, b2, 1, a1, a2], got shape {sos.shape}")
+        sos = _sections(coeffs["sos"], f"{key}.sos")
         plural = "s" if sos.shape[0] > 1 else ""
         lines.append(f"/* {key}: {sos.shape[0]} second-order section{plural} in cascade, rows "
                      "b0 b1 b2 a0 a1 a2 (a0 = 1) */\n")
@@ -678,7 +675,7 @@ static void {prefix}w_pass(double *x, size_t n)
                 f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n    return 0;\n")
     else:  # no band: W{L1{e} + L2{df_prev}} (W when present)
         body = (f"    double *a, *b;\n    size_t {'len, ' if w_step else ''}k;\n\n{checks}"
-                + (f"    len = n;\n" if w_step else "")
+                + ("    len = n;\n" if w_step else "")
                 + f"    a = work;\n    b = work + n;\n"
                 f"    {prefix}l1_apply(e, a, n);{note}\n"
                 f"    {prefix}l2_apply(df_prev, b, n);\n"

@@ -48,7 +48,7 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
 
-__all__ = ["rigid_body_split", "model_attitude", "airframe_path_filter", "DISTURBANCE_PATHS"]
+__all__ = ["rigid_body_split", "model_attitude", "airframe_path_filter", "check_disturbance", "DISTURBANCE_PATHS"]
 
 #: Where the disturbance acts: ``command`` (the paper's loop, added to the command) or
 #: ``airframe`` (an acceleration on the rigid body, behind the attitude chain).
@@ -56,6 +56,20 @@ DISTURBANCE_PATHS = ("command", "airframe")
 
 _STRUCTURES = ("two integrators (rigid body 1/s^2), or one integrator and a real stable pole (rigid body with "
                "drag 1/(s (s + a)))")
+
+
+def check_disturbance(disturbance: object) -> str:
+    """Return ``disturbance`` if it is one of :data:`DISTURBANCE_PATHS`, else raise :class:`SpecError`.
+
+    Parameters
+    ----------
+    disturbance : object
+        Where the disturbance acts, as given.
+    """
+    if disturbance not in DISTURBANCE_PATHS:
+        raise SpecError(f"`disturbance`: got {disturbance!r}, expected one of {list(DISTURBANCE_PATHS)} (command: "
+                        "added to the command as in the paper's loop; airframe: an acceleration on the rigid body)")
+    return disturbance
 
 
 def rigid_body_split(plant: PlantSpec, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

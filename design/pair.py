@@ -32,7 +32,7 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.lifted import check_lifted_size
 from ilcdob.display import html_table
-from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 from ilcdob.specs import LimitSpec
 
@@ -41,7 +41,7 @@ from .closed_form import LearningFilters, closed_form_filters, simulate_map
 from .delta import DeltaSet, delta_bound, delta_set
 from .export import zpk_to_coefficients
 from .fir import FIROptions, design_fir
-from .flown import DISTURBANCE_PATHS, airframe_path_filter
+from .flown import airframe_path_filter, check_disturbance
 from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
 from .limit import LIMIT_POLICIES, LimitReport, enforce_limit
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
@@ -105,7 +105,8 @@ class PairDesign:
         ``exact-reference``: the pair's reference terms, applied by :meth:`learning`.
     band : LearningBand or None
         The learning band fixed at design time (what ``filters.json`` and the C code carry):
-        stated, or chosen from the trial given to :func:`design_pair` or from the fleet.
+        stated, chosen from the fleet by :func:`design_pair`, or from one trial by
+        :func:`design_with_band`.
     choose : callable or None
         With ``bandwidth="auto"``: ``choose(error=e)`` chooses the band of each trial from its
         error (:func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound).
@@ -332,8 +333,7 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
     -------
     LearningBand
     """
-    if disturbance not in DISTURBANCE_PATHS:
-        raise SpecError(f"`disturbance`: got {disturbance!r}, expected one of {list(DISTURBANCE_PATHS)}")
+    check_disturbance(disturbance)
     src, tgt = fleet.loop(source), fleet.loop(target)
     path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
     request = check_bandwidth(bandwidth, fleet.sample_time)
@@ -411,9 +411,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
                         "got one with law 'paper' (pass law='exact-reference')")
     if method not in METHODS:
         raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
-    if disturbance not in DISTURBANCE_PATHS:
-        raise SpecError(f"`disturbance`: got {disturbance!r}, expected one of {list(DISTURBANCE_PATHS)} (command: "
-                        "added to the command as in the paper's loop; airframe: an acceleration on the rigid body)")
+    check_disturbance(disturbance)
     if on_limit not in LIMIT_POLICIES:
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
     request = check_bandwidth(bandwidth, fleet.sample_time)

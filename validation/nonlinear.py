@@ -57,11 +57,9 @@ from typing import Callable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.design import closed_form_filters
 from ilcdob.design.band import check_bandwidth
 from ilcdob.design.flown import model_attitude
 from ilcdob.design.laws import DEFAULT_LAW, check_law
-from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.fleet_io import fleet_to_toml
@@ -71,7 +69,7 @@ from ilcdob.signals import as_signal
 from ilcdob.specs import check_noise_std
 from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
 
-from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain
+from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain, pair_designs
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, rmse
 
@@ -377,17 +375,6 @@ def _check_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams] | None,
     return {name: vehicles[name] for name in fleet.names}
 
 
-def _pair_design(fleet: Fleet, cache: dict, src: str, tgt: str, settings: NonlinearSettings, law: str,
-                 r: np.ndarray, a_ref: np.ndarray) -> PairDesign:
-    """The pair's closed-form design as ``ilcdob design`` makes it for these vehicles;
-    ``cache`` also receives its closed-form filters (for the figures)."""
-    if (src, tgt) not in cache:
-        cache[(src, tgt)] = closed_form_filters(fleet.loop(src), fleet.loop(tgt))
-    reference = {"reference": r, "acceleration": a_ref} if law == "exact-reference" else {}
-    return design_pair(fleet, src, tgt, "closed-form", law=law, bandwidth=settings.bandwidth,
-                       disturbance="airframe" if settings.airframe_disturbance else "command", **reference)
-
-
 def _rng(settings: NonlinearSettings, sid: int, index: int, trial: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(settings.seed), 1000 + sid, index, trial]))
 
@@ -454,12 +441,11 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
                         "is per pair); use 'paper' or 'exact-reference'")
     base = {name: (flight(name, 0, "no_dob"), flight(name, 1, "dob")) for name in order}
     flown = {name: 0 for name in order}  # learning flights so far: trial index of the noise seed
-    designs: dict[tuple[str, str], PairDesign] = {}
+    pair_design = pair_designs(fleet, filters, law, r, a_ref, settings.bandwidth,
+                               "airframe" if settings.airframe_disturbance else "command")
 
     def step(src: str, tgt: str, prev: NonlinearFlight) -> NonlinearFlight:
-        if (src, tgt) not in designs:
-            designs[(src, tgt)] = _pair_design(fleet, filters, src, tgt, settings, law, r, a_ref)
-        df = designs[(src, tgt)].learning(prev.e_meas, prev.d_f, gain=settings.learning_gain).d_f
+        df = pair_design(src, tgt).learning(prev.e_meas, prev.d_f, gain=settings.learning_gain).d_f
         flown[tgt] += 1
         return flight(tgt, 1 + flown[tgt], "dob", df)
 

@@ -58,7 +58,8 @@ from ilcdob.display import html_table
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, simulate_flight
 
-__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "learning_chain", "law_delta_sets", "run_scenario",
+__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "learning_chain", "law_delta_sets", "pair_designs",
+           "run_scenario",
            "reproduce", "markdown_index", "json_document", "FIGURE_TEXT"]
 
 #: Caption of each figure in the report's README.md (``error_s<N>`` and ``disturbance_s<N>``
@@ -377,6 +378,49 @@ def learning_chain(order: list[str], iterations: int, first: Flight,
     return learning, chain
 
 
+def pair_designs(fleet: Fleet, filters: dict, law: str, r: np.ndarray, a_ref: np.ndarray,
+                 bandwidth: object = "auto", disturbance: str = "command") -> Callable[[str, str], PairDesign]:
+    """``design(source, target)``: the closed-form design a learning flight of a chain flies, as
+    ``ilcdob design --trial`` makes it (:func:`ilcdob.design.pair.design_pair`), built once per pair.
+
+    Pairs learning with the ``paper`` or ``exact-reference`` law also enter ``filters`` (their
+    Theorem filters, for the figures); ``multi-source`` uses the pair's band, limit and paper-law
+    filters around its own learning.
+
+    Parameters
+    ----------
+    fleet : Fleet
+    filters : dict
+        Cache of closed-form filters per (source, target), filled as pairs are designed.
+    law : str
+        Learning law (:mod:`ilcdob.design.laws`).
+    r, a_ref : numpy.ndarray
+        The scenario's reference (m) and its acceleration (m/s^2), for ``exact-reference``.
+    bandwidth : "auto", float or None
+        The learning band.
+    disturbance : {"command", "airframe"}
+        Where the disturbance acts (:mod:`ilcdob.design.flown`).
+
+    Returns
+    -------
+    callable
+        ``design(source, target) -> PairDesign``.
+    """
+    designs: dict[tuple[str, str], PairDesign] = {}
+
+    def design(src: str, tgt: str) -> PairDesign:
+        if (src, tgt) not in designs:
+            if law != "multi-source":
+                _filters_for(fleet, filters, src, tgt)
+            reference = {"reference": r, "acceleration": a_ref} if law == "exact-reference" else {}
+            designs[(src, tgt)] = design_pair(fleet, src, tgt, "closed-form", bandwidth=bandwidth,
+                                              law=DEFAULT_LAW if law == "multi-source" else law,
+                                              disturbance=disturbance, **reference)
+        return designs[(src, tgt)]
+
+    return design
+
+
 def law_delta_sets(fleet: Fleet, k: int = 8, seed: int = 0) -> dict[str, DeltaSet]:
     """Delta sets of the ``multi-source`` law: every system with an identification or a fleet bound.
 
@@ -457,17 +501,11 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
     latest: dict[str, Flight] = {order[0]: base[order[0]][1]}  # multi-source: each system's last trial
     if law == "multi-source" and deltas is None:
         deltas = law_delta_sets(fleet)
-    designs: dict[tuple[str, str], PairDesign] = {}
+    pair_design = pair_designs(fleet, filters, law, r, a_ref, bandwidth)
     powers: dict = {}  # multi-source: error powers of the Delta sets, computed once per system
 
     def step(src: str, tgt: str, prev: Flight) -> Flight:
-        if law != "multi-source":
-            _filters_for(fleet, filters, src, tgt)  # the pair's L1, L2 for the figures
-        if (src, tgt) not in designs:
-            reference = {"reference": r, "acceleration": a_ref} if law == "exact-reference" else {}
-            designs[(src, tgt)] = design_pair(fleet, src, tgt, "closed-form", bandwidth=bandwidth,
-                                              law=DEFAULT_LAW if law == "multi-source" else law, **reference)
-        design = designs[(src, tgt)]
+        design = pair_design(src, tgt)
         if law == "multi-source":
             names = list(latest)
             band = design.band_for(prev.measured_error, prev.d_f)
