@@ -955,6 +955,23 @@ def _band_readme(filters: dict[str, Any], lp: _Learning) -> list[str]:
     return out
 
 
+def _inversion_readme(filters: dict[str, Any]) -> list[str]:
+    """README lines stating the zero-phase substitutes of ``filters.json`` (``inversion``)."""
+    lines = []
+    for key in FILTER_KEYS:
+        note = filters[key].get("inversion")
+        if not note:
+            continue
+        poles = ", ".join(f"{re:.6g}" + (f"{im:+.4g}j" if im else "") for re, im in note["poles"])
+        looks = ", ".join("on the unit circle" if n is None else f"{n} samples" for n in note["exact_lookahead_samples"])
+        below = note["error_below_rad_s"]
+        lines += ["", f"{key} inverts the plant zero(s) {poles} of {filters['from']}'s model with zero phase error "
+                  f"(ZPETC; exactly they would look ahead {looks}): relative error of the filter below 1e-6 up to "
+                  f"{below['1e-06']:.4g} rad/s, below 1e-4 up to {below['0.0001']:.4g} rad/s, below 1e-2 up to "
+                  f"{below['0.01']:.4g} rad/s; with exact models the learning falls short by that fraction, it does not overshoot."]
+    return lines
+
+
 def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | None = None) -> str:
     """The ``README.md`` of a design folder holding ``files``.
 
@@ -1008,6 +1025,7 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
                   "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does)"
                   + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
                      or lp.w_sos is not None else "; their sum is what `learn` returns.")]
+        lines += _inversion_readme(filters)
         if filters.get("law") == "exact-reference":
             lines += ["", f"Learning law exact-reference (`ilcdob.design.laws`): pass `e - e_ref_source` instead "
                       f"of `e` to `{p}learn` and add `correction` to `d_next`, both from `reference_terms.csv` "

@@ -252,7 +252,7 @@ def matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, wh
     """
     zeros, poles = _cancel_common(zeros, poles)
     unit = ZPKFilter(zeros, poles, 1.0, ts)
-    ratio = exact(_GAIN_CHECK_W) / unit.freqresp(_GAIN_CHECK_W)
+    ratio = exact(_GAIN_CHECK_W) / unit.exact_freqresp(_GAIN_CHECK_W)
     gain = float(np.real(np.mean(ratio)))
     if np.max(np.abs(ratio / gain - 1)) > 1e-5:
         raise IlcdobError(f"{what}: zero-pole form does not match the block formula (gain ratios {ratio}); "

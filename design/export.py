@@ -3,9 +3,14 @@
 A filter is written as ``H(z) = z^advance * N(z^-1) / D(z^-1)``: ``output(k)`` uses
 ``input(k + advance)``, i.e. run ``N/D`` causally on the input shifted ``advance`` samples
 ahead. A non-causal zero-pole filter (:class:`~ilcdob.design.noncausal.ZPKFilter`) is
-converted exactly except for its anti-causal poles ``1/(z - p)``, ``|p| > 1``, which are
-expanded into the series ``-(1/p) sum_m (z/p)^m`` truncated where ``|p|^-m`` falls below
-``tol`` (about 22 terms for the ZOH sampling zero at -3.6): a finite advance, exact to ``tol``.
+converted as it is applied (:attr:`~ilcdob.design.noncausal.ZPKFilter.realised`: poles
+whose exact inverse would look ahead more than 64 samples replaced by their zero-phase-error
+substitute, stated under ``inversion``, docs/theory.md section 2), exactly except for its
+anti-causal poles ``1/(z - p)``, ``|p| > 1``, which are expanded into the series
+``-(1/p) sum_m (z/p)^m`` truncated where ``|p|^-m`` falls below ``tol`` (about 22 terms for
+the ZOH sampling zero at -3.6, at most 64 by the look-ahead bound): a finite advance, exact
+to ``tol``. The sections are ordered by :func:`order_sections` so that no intermediate
+signal outgrows the output.
 
 Canonical form: second-order sections. ``sos`` rows are ``[b0, b1, b2, 1, a1, a2]`` in
 powers of ``z^-1``, cascaded; :func:`apply_coefficients` and the C code of
@@ -32,9 +37,9 @@ from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 
 from .band import learning_horizon
-from .noncausal import ZPKFilter
+from .noncausal import LOOKAHEAD_MAX, ZPKFilter, lookahead
 
-__all__ = ["zpk_to_coefficients", "apply_coefficients", "apply_learning", "direct_form_grid",
+__all__ = ["zpk_to_coefficients", "inversion_note", "order_sections", "section_growth", "order_grid", "apply_coefficients", "apply_learning", "direct_form_grid",
            "direct_form_disagreement", "DIRECT_FORM_RTOL"]
 
 #: Largest relative disagreement of ``num``/``den`` with ``sos`` for ``num``/``den`` to be written.
@@ -97,6 +102,105 @@ def direct_form_disagreement(num: Any, den: Any, sos: Any, ts: float) -> tuple[f
     return float(rel[i]), float(w[i])
 
 
+def section_growth(sos: np.ndarray, ts: float) -> float:
+    """Largest steady-state size of an intermediate signal of a section cascade, relative to
+    its output: ``max_k max_w |H_1(w) ... H_k(w)| / |H(w)|`` on :func:`order_grid`.
+
+    Parameters
+    ----------
+    sos : numpy.ndarray
+        Second-order sections in cascade order.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    float
+        The ratio (1 when no intermediate exceeds the output at any frequency).
+    """
+    h = _section_responses(np.asarray(sos, float), ts)
+    part = np.cumprod(h, axis=0)
+    return float(np.max(np.abs(part) / np.abs(part[-1])))
+
+
+def order_grid(ts: float) -> np.ndarray:
+    """Frequencies on which section orderings are judged: 400 log-spaced points from four
+    decades below Nyquist to Nyquist, rad/s (as :func:`direct_form_grid`, coarser)."""
+    wn = math.pi / ts
+    return np.geomspace(wn * 10.0 ** -_BAND_DECADES, wn, 400)
+
+
+def _section_responses(sos: np.ndarray, ts: float) -> np.ndarray:
+    z = np.exp(-1j * order_grid(ts) * ts)
+    num = sos[:, [0]] + sos[:, [1]] * z + sos[:, [2]] * z ** 2
+    den = sos[:, [3]] + sos[:, [4]] * z + sos[:, [5]] * z ** 2
+    return num / den
+
+
+def order_sections(sos: np.ndarray, ts: float) -> np.ndarray:
+    """Order a section cascade so that its intermediate signals stay near the output's size.
+
+    ``scipy.signal.zpk2sos`` orders sections by pole radius. A learning filter pairs an
+    inverse plant (gain ~1e5 towards Nyquist) with poles clustered near ``z = 1``; in that order
+    the partial cascades of a closed-form L1 reached 3.7e6 times the output at low frequency,
+    and the rounding they carried, amplified by the later sections' high-frequency gain, cost
+    the output 1e-3 of its size. Greedily appending the section that keeps
+    ``max_w |partial(w)| / |H(w)|`` smallest (:func:`section_growth`) brought the same filter
+    to 1.4 and its output to rounding level. The product, hence the filter, is unchanged.
+
+    Parameters
+    ----------
+    sos : numpy.ndarray
+        Second-order sections, rows ``[b0, b1, b2, 1, a1, a2]``.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    numpy.ndarray
+        The same rows, reordered.
+    """
+    sos = np.asarray(sos, float)
+    h = _section_responses(sos, ts)
+    total = np.abs(np.prod(h, axis=0))
+    part = np.ones(h.shape[1], dtype=complex)
+    remaining, order = list(range(sos.shape[0])), []
+    while remaining:
+        best = min(remaining, key=lambda i: float(np.max(np.abs(part * h[i]) / total)))
+        order.append(best)
+        remaining.remove(best)
+        part = part * h[best]
+    return sos[order]
+
+
+def inversion_note(f: ZPKFilter) -> dict[str, Any]:
+    """What a filter's zero-phase substitutes cost (:mod:`.noncausal`, look-ahead bound).
+
+    Parameters
+    ----------
+    f : ZPKFilter
+        A filter with :attr:`~ilcdob.design.noncausal.ZPKFilter.substituted` poles.
+
+    Returns
+    -------
+    dict
+        ``method``, the substituted ``poles`` (``[re, im]``), the ``exact_lookahead_samples``
+        each would have needed, and ``error_below_rad_s``: the highest frequency up to which
+        the relative error ``|applied/exact - 1|`` stays below 1e-6, 1e-4 and 1e-2.
+    """
+    w = np.linspace(0.0, math.pi / f.ts, 20001)[1:]
+    err = f.approximation_error(w)
+    below = {}
+    for level in (1e-6, 1e-4, 1e-2):
+        over = np.flatnonzero(err > level)
+        below[f"{level:g}"] = float(w[over[0] - 1]) if over.size and over[0] > 0 else (0.0 if over.size else float(w[-1]))
+    return {"method": "zero-phase-error substitute (z^-1 - p)/(1 - p)^2 for poles whose exact inverse would look "
+                      f"ahead more than {LOOKAHEAD_MAX} samples or that lie on the unit circle",
+            "poles": [[float(p.real), float(p.imag)] for p in f.substituted],
+            "exact_lookahead_samples": [lookahead(p) if abs(p) > 1 + 1e-8 else None for p in f.substituted],
+            "error_below_rad_s": below}
+
+
 def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, Any]:
     """Coefficient form of a (non-causal) zero-pole filter, see module docstring.
 
@@ -114,6 +218,8 @@ def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, Any]:
         ``"num"``, ``"den"`` (when they agree with ``sos`` to :data:`DIRECT_FORM_RTOL`) or
         ``"num_den_omitted"`` (a sentence giving the disagreement).
     """
+    exact = f
+    f = f.realised
     pc, pu = f.causal_poles, f.anticausal_poles
     num = np.real(np.poly(f.zeros)) if len(f.zeros) else np.array([1.0])   # in z^-1 after shift
     den = np.real(np.poly(pc)) if len(pc) else np.array([1.0])
@@ -139,8 +245,10 @@ def zpk_to_coefficients(f: ZPKFilter, tol: float = 1e-12) -> dict[str, Any]:
         all_zeros = np.concatenate([f.zeros, np.roots(c[::-1])])
         sos_gain = gain * c[-1]
     n_extra = len(all_zeros) - len(pc)
-    sos = signal.zpk2sos(all_zeros, np.concatenate([pc, np.zeros(max(n_extra, 0))]), sos_gain)
+    sos = order_sections(signal.zpk2sos(all_zeros, np.concatenate([pc, np.zeros(max(n_extra, 0))]), sos_gain), f.ts)
     out: dict[str, Any] = {"advance": int(advance), "sos": sos.tolist()}
+    if exact.substituted.size:
+        out["inversion"] = inversion_note(exact)
     num = gain * num
     rel, w = direct_form_disagreement(num, den, sos, f.ts)
     if rel <= DIRECT_FORM_RTOL:

@@ -11,6 +11,30 @@ applied as the exact stable inversion of docs/theory.md section 2:
   the end of the trial (stable in reversed time);
 * surplus zeros become an advance of ``k`` samples (non-causal lead).
 
+Look-ahead bound. An anti-causal pole ``p`` needs the input ``n(p) = ln(1e12)/ln|p|``
+samples ahead before its response falls below 1e-12 (:func:`lookahead`). Sampling zeros of
+relative-degree-3 plants sit near -3.7 (about 21 samples); those of relative-degree-2 plants
+approach -1 as ``Ts -> 0`` (-1.01 at 5 ms: 2777 samples, longer than most of a trial, and
+on the circle for a pure double integrator), as can zeros of a fractional input delay. A
+pole whose look-ahead exceeds :data:`LOOKAHEAD_MAX` samples (or lies on the unit circle
+away from ``z = 1``) is inverted with zero phase error instead (Tomizuka's ZPETC, docs/theory.md
+section 2)::
+
+    1/(z - p)  ->  (z^-1 - p) / (1 - p)^2
+
+exact at DC, zero phase at every frequency, magnitude ``|e^{jw Ts} - p|^2/|1 - p|^2`` times
+the exact one: for ``p`` near -1 the relative error is ``sin^2(w Ts / 2)`` (2.5e-5 at 10 rad/s
+and 1 ms, 6.2e-4 at 10 rad/s and 5 ms), and towards Nyquist the substitute rolls off where
+the exact inverse would rise to ``1/(|p| - 1)``. With an exact model, learning through the
+substitute leaves the fraction ``1 - |e^{jw Ts} - p|^2/|1 - p|^2`` (between 0 and 1) of the
+error: it can fall short, it cannot amplify. :attr:`ZPKFilter.substituted` lists the poles so
+treated; :meth:`ZPKFilter.exact_freqresp` is the rational filter as built,
+:meth:`ZPKFilter.freqresp` and :meth:`ZPKFilter.apply` the filter as applied.
+:data:`LOOKAHEAD_MAX` = 64 samples keeps the exported look-ahead short (64 ms at 1 ms) and
+its series expansion (:mod:`.export`) at most 32 second-order sections, whose intermediate
+signals were measured not to exceed the output (sinusoids over the band); at 128 samples the
+same expansion already grew intermediates 10-50 times, at 567 samples 1.6e5 times.
+
 Boundary effects: the trial is taken as zero before ``t = 0``; the anti-causal part's answer
 there (to the trial's first samples) is computed over a lead of zeros and passed on to the
 causal part, which starts at rest before that lead. The
@@ -24,16 +48,47 @@ thousands of m/s^2 in the last samples.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import signal
 
-from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 
-__all__ = ["ZPKFilter", "as_signal", "extend_smoothly"]
+__all__ = ["ZPKFilter", "as_signal", "extend_smoothly", "lookahead", "LOOKAHEAD_MAX", "LOOKAHEAD_TOL"]
 
 _CIRCLE_TOL = 1e-8
+
+#: Largest look-ahead (samples) of an anti-causal pole inverted exactly (module docstring).
+LOOKAHEAD_MAX = 64
+
+#: Relative size of the last term of an anti-causal pole's look-ahead.
+LOOKAHEAD_TOL = 1e-12
+
+
+def lookahead(p: complex, tol: float = LOOKAHEAD_TOL) -> int:
+    """Samples ahead an anti-causal pole ``1/(z - p)`` needs for its response to fall below ``tol``.
+
+    Parameters
+    ----------
+    p : complex
+        The pole, ``|p| > 1``.
+    tol : float
+        Relative size of the last term (default :data:`LOOKAHEAD_TOL`).
+
+    Returns
+    -------
+    int
+        ``ceil(ln(1/tol) / ln|p|)``.
+    """
+    return int(np.ceil(-np.log(tol) / np.log(abs(p))))
+
+
+def _zpk_response(zeros: np.ndarray, poles: np.ndarray, gain: complex, z: np.ndarray) -> np.ndarray:
+    z = np.asarray(z, dtype=complex)
+    num = np.prod(z[..., None] - zeros, axis=-1) if len(zeros) else np.ones_like(z)
+    den = np.prod(z[..., None] - poles, axis=-1) if len(poles) else np.ones_like(z)
+    return gain * num / den
 
 
 @dataclass(frozen=True)
@@ -55,11 +110,29 @@ class ZPKFilter:
     gain: float
     ts: float
 
-    def __post_init__(self) -> None:
-        on_circle = [p for p in self.poles if abs(abs(p) - 1) < _CIRCLE_TOL and abs(p - 1) > 1e-6]
-        if on_circle:
-            raise SpecError(f"`poles`: {on_circle} lie on the unit circle away from z = 1; "
-                            "such a filter has no bounded non-causal realisation")
+    @cached_property
+    def substituted(self) -> np.ndarray:
+        """Poles inverted with zero phase error instead of exactly (module docstring): on the
+        unit circle away from ``z = 1``, or anti-causal with a look-ahead over :data:`LOOKAHEAD_MAX`."""
+        p = np.asarray(self.poles, dtype=complex)
+        r = np.abs(p)
+        on_circle = (np.abs(r - 1) <= _CIRCLE_TOL) & (np.abs(p - 1) > 1e-6)
+        far = np.array([ri > 1 + _CIRCLE_TOL and lookahead(pi) > LOOKAHEAD_MAX for pi, ri in zip(p, r)], dtype=bool)
+        return p[on_circle | far] if p.size else p
+
+    @cached_property
+    def realised(self) -> "ZPKFilter":
+        """The filter as applied: each pole of :attr:`substituted` replaced by its ZPETC factor
+        ``(z^-1 - p)/(1 - p)^2`` (a zero at ``1/p``, a pole at 0); ``self`` when there are none."""
+        sub = self.substituted
+        if not sub.size:
+            return self
+        keep = np.ones(len(self.poles), dtype=bool)
+        for p in sub:
+            keep[np.flatnonzero((np.abs(self.poles - p) == 0) & keep)[0]] = False
+        gain = self.gain * np.prod(-sub / (1 - sub) ** 2)
+        return ZPKFilter(np.concatenate([self.zeros, 1.0 / sub]), np.concatenate([self.poles[keep], np.zeros(sub.size)]),
+                         float(np.real(gain)), self.ts)
 
     @property
     def causal_poles(self) -> np.ndarray:
@@ -77,14 +150,27 @@ class ZPKFilter:
         return max(0, len(self.zeros) - len(self.causal_poles))
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
-        """Evaluate ``F(z)`` at complex points ``z``."""
-        z = np.asarray(z, dtype=complex)
-        num = np.prod(z[..., None] - self.zeros, axis=-1) if len(self.zeros) else np.ones_like(z)
-        den = np.prod(z[..., None] - self.poles, axis=-1) if len(self.poles) else np.ones_like(z)
-        return self.gain * num / den
+        """Evaluate the filter as applied (:attr:`realised`) at complex points ``z``."""
+        f = self.realised
+        return _zpk_response(f.zeros, f.poles, f.gain, z)
+
+    def exact_freqresp(self, w: np.ndarray) -> np.ndarray:
+        """Frequency response of the rational filter exactly as built (no substitution).
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex response, the shape of ``w``.
+        """
+        return _zpk_response(self.zeros, self.poles, self.gain, np.exp(1j * np.asarray(w, dtype=float) * self.ts))
 
     def freqresp(self, w: np.ndarray) -> np.ndarray:
-        """Frequency response ``F(e^{j w Ts})``.
+        """Frequency response ``F(e^{j w Ts})`` of the filter as applied (:attr:`realised`).
 
         Parameters
         ----------
@@ -97,6 +183,24 @@ class ZPKFilter:
             Complex response, the shape of ``w``.
         """
         return self(np.exp(1j * np.asarray(w, dtype=float) * self.ts))
+
+    def approximation_error(self, w: np.ndarray) -> np.ndarray:
+        """Relative error ``|realised / exact - 1|`` of the filter as applied (0 without substitution).
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            The error at each frequency (real, between 0 and 1).
+        """
+        w = np.asarray(w, dtype=float)
+        if not self.substituted.size:
+            return np.zeros(w.shape)
+        return np.abs(self.freqresp(w) / self.exact_freqresp(w) - 1.0)
 
     def apply(self, x: object, name: str = "x") -> np.ndarray:
         """Apply the filter to a whole trial non-causally (stable inversion, module docstring).
@@ -113,16 +217,17 @@ class ZPKFilter:
         numpy.ndarray
             The filtered trial, same length as ``x``.
         """
+        f = self.realised
         x = as_signal(x, name)
         n = x.size
-        k = self.advance
-        pu = self.anticausal_poles
+        k = f.advance
+        pu = f.anticausal_poles
         n_pad, n_pre = k + 8, 0
         if len(pu):
             # the anti-causal part answers before t = 0 to the trial's first samples: its
             # output there decays like |p|^-m and feeds the causal part, so it is computed
             # over a lead of zeros long enough for it to fall below 1e-12 of its size
-            n_pre = int(np.ceil(12.0 / np.log10(float(np.min(np.abs(pu))))))
+            n_pre = max(lookahead(p) for p in pu)
             n_pad += n_pre
         x = np.concatenate([np.zeros(n_pre), extend_smoothly(x, n_pad)])
         # anti-causal part: prod 1/(z - p) = prod(-1/p) * prod 1/(1 - z/p), run in reversed time
@@ -131,6 +236,6 @@ class ZPKFilter:
             scale = float(np.real(np.prod(-1.0 / pu)))
             x = scale * signal.sosfilt(sos_u, x[::-1])[::-1]
         # causal part with k extra poles at the origin, then advance by k samples
-        pc = np.concatenate([self.causal_poles, np.zeros(k)])
-        sos_c = signal.zpk2sos(self.zeros, pc, self.gain)
+        pc = np.concatenate([f.causal_poles, np.zeros(k)])
+        sos_c = signal.zpk2sos(f.zeros, pc, f.gain)
         return signal.sosfilt(sos_c, x)[n_pre + k:n_pre + k + n]
