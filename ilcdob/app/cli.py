@@ -167,8 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
                    help="a learning signal beyond the fleet's acceleration limit of --to: clip it (with a warning) or "
                         "refuse it (exit 1)")
-    p = _sub(sub, "check", "per pair and frequency: the paper's condition |Delta| < |1 + P C|/2 and the law with its "
-                           "learning band (exit 1: the law with its band can make the error worse)")
+    p = _sub(sub, "check", "will learning help? per pair and frequency the exact worst case of the error ratio "
+                           "|e_j/e'_j| over the Delta set (|Delta| <= W) for the law with its learning band, the "
+                           "ratio for a stated plant, and the paper's first-order condition |Delta| < |1 + P C|/2 "
+                           "beside it (exit 1: improvement not guaranteed, the exact worst case exceeds 1.01)")
     _common(p, None)
     p.add_argument("--order", default=None, help="learning order, comma-separated names (default: file order)")
     p.add_argument("--bound", type=float, default=None, help="multiplicative uncertainty bound (default: identified)")

@@ -13,7 +13,7 @@ and quick commands start without loading cvxpy, CasADi and Dask.
 | :func:`identify_to_json` | ``identify`` | model.json (+ a figure folder) |
 | :func:`identify_fleet_to_folder` | ``identify-fleet`` | flights, models, figures, identified_fleet.toml |
 | :func:`design_to_folder` | ``design`` | filters.json, filters.h/.c, README.md, lifted.npz, learning_signal.csv |
-| :func:`check_to_json` | ``check`` | the Theorem check as JSON |
+| :func:`check_to_json` | ``check`` | the check as JSON: exact worst case, paper's condition |
 | :func:`compare_to_folder` | ``compare`` | compare.json, compare.txt, compare_ratios.png |
 | :func:`extensions_to_folder` | ``extensions`` | extensions.json, README.md |
 | :func:`campaign_to_folder` | ``campaign`` | samples.jsonl (resumable), campaign.json, campaign.txt, figure |
@@ -472,8 +472,10 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
 def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, order: Sequence[str] | None = None,
                   bound: float | None = None, scale: float = 1.0, samples: int = 8, bandwidth: object = "auto",
                   argv: Sequence[str] | None = None) -> list[Any]:
-    """The Theorem's condition per pair and frequency (paper Sec. III), unfiltered and with the
-    learning band of each pair's law, optionally as JSON.
+    """Will learning help? Per pair and frequency the exact worst-case error ratio of the law as
+    applied (closed-form filters with each pair's learning band) over the Delta set's disc, the
+    ratio for a stated plant, and the paper's first-order condition (paper Sec. III), optionally
+    as JSON (:mod:`ilcdob.design.theorem`).
 
     Parameters
     ----------
@@ -500,7 +502,7 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     list of PairCheck
     """
     from ilcdob.design.pair import fleet_delta_sets, pair_band
-    from ilcdob.design.theorem import learning_pairs, theorem_check
+    from ilcdob.design.theorem import EXACT_TOL, learning_pairs, theorem_check
 
     if out is not None:
         check_output_path(out, folder=False)
@@ -512,7 +514,15 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     bands = {(s, t): pair_band(flt, s, t, bandwidth, deltas=deltas) for s, t in learning_pairs(flt.names, order)}
     checks = theorem_check(flt, order, deltas, bands=bands)
     if out is not None:
-        write_file(out, {"order": order, "pairs": [c.to_dict() for c in checks],
+        write_file(out, {"order": order,
+                         "verdict": "holds" if all(c.holds_exact for c in checks) else "fails",
+                         "verdict_rule": "improvement guaranteed for a pair when the exact worst case of "
+                                         "|e_j / e'_j| over |Delta| <= W (and for a stated plant's Delta) is <= 1 + "
+                                         f"{EXACT_TOL:g} at every checked frequency; the paper's first-order "
+                                         "condition |Delta| < |1 + P C|/2 is reported beside it (paper_first_order)",
+                         "units": {"w": "rad/s", "ratios": "1 (|e_j| / |e'_j| per frequency)",
+                                   "delta, bound": "1 (relative model error |P/P_hat - 1|)"},
+                         "pairs": [c.to_dict() for c in checks],
                          "provenance": _provenance("check", argv, digest).to_dict()})
     return checks
 
