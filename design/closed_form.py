@@ -20,6 +20,26 @@ Zeros and poles of ``L1_j`` come from the blocks, never from a quotient of polyn
     (1 - Q_j)/(1 - Q_{j-1}): the common zero at z = 1 is cancelled analytically (the
                               root z = 1 is removed from both zero sets).
 
+With ``D = 1 - Q + P (M + C)`` over the common denominator of the blocks,
+``L1_j = -(1 - Q_j) D/(P (1 - Q))``: the poles of ``Q_{j-1}`` cancel exactly and are never
+formed. What is computed, and how, so that it stays accurate at ``Ts`` = 1 ms and ``q_order``
+up to 8 (:mod:`ilcdob.discretize`, "Conditioning"; measured against an independent
+evaluation of the blocks, ``tests/test_conditioning.py``):
+
+* poles of ``Q_j``, ``M`` and ``C``: analytic (the lags' ``e^{-Ts/tau}``, Tustin images, the
+  delay states' 0), not eigenvalues of realisations;
+* zeros of ``P_hat``: from the delta-form pencil of the sampled plant (realised in the
+  normalised variable ``s Ts``, so its small input entries keep their digits);
+* zeros of ``1 - Q``: ``1 + eig((A - I) + B C)`` of the lag cascade in delta form
+  (:func:`one_minus_zeros`);
+* closed-loop poles: ``1 + eig(A - I)`` of the interconnection assembled from the blocks'
+  delta forms, with the exact poles at 0 of a delay line shared by the plant and the Q branch
+  deflated (:meth:`ilcdob.loop.LoopSystem.poles`);
+* coinciding zero/pole pairs (equal ``Q`` in ``L2``; delay poles) cancel.
+
+The gain is matched to the block formula and the zero-pole form checked against it
+(:func:`matched`): a disagreement beyond ``MATCH_RTOL`` is a :class:`~ilcdob.errors.NumericalError`.
+
 One integrator (the PID's) remains: the loop rejects constant disturbances, so the error
 carries their derivative only. The ZOH sampling zero of P_hat outside the unit circle
 becomes an anti-causal pole (stable inversion, :mod:`ilcdob.design.noncausal`).
@@ -33,14 +53,15 @@ from typing import Callable
 import control as ct
 import numpy as np
 
-from ilcdob.errors import IlcdobError, SpecError
-from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.discretize import DiscreteBlock
+from ilcdob.errors import NumericalError, SpecError
+from ilcdob.loop import LoopSystem, delta_poles, freqresp
 from ilcdob.signals import as_signal
 
 from .noncausal import ZPKFilter
 
 __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "inverse_gd_filter",
-           "reconstruct_disturbance", "one_minus", "matched"]
+           "reconstruct_disturbance", "one_minus", "one_minus_zeros", "matched", "MATCH_RTOL"]
 
 _GAIN_CHECK_W = np.array([0.37, 1.3, 5.1, 17.0])  # rad/s, points where the zpk form is checked
 
@@ -84,9 +105,43 @@ def one_minus(sys: ct.StateSpace) -> ct.StateSpace:
     return ct.ss(sys.A, sys.B, -sys.C, 1.0 - sys.D, sys.dt)
 
 
-def _zeros_without_one(sys: ct.StateSpace, what: str) -> np.ndarray:
-    z = np.asarray(sys.zeros(), dtype=complex)
-    z = z[np.isfinite(z)]
+def _block(loop: LoopSystem, key: str) -> DiscreteBlock:
+    """The loop's block ``key`` with its delta form and analytic poles (a plain eigenvalue fallback for
+    a loop built without them)."""
+    blk = loop.blocks.get(key) if loop.blocks else None
+    if blk is not None:
+        return blk
+    sys = getattr(loop, key)
+    a = np.asarray(sys.A, dtype=float)
+    return DiscreteBlock(sys, a - np.eye(a.shape[0]), np.linalg.eigvals(a).astype(complex) if a.size else
+                         np.zeros(0, dtype=complex))
+
+
+def one_minus_zeros(q: DiscreteBlock) -> np.ndarray:
+    """Zeros of ``1 - Q`` (z-plane) from the delta form: ``1 + eig((A - I) + B C/(1 - D))``.
+
+    The zeros of ``(A, B, -C, 1 - D)`` are the eigenvalues of ``A + B C/(1 - D)``; computed as
+    ``1 +`` those of ``A - I + B C/(1 - D)`` they keep the digits that ``A`` (entries near 1)
+    rounds away at fast sampling (:mod:`ilcdob.discretize`, "Conditioning").
+
+    Parameters
+    ----------
+    q : DiscreteBlock
+        The Q branch (:func:`ilcdob.discretize.q_block`).
+
+    Returns
+    -------
+    numpy.ndarray
+        The zeros, among them ``z = 1`` for a unit-DC-gain ``Q``.
+    """
+    b = np.asarray(q.sys.B, dtype=float)[:, 0]
+    c = np.asarray(q.sys.C, dtype=float)[0]
+    d = float(np.asarray(q.sys.D, dtype=float)[0, 0])
+    return delta_poles(q.a_minus_i + np.outer(b, c) / (1.0 - d))
+
+
+def _zeros_without_one(q: DiscreteBlock, what: str) -> np.ndarray:
+    z = one_minus_zeros(q)
     i = int(np.argmin(np.abs(z - 1.0)))
     if abs(z[i] - 1.0) > 1e-5:
         raise SpecError(f"{what}: 1 - Q has no zero at z = 1 (nearest {z[i]:.6g}); Q must have unit DC gain")
@@ -94,13 +149,15 @@ def _zeros_without_one(sys: ct.StateSpace, what: str) -> np.ndarray:
 
 
 def _l1_exact(prev: LoopSystem, nxt: LoopSystem, w: np.ndarray) -> np.ndarray:
-    """``-(1 - Q_j) (1/P_hat + (M + C)/(1 - Q_{j-1}))`` evaluated from block responses."""
-    q_j = freqresp(nxt.Q, w)
-    p = freqresp(prev.P, w)
-    m = freqresp(prev.M, w)
-    c = freqresp(prev.C, w)
-    q = freqresp(prev.Q, w)
+    """``-(1 - Q_j) (1/P_hat + (M + C)/(1 - Q_{j-1}))`` evaluated from block responses (delta form)."""
+    q_j = _block(nxt, "Q").response(w)
+    p, m, c, q = (_block(prev, k).response(w) for k in ("P", "M", "C", "Q"))
     return -(1 - q_j) * (1.0 / p + (m + c) / (1 - q))
+
+
+def _l2_exact(prev: LoopSystem, nxt: LoopSystem, w: np.ndarray) -> np.ndarray:
+    """``L1 Gf_{j-1} = (1 - Q_j)/(1 - Q_{j-1})`` evaluated from block responses (delta form)."""
+    return (1 - _block(nxt, "Q").response(w)) / (1 - _block(prev, "Q").response(w))
 
 
 @dataclass(frozen=True)
@@ -204,8 +261,8 @@ class LearningFilters:
 
 
 def _cancel_common(zeros: np.ndarray, poles: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    """Remove pole/zero pairs that coincide (e.g. the PID's derivative-filter pole, present in
-    both D and C): they cancel exactly and only raise the order."""
+    """Remove pole/zero pairs that coincide (e.g. the zeros of ``1 - Q`` of two systems with the same
+    Q in ``L2``): they cancel exactly and only raise the order."""
     zs, ps = list(zeros), list(poles)
     kept = []
     for z in zs:
@@ -219,14 +276,36 @@ def _cancel_common(zeros: np.ndarray, poles: np.ndarray, tol: float = 1e-9) -> t
     return np.asarray(kept, dtype=complex), np.asarray(ps, dtype=complex)
 
 
+#: Relative tolerance of the check of a zero-pole form against its block formula (:func:`matched`).
+MATCH_RTOL = 1e-5
+
+
+def _check_grid(ts: float) -> np.ndarray:
+    """Frequencies where :func:`matched` checks a filter: the gain points below 0.8 Nyquist and 16
+    points spaced logarithmically from 0.1 rad/s to 0.8 Nyquist."""
+    top = 0.8 * np.pi / ts
+    return np.unique(np.concatenate([_GAIN_CHECK_W[_GAIN_CHECK_W < top], np.geomspace(min(0.1, top / 10), top, 16)]))
+
+
+def _rational_response(f: ZPKFilter, w: np.ndarray) -> np.ndarray:
+    """The response of ``f``'s zeros, poles and gain exactly as given (not as applied)."""
+    exact = getattr(f, "exact_freqresp", None)
+    if exact is not None:
+        return exact(w)
+    return f(np.exp(1j * np.asarray(w, dtype=float) * f.ts))
+
+
 def matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, what: str) -> ZPKFilter:
     """Zero-pole filter whose gain is matched to a block formula, and checked against it.
 
     The zeros and poles of a learning filter are collected from the blocks of the loop
     (never from a quotient of polynomials, docs/theory.md section 2); coinciding pole/zero
     pairs are cancelled first. The gain is the mean ratio of ``exact(w)`` to the unit-gain
-    filter's response at four frequencies between 0.37 and 17 rad/s, and every ratio must
-    agree with it to 1e-5 relative, which also checks the zeros and poles.
+    rational response at the frequencies of ``_GAIN_CHECK_W`` (0.37 to 17 rad/s) below 0.8
+    times Nyquist. The filter's exact rational response (:meth:`ZPKFilter.exact_freqresp`, not
+    the response as applied) must then agree with ``exact`` to ``MATCH_RTOL`` relative at those
+    points and on a logarithmic grid from 0.1 rad/s to 0.8 Nyquist, which checks the zeros and
+    poles.
 
     Parameters
     ----------
@@ -247,17 +326,31 @@ def matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, wh
 
     Raises
     ------
-    IlcdobError
-        The zero-pole form does not match ``exact`` (numerical trouble in the loop).
+    NumericalError
+        The zero-pole form does not match ``exact`` (the message names the filter, the largest
+        relative disagreement and its frequency).
     """
     zeros, poles = _cancel_common(zeros, poles)
     unit = ZPKFilter(zeros, poles, 1.0, ts)
-    ratio = exact(_GAIN_CHECK_W) / unit.exact_freqresp(_GAIN_CHECK_W)
+    w_gain = _GAIN_CHECK_W[_GAIN_CHECK_W < 0.8 * np.pi / ts]
+    if w_gain.size < 2:
+        w_gain = np.geomspace(0.1, 0.8 * np.pi / ts, 4)
+    with np.errstate(all="ignore"):
+        ratio = exact(w_gain) / _rational_response(unit, w_gain)
     gain = float(np.real(np.mean(ratio)))
-    if np.max(np.abs(ratio / gain - 1)) > 1e-5:
-        raise IlcdobError(f"{what}: zero-pole form does not match the block formula (gain ratios {ratio}); "
-                          "the loop is probably badly conditioned. Report this fleet.")
-    return ZPKFilter(zeros, poles, gain, ts)
+    filt = ZPKFilter(zeros, poles, gain, ts)
+    w = _check_grid(ts)
+    with np.errstate(all="ignore"):
+        want = exact(w)
+        err = np.abs(_rational_response(filt, w) / want - 1)
+    err = np.where(np.isfinite(err), err, np.inf)
+    i = int(np.argmax(err))
+    if not (gain != 0 and np.isfinite(gain) and err[i] <= MATCH_RTOL):
+        raise NumericalError(
+            f"{what}: the zero-pole form ({len(zeros)} zeros, {len(poles)} poles) does not match the block "
+            f"formula: relative disagreement {err[i]:.3g} at {w[i]:.4g} rad/s (tolerance {MATCH_RTOL:g}, Ts = "
+            f"{ts:g} s); the loop is too badly conditioned at this sample time and DOB order")
+    return filt
 
 
 def inverse_gd_filter(loop: LoopSystem, model: bool = True) -> ZPKFilter:
@@ -282,17 +375,24 @@ def inverse_gd_filter(loop: LoopSystem, model: bool = True) -> ZPKFilter:
         ``Gd^{-1}``, anti-causal where the plant's sampling zero lies outside the unit circle.
     """
     src = loop.nominal if model else loop
-    p_zeros = np.asarray(src.P.zeros(), dtype=complex)
-    q_zeros = np.asarray(one_minus(src.Q).zeros(), dtype=complex)
-    zeros = np.linalg.eigvals(src.closed_loop.A)
-    poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], q_zeros[np.isfinite(q_zeros)],
-                            np.linalg.eigvals(src.M.A), np.linalg.eigvals(src.C.A)])
+    poles = np.concatenate([_plant_zeros(src), one_minus_zeros(_block(src, "Q")), _block(src, "M").poles,
+                            _block(src, "C").poles])
 
     def exact(w):
-        p, m, c, q = (freqresp(s, w) for s in (src.P, src.M, src.C, src.Q))
+        p, m, c, q = (_block(src, k).response(w) for k in ("P", "M", "C", "Q"))
         return 1.0 / p + (m + c) / (1 - q)
 
-    return matched(zeros, poles, src.ts, exact, f"Gd^-1 of {loop.name!r}")
+    return matched(src.poles(), poles, src.ts, exact, f"Gd^-1 of {loop.name!r}")
+
+
+def _finite_zeros(sys: ct.StateSpace) -> np.ndarray:
+    z = np.asarray(sys.zeros(), dtype=complex)
+    return z[np.isfinite(z)]
+
+
+def _plant_zeros(loop: LoopSystem) -> np.ndarray:
+    blk = _block(loop, "P")
+    return blk.zeros if blk.zeros is not None else _finite_zeros(loop.P)
 
 
 def reconstruct_disturbance(loop: LoopSystem, e: object, d_f: object, model: bool = True) -> np.ndarray:
@@ -350,31 +450,22 @@ def closed_form_filters(prev: LoopSystem, nxt: LoopSystem) -> LearningFilters:
     ------
     SpecError
         Different sample times, or a Q without unit DC gain.
-    IlcdobError
+    NumericalError
         The zero-pole-gain form disagrees with the block formula (numerical trouble).
     """
     if abs(prev.ts - nxt.ts) > 1e-12:
         raise SpecError(f"`sample_time`: systems {prev.name!r} ({prev.ts} s) and {nxt.name!r} "
                         f"({nxt.ts} s) must share one sample time")
     src = prev.nominal
-    zeros = np.concatenate([
-        _zeros_without_one(one_minus(nxt.Q), f"system {nxt.name!r}"),
-        np.linalg.eigvals(src.closed_loop.A),
-    ])
-    p_zeros = np.asarray(src.P.zeros(), dtype=complex)
-    poles = np.concatenate([
-        np.linalg.eigvals(nxt.Q.A),
-        p_zeros[np.isfinite(p_zeros)],
-        _zeros_without_one(one_minus(src.Q), f"system {prev.name!r}"),
-        np.linalg.eigvals(src.M.A),
-        np.linalg.eigvals(src.C.A),
-    ])
+    q_j, q_p = _block(nxt, "Q"), _block(src, "Q")
+    omq_j = _zeros_without_one(q_j, f"system {nxt.name!r}")
+    omq_p = _zeros_without_one(q_p, f"system {prev.name!r}")
+    # L1 = -(1 - Q_j) D/(P (1 - Q)): zeros of 1 - Q_j and of D (the closed-loop poles); poles of Q_j,
+    # zeros of P_hat and of 1 - Q, poles of M and C (Q's poles cancel; z = 1 cancels analytically)
+    zeros = np.concatenate([omq_j, src.poles()])
+    poles = np.concatenate([q_j.poles, _plant_zeros(src), omq_p, _block(src, "M").poles, _block(src, "C").poles])
     l1 = matched(zeros, poles, src.ts, lambda w: _l1_exact(src, nxt, w),
-                  f"learning filter {prev.name!r} -> {nxt.name!r}")
-    l2_zeros = np.concatenate([_zeros_without_one(one_minus(nxt.Q), f"system {nxt.name!r}"),
-                               np.linalg.eigvals(src.Q.A)])
-    l2_poles = np.concatenate([np.linalg.eigvals(nxt.Q.A),
-                               _zeros_without_one(one_minus(src.Q), f"system {prev.name!r}")])
-    l2 = matched(l2_zeros, l2_poles, src.ts, lambda w: _l1_exact(src, nxt, w) * freqresp(src.G_f, w),
-                  f"learning filter L2 {prev.name!r} -> {nxt.name!r}")
+                 f"learning filter {prev.name!r} -> {nxt.name!r}")
+    l2 = matched(np.concatenate([omq_j, q_p.poles]), np.concatenate([q_j.poles, omq_p]), src.ts,
+                 lambda w: _l2_exact(src, nxt, w), f"learning filter L2 {prev.name!r} -> {nxt.name!r}")
     return LearningFilters(source=src, target=nxt, L1=l1, L2=l2)

@@ -15,15 +15,19 @@ Look-ahead bound. An anti-causal pole ``p`` needs the input ``n(p) = ln(1e12)/ln
 samples ahead before its response falls below 1e-12 (:func:`lookahead`). Sampling zeros of
 relative-degree-3 plants sit near -3.7 (about 21 samples); those of relative-degree-2 plants
 approach -1 as ``Ts -> 0`` (-1.01 at 5 ms: 2777 samples, longer than most of a trial, and
-on the circle for a pure double integrator), as can zeros of a fractional input delay. A
-pole whose look-ahead exceeds :data:`LOOKAHEAD_MAX` samples (or lies on the unit circle
-away from ``z = 1``) is inverted with zero phase error instead (Tomizuka's ZPETC, docs/theory.md
-section 2)::
+on the circle for a pure double integrator), as can zeros of a fractional input delay. Such
+a pole in the left half of the z-plane (an artefact of sampling, not of the vehicle) whose
+look-ahead exceeds :data:`LOOKAHEAD_MAX` samples, or that lies on the unit circle, is
+inverted with zero phase error instead (Tomizuka's ZPETC, docs/theory.md section 2). The
+image ``e^{z Ts}`` of a continuous non-minimum-phase zero ``z`` lies near +1 and needs about
+``27.6/z`` seconds of look-ahead at any sample time: that preview is physics, and such poles
+are always inverted exactly (the substitute would multiply the response by
+``1 + (w/z)^2`` there)::
 
     1/(z - p)  ->  (z^-1 - p) / (1 - p)^2
 
 exact at DC, zero phase at every frequency, magnitude ``|e^{jw Ts} - p|^2/|1 - p|^2`` times
-the exact one: for ``p`` near -1 the relative error is ``sin^2(w Ts / 2)`` (2.5e-5 at 10 rad/s
+the exact one (between 0 and 1 for ``Re p < 0``): for ``p`` near -1 the relative error is ``sin^2(w Ts / 2)`` (2.5e-5 at 10 rad/s
 and 1 ms, 6.2e-4 at 10 rad/s and 5 ms), and towards Nyquist the substitute rolls off where
 the exact inverse would rise to ``1/(|p| - 1)``. With an exact model, learning through the
 substitute leaves the fraction ``1 - |e^{jw Ts} - p|^2/|1 - p|^2`` (between 0 and 1) of the
@@ -112,13 +116,14 @@ class ZPKFilter:
 
     @cached_property
     def substituted(self) -> np.ndarray:
-        """Poles inverted with zero phase error instead of exactly (module docstring): on the
-        unit circle away from ``z = 1``, or anti-causal with a look-ahead over :data:`LOOKAHEAD_MAX`."""
+        """Poles inverted with zero phase error instead of exactly (module docstring): in the left
+        half of the z-plane (sampling zeros of the plant), on the unit circle or anti-causal with
+        a look-ahead over :data:`LOOKAHEAD_MAX`."""
         p = np.asarray(self.poles, dtype=complex)
         r = np.abs(p)
         on_circle = (np.abs(r - 1) <= _CIRCLE_TOL) & (np.abs(p - 1) > 1e-6)
         far = np.array([ri > 1 + _CIRCLE_TOL and lookahead(pi) > LOOKAHEAD_MAX for pi, ri in zip(p, r)], dtype=bool)
-        return p[on_circle | far] if p.size else p
+        return p[(on_circle | far) & (p.real < 0)] if p.size else p
 
     @cached_property
     def realised(self) -> "ZPKFilter":

@@ -169,3 +169,42 @@ def test_lifted_form_matches_closed_form_and_reports_conditioning(fleet):
     f_a2 = simulate_flight(a, r, d, d_f=df_a)
     e2 = simulate_flight(b, r, d, d_f=lifted.apply(f_a2.e, f_a2.d_f)).e
     assert rmse(e2) < 1e-8 * rmse(f_b.e)
+
+
+def test_mismatched_zero_pole_form_is_a_numerical_error(fleet):
+    # a zero-pole form that does not reproduce its block formula is a numerical failure (exit 3), and the
+    # message names the filter, the disagreement and the frequency
+    from ilcdob.design.closed_form import _l1_exact, matched
+    from ilcdob.errors import IlcdobError, NumericalError
+
+    a, b = fleet.loops[0], fleet.loops[1]
+    lf = closed_form_filters(a, b)
+    zeros = lf.L1.zeros.copy()
+    zeros[np.argmin(np.abs(zeros - 0.9))] *= 1.001  # one closed-loop pole misplaced by 1e-3
+    with pytest.raises(NumericalError) as info:
+        matched(zeros, lf.L1.poles, a.ts, lambda w: _l1_exact(a.nominal, b, w), "learning filter 'UAV1' -> 'UAV2'")
+    assert isinstance(info.value, IlcdobError) and isinstance(info.value, ArithmeticError)
+    msg = str(info.value)
+    assert "'UAV1' -> 'UAV2'" in msg and "relative disagreement" in msg and "rad/s" in msg
+    # the filters as built pass the same check with the filter's own zeros
+    assert matched(lf.L1.zeros, lf.L1.poles, a.ts, lambda w: _l1_exact(a.nominal, b, w), "L1").gain == \
+        pytest.approx(lf.L1.gain, rel=1e-12)
+
+
+def test_check_uses_the_rational_filter_not_its_applied_approximation():
+    # relative degree 2 at 1 ms: the sampling zero at -1.002 becomes an anti-causal pole whose look-ahead
+    # (13800 samples) is replaced by its zero-phase substitute when applied (design/noncausal.py). The
+    # zero-pole form is checked with its exact rational response, which matches the block formula
+    from ilcdob.design.closed_form import _l1_exact
+    from ilcdob.fleet import fleet_from_dict
+
+    table = {"plant": {"num": [0.8, 8.0], "den": [1.0, 4.0, 0.0, 0.0]},
+             "controller": {"kp": 2.0, "ki": 0.2, "kd": 2.0, "derivative_filter": 0.05},
+             "dob": {"q_order": 6, "q_time_constant": 0.15}}
+    fl = fleet_from_dict({"sample_time": 0.001, "system": [dict(table, name="A"), dict(table, name="B")]})
+    lf = closed_form_filters(fl.loops[0], fl.loops[1])
+    assert lf.L1.substituted.size == 1 and abs(lf.L1.substituted[0] + 1.002) < 1e-3
+    w = np.geomspace(0.1, 0.8 * np.pi / 0.001, 30)
+    exact = _l1_exact(fl.loops[0], fl.loops[1], w)
+    np.testing.assert_allclose(lf.L1.exact_freqresp(w), exact, rtol=1e-10)  # measured 1.7e-12
+    assert np.max(np.abs(lf.L1.freqresp(w) / exact - 1)) > 1e-3  # as applied: sin^2(w Ts/2) off at the top

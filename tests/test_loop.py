@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ilcdob import PIDSpec, PlantSpec, SpecError, UnstableLoopError, build_loop, freqresp
+from ilcdob import DOBSpec, PIDSpec, PlantSpec, SpecError, UnstableLoopError, build_loop, freqresp
 from ilcdob.design import simulate_map
 from ilcdob.validation.simulate import simulate_flight
 
@@ -73,3 +73,46 @@ def test_overflowing_loop_is_a_spec_error_naming_the_system(fleet):
         build_loop(spec, 0.02)
     msg = str(info.value)
     assert "'UAV1'" in msg and "non-finite" in msg and "PID loop without DOB" in msg
+
+
+def test_closed_loop_delta_form_matches_the_loop(fleet):
+    # A - I of the interconnection, assembled from the blocks' delta forms, is the loop's A - I (to rounding)
+    for lp in fleet.loops:
+        n = lp.closed_loop.nstates
+        np.testing.assert_allclose(lp.closed_loop_a_minus_i + np.eye(n), lp.closed_loop.A, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(np.sort_complex(lp.poles()), np.sort_complex(np.linalg.eigvals(lp.closed_loop.A)),
+                                   rtol=0, atol=1e-9)
+
+
+def test_shared_delay_line_gives_exact_poles_at_zero(fleet):
+    # plant and Q branch both delayed by 0.0437 s at 5 ms (8 samples + a fraction: 9 states each): the
+    # difference of the two lines contributes 9 poles at z = 0 exactly; the rest are the loop's other poles
+    spec = replace(fleet.systems[0], plant=PlantSpec(fleet.systems[0].plant.num, fleet.systems[0].plant.den, 0.0437))
+    lp = build_loop(spec, 0.005)
+    assert lp.blocks["P"].delay_states == lp.blocks["Q"].delay_states == 9
+    poles = lp.poles()
+    assert poles.size == lp.closed_loop.nstates and np.sum(poles == 0) == 9
+    full = np.linalg.eigvals(lp.closed_loop_a_minus_i) + 1
+    big = np.sort_complex(full[np.abs(full) > 0.2])
+    # (to 2e-8: the near-double pole of Q and M at 0.967 is that sensitive to rounding, ~sqrt(eps))
+    np.testing.assert_allclose(big, np.sort_complex(poles[np.abs(poles) > 0.2]), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("ts, q_order", [(0.005, 8), (0.001, 6), (0.001, 8)])
+def test_fast_sampling_high_order_is_not_a_false_alarm(fleet, ts, q_order):
+    # reported as unstable with |z| = 1.0005-1.02 when Q and M were realised from polynomials; the
+    # exact largest pole (120-digit characteristic polynomial) is the PID's slow pole
+    exact = {0.005: 0.99943828, 0.001: 0.99988762}
+    spec = replace(fleet.systems[0], dob=DOBSpec(q_order, 0.15))
+    lp = build_loop(spec, ts)
+    assert abs(np.max(np.abs(lp.poles())) - exact[ts]) < 1e-4
+    # the 2 q_order poles of Q and M sit about Ts/tau inside the circle
+    h = ts / 0.15
+    near = lp.poles()[np.abs(lp.poles() - np.exp(-h)) < 0.5 * h]
+    assert near.size >= q_order and np.all(np.abs(near) < 1 - 0.5 * h)
+
+
+def test_unstable_loop_is_still_caught_at_fast_sampling(fleet):
+    spec = replace(fleet.systems[0], controller=PIDSpec(300.0, 0.3, 0.1, 0.05), dob=DOBSpec(8, 0.15))
+    with pytest.raises(UnstableLoopError, match="'UAV1'.*\\|z\\|="):
+        build_loop(spec, 0.001)
