@@ -9,15 +9,20 @@ see :func:`default_c_prefix`), ::
 filtering one recorded trial exactly as :func:`~ilcdob.design.export.apply_coefficients`
 does: the input is taken as zero before the trial, continued past its end by the
 least-squares cubic through its last 16 samples
-(:func:`~ilcdob.signals.extend_smoothly`), run through the second-order sections
-(or, for a FIR, the direct form) in the operation order of ``scipy.signal.sosfilt``
-(``lfilter``), and read ``advance`` samples ahead. The C code allocates nothing: the
-sections' state and the cubic's coefficients live in fixed-size local arrays, and the
-``advance`` continuation samples are computed on the fly, so the caller provides only the
-input and output arrays (``y`` may be ``u``: in place). The cubic is fitted with orthogonal
-polynomials on the centred abscissa (Forsythe's three-term recurrence), which solves the
-same least-squares problem as ``numpy.polyfit`` without its conditioning loss; the two
-agree to rounding.
+(:func:`~ilcdob.signals.extend_smoothly`), run through the look-ahead pre-stage when the
+filter has one (``lookahead``, ``v(j) = sum_m g_m u(j + m)``, the sum in descending ``m``:
+the smallest taps first), then through the second-order sections (or, for a FIR, the
+direct form) in the operation order of ``scipy.signal.sosfilt`` (``lfilter``), and read so
+that the whole filter looks ``advance`` samples ahead (:mod:`.export`). The loop runs over ``i = 0 .. n + advance - 1``:
+``v(i - M)`` from the inputs ``u(i - M) .. u(i)``, one step of the sections, and, from
+``i = advance`` on, the output ``y(i - advance)``; as ``advance >= M`` that output
+overwrites no input a later step reads (``y`` may be ``u``: in place). The C code allocates
+nothing: the sections' state and the cubic's coefficients live in fixed-size local arrays,
+and the continuation samples past the trial's end are computed on the fly where the
+pre-stage or the sections reach them, so the caller provides only the input and output
+arrays. The cubic is fitted with orthogonal polynomials on the centred abscissa (Forsythe's
+three-term recurrence), which solves the same least-squares problem as ``numpy.polyfit``
+without its conditioning loss; the two agree to rounding.
 
 Beside them the source has the whole learning law of the design, ::
 
@@ -66,7 +71,7 @@ from scipy import signal
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal
 
-from .export import apply_coefficients
+from .export import apply_coefficients, apply_lookahead, lookahead_taps
 
 __all__ = ["CCode", "c_code", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
            "float_error", "design_readme", "design_files", "FILTER_KEYS"]
@@ -233,6 +238,9 @@ def emulate_c_filter(coeffs: dict[str, Any], x: object, dtype: type = np.float32
     adv = int(coeffs["advance"])
     padded = np.concatenate([x, _tail_samples(x, adv, dtype)])
     if coeffs.get("sos"):
+        g = lookahead_taps(coeffs)
+        if g is not None:   # the C pre-stage: a sum in descending m, in dtype
+            padded = apply_lookahead(g.astype(dtype), padded)
         y = signal.sosfilt(np.asarray(coeffs["sos"], float).astype(dtype), padded)
     else:
         num, den = _direct_form(coeffs)
@@ -378,7 +386,14 @@ def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
     for part in ("sos", "num", "den"):
         if coeffs.get(part) is not None and not np.all(np.isfinite(np.asarray(coeffs[part], float))):
             raise SpecError(f"`{key}.{part}`: non-finite coefficient(s); expected finite numbers")
+    g = lookahead_taps(coeffs, f"{key}.lookahead")
     lines = []
+    if g is not None:
+        ahead = g.size - 1
+        lines.append(f"/* {key}: look-ahead pre-stage, {g.size} taps g_m: v(j) = sum_m g_m u(j + m), m = 0..{ahead} "
+                     "(the series of the\n   anti-causal poles, |p| > 1); the sections below run on v and are read "
+                     f"{adv - ahead} sample{'s' if adv - ahead != 1 else ''} ahead of it */\n")
+        lines.append(_array_c(ct, f"{name}_ahead{s}", g))
     if coeffs.get("sos"):
         sos = _sections(coeffs["sos"], f"{key}.sos")
         plural = "s" if sos.shape[0] > 1 else ""
@@ -419,7 +434,26 @@ def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
         why = coeffs.get("num_den_omitted", "")
         raise SpecError(f"`{key}`: neither `sos` nor `num`/`den` given" + (f" ({why})" if why else "")
                         + f"; got keys {sorted(coeffs)}")
-    if adv:
+    if g is not None:
+        ahead, lit = g.size - 1, ct.lit
+        body = (f"{state}    struct {prefix}tail{s} tail;\n    size_t k, m;\n\n"
+                f"    if (n == 0)\n        return;\n"
+                f"    {prefix}tail_init{s}(&tail, u, n);   /* before any output: y may be u */\n"
+                f"    for (k = 0; k < n + {adv}; ++k) {{\n"
+                f"        /* x = v(k - {ahead}) = sum_m g_m u(k - {ahead} + m), m descending (smallest taps\n"
+                f"           first): the continuation past the trial's end for m >= recorded, the trial\n"
+                f"           for m >= first, zero before it */\n"
+                f"        const size_t recorded = k < n + {ahead} ? n + {ahead} - k : 0;\n"
+                f"        const size_t first = k < {ahead} ? {ahead} - k : 0;\n"
+                f"        {T} x = 0.0{lit};\n"
+                f"        for (m = {ahead + 1}; m > recorded; --m)\n"
+                f"            x = x + {name}_ahead{s}[m - 1] * {prefix}tail_eval{s}(&tail, k + m - 1 - {ahead} - n);\n"
+                f"        for (; m > first; --m)\n"
+                f"            x = x + {name}_ahead{s}[m - 1] * u[k + m - 1 - {ahead}];\n"
+                f"{step}"
+                f"        if (k >= {adv})\n            y[k - {adv}] = x;   /* u(k - {adv}) is read no more */\n"
+                f"    }}\n")
+    elif adv:
         body = (f"{state}    struct {prefix}tail{s} tail;\n    size_t k;\n\n"
                 f"    if (n == 0)\n        return;\n"
                 f"    {prefix}tail_init{s}(&tail, u, n);   /* before any output: y may be u */\n"
@@ -437,6 +471,12 @@ def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
                 f"    }}\n")
     lines.append(f"\nvoid {name}_apply{s}(const {T} *u, {T} *y, size_t n)\n{{\n{body}}}\n")
     return "".join(lines)
+
+
+def _lookahead_size(coeffs: dict[str, Any]) -> int:
+    """Taps of a filter's look-ahead pre-stage (0 without one)."""
+    g = coeffs.get("lookahead")
+    return 0 if g is None else len(g)
 
 
 def _stack_values(coeffs: dict[str, Any]) -> int:
@@ -810,6 +850,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
         for k in FILTER_KEYS:
             decls.append(f"void {prefix}{k.lower()}_apply{ct.suffix}(const {ct.name} *u, {ct.name} *y, size_t n);")
     adv = {k: int(filters[k]["advance"]) for k in FILTER_KEYS}
+    taps = {k: _lookahead_size(filters[k]) for k in FILTER_KEYS}
     stack = max([_stack_values(filters[k]) for k in FILTER_KEYS]
                 + [2 * s.shape[0] for s in (lp.sos, lp.w_sos) if s is not None])
     float_note = ""
@@ -858,7 +899,11 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
  * exactly as ilcdob.design.export.apply_coefficients does: the filter looks
  * {macro}L1_ADVANCE (L2: {macro}L2_ADVANCE) samples ahead, the input is taken as zero
  * before the trial and continued past its end by the least-squares cubic through its last
- * 16 samples. y must hold n values and may be u (in place). With a band or W their sum is
+ * 16 samples. A filter with anti-causal poles (|p| > 1) first runs the input through a
+ * look-ahead FIR of {macro}L1_LOOKAHEAD_TAPS (L2: {macro}L2_LOOKAHEAD_TAPS) taps, the series of
+ * those poles, v(j) = sum_m g_m u(j + m); its taps - 1 samples are part of the advance, and
+ * its second-order sections run on v (0 taps: no FIR, the sections run on u).
+ * y must hold n values and may be u (in place). With a band or W their sum is
  * not the learning signal: use learn. No allocation: the filter
  * state and the cubic live in local arrays of at most {stack} numbers ({8 * stack} bytes in
  * double, {4 * stack} in float) plus a few scalars. Compile with -ffp-contract=off (no fused multiply-add)
@@ -873,6 +918,8 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
 #define {macro}SAMPLE_TIME {ts!r} /* s */
 #define {macro}L1_ADVANCE {adv['L1']} /* samples of look-ahead of L1 */
 #define {macro}L2_ADVANCE {adv['L2']} /* samples of look-ahead of L2 */
+#define {macro}L1_LOOKAHEAD_TAPS {taps['L1']} /* taps of L1's look-ahead FIR (0: none) */
+#define {macro}L2_LOOKAHEAD_TAPS {taps['L2']} /* taps of L2's look-ahead FIR (0: none) */
 {band_macros}{limit_macro}#define {macro}LEARN_WORK(n) (2 * ((n) + 2 * {macro}PAD)) /* doubles of scratch for learn */
 #define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
 #define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
@@ -913,9 +960,12 @@ int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_
 
 _FILE_TEXT = {
     "filters.json": "the design: method, pair, sample time and, for closed-form and fir, the filters L1 and L2 "
-                    "(`advance` samples of look-ahead and second-order sections `sos`, rows "
-                    "[b0, b1, b2, 1, a1, a2] in powers of z^-1, or FIR taps `num`; direct-form `num`/`den` only "
-                    "where they reproduce the sections, else `num_den_omitted` says why)",
+                    "(`advance` samples of look-ahead in all; second-order sections `sos`, rows "
+                    "[b0, b1, b2, 1, a1, a2] in powers of z^-1, run after the look-ahead FIR `lookahead` = "
+                    "[g_0, ..., g_M] where the filter has anti-causal poles: output(k) = S{v}(k + advance - M), "
+                    "v(j) = sum_m g_m u(j + m); or FIR taps `num`; direct-form `num`/`den` (the look-ahead FIR "
+                    "multiplied in, same `advance`) only where they reproduce the sections, else "
+                    "`num_den_omitted` says why)",
     "filters.h": "C99 declarations of the function computing the learning signal from a recorded trial (`learn`: "
                  "L1 and L2 within the learning band, with the airframe correction when there is one) and of the "
                  "functions running L1 and L2 alone, with the sample time, the band and the look-ahead of each "
@@ -972,6 +1022,33 @@ def _inversion_readme(filters: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _structure_readme(filters: dict[str, Any]) -> list[str]:
+    """README lines giving each filter's look-ahead and how it is run (pre-stage, sections)."""
+    ts = float(filters["sample_time"])
+    lines = []
+    for key in FILTER_KEYS:
+        f = filters[key]
+        adv = int(f["advance"])
+        look = f"{key} looks ahead {adv} sample{'s' if adv != 1 else ''} ({adv * ts:.4g} s)"
+        if f.get("sos"):
+            ns, taps = len(f["sos"]), _lookahead_size(f)
+            sections = f"{ns} second-order section{'s' if ns != 1 else ''}"
+            if taps:
+                ahead = taps - 1
+                lines.append(f"- {look}: a look-ahead FIR of {taps} taps (`lookahead` in `filters.json`, "
+                             f"v(j) = sum_m g_m u(j + m), m = 0..{ahead}: the series of its anti-causal poles "
+                             f"|p| > 1, the stable inversion's backward part cut where its terms fall below 1e-12) "
+                             f"looks {ahead} samples ahead, then {sections} run on v, read {adv - ahead} "
+                             f"sample{'s' if adv - ahead != 1 else ''} ahead.")
+            else:
+                lines.append(f"- {look}: {sections}.")
+        elif "num" in f:
+            kind = (f"a FIR of {len(f['num'])} taps" if list(f.get("den", [1.0])) == [1.0]
+                    else f"a direct form of order {max(len(f['num']), len(f['den'])) - 1}")
+            lines.append(f"- {look}: {kind}.")
+    return lines
+
+
 def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | None = None) -> str:
     """The ``README.md`` of a design folder holding ``files``.
 
@@ -1024,7 +1101,8 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
                   f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
                   "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does)"
                   + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
-                     or lp.w_sos is not None else "; their sum is what `learn` returns.")]
+                     or lp.w_sos is not None else "; their sum is what `learn` returns."),
+                  "", *_structure_readme(filters)]
         lines += _inversion_readme(filters)
         if filters.get("law") == "exact-reference":
             lines += ["", f"Learning law exact-reference (`ilcdob.design.laws`): pass `e - e_ref_source` instead "

@@ -226,6 +226,7 @@ class ZPKFilter:
         x = as_signal(x, name)
         n = x.size
         k = f.advance
+        delay = max(0, len(f.causal_poles) - len(f.zeros))   # a strictly proper causal part
         pu = f.anticausal_poles
         n_pad, n_pre = k + 8, 0
         if len(pu):
@@ -241,6 +242,8 @@ class ZPKFilter:
             scale = float(np.real(np.prod(-1.0 / pu)))
             x = scale * signal.sosfilt(sos_u, x[::-1])[::-1]
         # causal part with k extra poles at the origin, then advance by k samples
+        # (scipy.signal.zpk2sos puts missing zeros at the origin: a delay is restored by shifting)
         pc = np.concatenate([f.causal_poles, np.zeros(k)])
-        sos_c = signal.zpk2sos(f.zeros, pc, f.gain)
-        return signal.sosfilt(sos_c, x)[n_pre + k:n_pre + k + n]
+        y = signal.sosfilt(signal.zpk2sos(f.zeros, pc, f.gain), x)
+        y = np.concatenate([np.zeros(delay), y])
+        return y[n_pre + k:n_pre + k + n]

@@ -14,11 +14,15 @@ import pytest
 from ilcdob.app.cli import main
 from ilcdob.app.output import OutputFolder, Provenance
 from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
-from ilcdob.design.export import DIRECT_FORM_RTOL, apply_coefficients, apply_learning, direct_form_disagreement
+from ilcdob.design.export import (DIRECT_FORM_RTOL, apply_coefficients, apply_learning, apply_lookahead,
+                                  coefficients_freqresp, direct_form_disagreement, section_growth,
+                                  zpk_to_coefficients)
+from ilcdob.design.noncausal import ZPKFilter, lookahead
 from ilcdob.design.pair import design_pair
 from ilcdob.design.limit import LearningLimitWarning
 from ilcdob.errors import SpecError
 from ilcdob.fleet import default_fleet, load_fleet
+from ilcdob.signals import extend_smoothly
 
 # Third-order plants differing in lag at Ts = 0.01 s; C has a 3-sample input delay.
 LAGGED_FLEET = """\
@@ -81,7 +85,7 @@ def _driver(prefix: str, with_float: bool) -> str:
     out_f = ', (double)f1[k], (double)f2[k]' if with_float else ", 0.0, 0.0"
     return f"""#include <stdio.h>
 #include "filters.h"
-#define NMAX 4096
+#define NMAX 12000
 static double u[NMAX], y1[NMAX], y2[NMAX], w[NMAX];
 static float uf[NMAX], f1[NMAX], f2[NMAX];
 int main(void)
@@ -577,3 +581,151 @@ def test_header_and_readme_recommend_learn(learn_designs):
     files, data = design_files(design.filters, float_variant=True)
     assert "learn" not in " ".join(data["c"]["float"]["functions"])
     assert "has no float variant" in files["filters.h"] and "`learn` runs in double" in files["README.md"]
+
+
+# --------------------------------------------------------------------------- the look-ahead pre-stage
+
+
+def _exact_filter(zeros, poles, gain: float, ts: float) -> ZPKFilter:
+    """The filter; its anti-causal poles in the right half-plane are inverted exactly (the images of
+    continuous non-minimum-phase zeros: their look-ahead, ~27.6/z s, is physics, design/noncausal.py)."""
+    f = ZPKFilter(np.asarray(zeros, dtype=complex), np.asarray(poles, dtype=complex), gain, ts)
+    assert not f.substituted.size, "expected an exact inversion of right-half-plane poles"
+    return f
+
+
+def _independent_response(coeffs: dict, w: np.ndarray, ts: float) -> np.ndarray:
+    """``e^{jwTs advance} sum_m g_m e^{jwTs (m - M)} S(e^{-jwTs})``, from the definition term by term."""
+    from scipy import signal
+
+    _, s = signal.sosfreqz(np.asarray(coeffs["sos"], float), worN=w * ts)
+    g = np.asarray(coeffs.get("lookahead", [1.0]), float)
+    m = np.arange(g.size)
+    fir = (g[None, :] * np.exp(1j * np.outer(w * ts, m - (g.size - 1)))).sum(axis=1)
+    return np.exp(1j * w * ts * coeffs["advance"]) * fir * s
+
+
+TS_FAST = 0.001
+#: Anti-causal poles near +1: 1.01, and the image e^{z Ts} of a continuous non-minimum-phase zero
+#: at z = 10 rad/s sampled at 1 ms (look-ahead 2777 and 2764 samples).
+NEAR_ONE = {"1.01": 1.01, "e^(10 Ts)": float(np.exp(10.0 * TS_FAST))}
+
+
+@pytest.fixture(scope="module")
+def near_one() -> dict:
+    """Each pole near +1 in ``zeros [0.9, 0.95], poles [0.5, p]``: the filter and its export.
+
+    Measured (2 cores): export 0.03 s each, 1 section and 2778 or 2765 look-ahead taps; through the
+    roots of the series (the form before the pre-stage) p = 1.01 took 70 s and gave 1390 sections
+    whose partial cascades reached 2.5e184 times the output (section_growth)."""
+    out = {}
+    for label, p in NEAR_ONE.items():
+        f = _exact_filter([0.9, 0.95], [0.5, p], 1.0, TS_FAST)
+        out[label] = (f, zpk_to_coefficients(f))
+    return out
+
+
+@pytest.mark.parametrize("label", list(NEAR_ONE))
+def test_lookahead_near_plus_one_is_exact_and_bounded(near_one, label):
+    """The series of an anti-causal pole near +1 is stored as taps, not as the roots of a degree-2777
+    polynomial: one section (the zeros and the causal pole), the look-ahead the pole needs, the
+    rational response to 1e-9 (measured 4e-12), no intermediate signal above 1e6 times the output
+    (measured 100: the pre-stage's output v is 1/|S| times it, 100 at DC)."""
+    f, c = near_one[label]
+    p = NEAR_ONE[label]
+    taps = np.asarray(c["lookahead"])
+    assert taps.size - 1 == lookahead(p) and c["advance"] == taps.size - 1 + 1   # one surplus zero
+    assert len(c["sos"]) == 1
+    w = np.geomspace(0.1, 0.8 * np.pi / TS_FAST, 400)
+    exact = f.exact_freqresp(w)
+    assert np.max(np.abs(_independent_response(c, w, TS_FAST) / exact - 1)) < 1e-9
+    assert np.max(np.abs(coefficients_freqresp(c, w, TS_FAST) / exact - 1)) < 1e-9
+    # steady state (section_growth, pre-stage output included) and in time, on the Python computation
+    growth = section_growth(np.asarray(c["sos"]), TS_FAST, taps)
+    assert 1.0 <= growth <= 1e6
+    assert section_growth(np.asarray(c["sos"]), TS_FAST) <= 1e6
+    x = reference_trial(TS_FAST, 6000)
+    y = apply_coefficients(c, x)
+    v = apply_lookahead(taps, extend_smoothly(x, c["advance"] + 8))
+    assert np.max(np.abs(v)) <= 1e6 * np.max(np.abs(y))
+    # the direct form, when written, includes the pre-stage and agrees with it
+    if "num" in c:
+        assert len(c["num"]) == taps.size + 2
+        assert direct_form_disagreement(c["num"], c["den"], c["sos"], TS_FAST, taps)[0] <= DIRECT_FORM_RTOL
+
+
+def test_c_lookahead_near_plus_one_matches_python_and_the_inversion(cc, near_one, tmp_path):
+    """Compiled C with 2778- and 2765-tap pre-stages (L1, L2), double and float, in place: equal to
+    apply_coefficients (1e-9 over the whole trial, measured 1.7e-13; 1e-12 in the interior, measured 0)
+    and, in the trial's interior, to ZPKFilter.apply, the stable inversion run backwards (1e-9;
+    measured 1.1e-12).
+    Interior: from 0.1 s to the look-ahead (2.8 s) before the end, beyond which both continue the
+    trial by a cubic fitted to its last 16 samples (fitted differently; they agree there to ~1e-10)."""
+    (f1, c1), (f2, c2) = near_one["1.01"], near_one["e^(10 Ts)"]
+    filters = {"from": "N", "to": "M", "method": "closed-form", "sample_time": TS_FAST, "L1": c1, "L2": c2}
+    data = write_design_folder(tmp_path, filters, float_variant=True)
+    exe = _build(cc, tmp_path, True, data["c"]["prefix"])
+    x = reference_trial(TS_FAST, 10000)
+    out = _run(exe, x)
+    interior = slice(100, x.size - c1["advance"])
+    for col, (f, c) in enumerate(((f1, c1), (f2, c2))):
+        ref = apply_coefficients(c, x)
+        assert _rel(out[:, col], ref) < 1e-9
+        assert _rel(out[interior, col], ref[interior]) < 1e-12
+        inv = f.apply(x)
+        assert _rel(out[interior, col], inv[interior]) < 1e-9
+    np.testing.assert_array_equal(out[:, 2], out[:, 0])   # in place: the same numbers
+    stated = data["c"]["float"]["max_relative_error"]
+    x = reference_trial(TS_FAST)
+    out = _run(exe, x)
+    for col, key in ((3, "L1"), (4, "L2")):
+        assert _rel(out[:, col], apply_coefficients(filters[key], x)) == pytest.approx(stated[key], rel=0.01), key
+    header, readme = (tmp_path / "filters.h").read_text(), (tmp_path / "README.md").read_text()
+    assert "#define ILCDOB_N_M_L1_LOOKAHEAD_TAPS 2778 " in header and "#define ILCDOB_N_M_L1_ADVANCE 2778 " in header
+    assert "L1 looks ahead 2778 samples (2.778 s): a look-ahead FIR of 2778 taps" in readme
+    assert "L2 looks ahead 2765 samples (2.765 s): a look-ahead FIR of 2765 taps" in readme
+    assert "then 1 second-order section run on v, read 1 sample ahead" in readme
+
+
+def test_lookahead_with_more_causal_poles_than_zeros(cc, tmp_path):
+    """A filter whose causal poles outnumber its zeros delays by their difference: delay sections keep
+    the sections' own advance >= 0, so the C code runs in place; response exact to 1e-9."""
+    ts = 0.01
+    f = _exact_filter([0.3], [0.5, 0.6, -0.4, 3.0], 2.0, ts)
+    c = zpk_to_coefficients(f)
+    taps = len(c["lookahead"])
+    assert taps - 1 == lookahead(3.0) and c["advance"] == taps - 1   # 3 causal poles over 1 zero: a delay of 2
+    assert sum(row[:3] == [0.0, 1.0, 0.0] or row[:3] == [0.0, 0.0, 1.0] for row in c["sos"]) == 1
+    w = np.geomspace(0.1, 0.8 * np.pi / ts, 200)
+    assert np.max(np.abs(_independent_response(c, w, ts) / f.exact_freqresp(w) - 1)) < 1e-9
+    g = _exact_filter([0.9, 0.95, 0.2], [0.5, -3.7], 0.5, ts)   # the sampling zero near -3.7: 22 + 1 taps
+    cg = zpk_to_coefficients(g)
+    assert len(cg["lookahead"]) == lookahead(-3.7) + 1 and cg["advance"] == lookahead(-3.7) + 2
+    filters = {"from": "X", "to": "Y", "method": "closed-form", "sample_time": ts, "L1": c, "L2": cg}
+    data = write_design_folder(tmp_path, filters)
+    exe = _build(cc, tmp_path, False, data["c"]["prefix"])
+    rng = np.random.default_rng(2)
+    for x in (reference_trial(ts, 900), rng.standard_normal(30), np.array([0.7])):
+        out = _run(exe, x)
+        for col, key in ((0, "L1"), (1, "L2")):
+            assert _rel(out[:, col], apply_coefficients(filters[key], x)) < 1e-12, (x.size, key)
+        np.testing.assert_array_equal(out[:, 2], out[:, 0])
+
+
+@pytest.mark.parametrize("value, why", [
+    ([1.0, float("nan")], "finite"),
+    ([], "non-empty"),
+    ("taps", "list of numbers"),
+    ([1.0] * 9, "more than `advance`"),
+])
+def test_lookahead_entry_is_checked(value, why):
+    coeffs = {"advance": 4, "sos": [[1.0, -0.5, 0.0, 1.0, -0.2, 0.0]], "lookahead": value}
+    with pytest.raises(SpecError, match="`lookahead`") as err:
+        apply_coefficients(coeffs, np.ones(10))
+    assert why in str(err.value)
+    filters = {"from": "X", "to": "Y", "method": "closed-form", "sample_time": 0.01, "L1": coeffs,
+               "L2": {"advance": 0, "sos": [[1.0, 0.0, 0.0, 1.0, 0.0, 0.0]]}}
+    with pytest.raises(SpecError, match="`L1.lookahead`"):
+        c_code(filters)
+    with pytest.raises(SpecError, match="`sos` is missing"):
+        apply_coefficients({"advance": 4, "num": [1.0], "den": [1.0], "lookahead": [1.0, 0.5]}, np.ones(10))

@@ -53,9 +53,12 @@ def _model_maps(lp) -> tuple[ct.StateSpace, ct.StateSpace]:
 
 
 def _exported_response(coeffs: dict, w: np.ndarray, ts: float) -> np.ndarray:
-    """``z^advance * prod(sections)(z^-1)`` of a filter in ``filters.json``."""
+    """``z^(advance - M) * sum_m g_m z^m * prod(sections)(z^-1)`` of a filter in ``filters.json``
+    (``g``: its look-ahead taps, ``M + 1`` of them; none: ``M = 0``, ``g = [1]``)."""
     _, h = signal.sosfreqz(np.asarray(coeffs["sos"], float), worN=w * ts)
-    return h * np.exp(1j * w * ts * coeffs["advance"])
+    g = np.asarray(coeffs.get("lookahead", [1.0]), float)
+    ahead = np.exp(1j * np.outer(w * ts, np.arange(g.size))) @ g
+    return h * ahead * np.exp(1j * w * ts * (coeffs["advance"] - (g.size - 1)))
 
 
 @pytest.mark.parametrize("fleet_name", FLEETS)
