@@ -32,7 +32,7 @@ Beside them the source has the whole learning law of the design, ::
 computing :func:`~ilcdob.design.export.apply_learning` (``filters.json`` keys ``band`` and
 ``disturbance``) ::
 
-    d_f = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
+    d_f = fold(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
 
 into ``df_next``: ``H`` extends the trial by ``band.pad`` samples at each end (zeros before,
 the least-squares line through its last ``band.end_fit`` samples after, fitted on the centred
@@ -40,7 +40,9 @@ abscissa: the problem ``numpy.polyfit`` of degree 1 solves), ``F`` is ``band.sos
 forwards from the state ``band.zi`` times the first sample, then backwards from ``band.zi``
 times the last (``scipy.signal.sosfilt`` operation by operation), ``L1``/``L2`` are the apply
 functions above run in place on the extended signals, ``W`` (``disturbance.W.sos``, the
-airframe correction) runs forwards from rest and ``crop`` keeps the trial's ``n`` samples.
+airframe correction) runs forwards from rest and ``fold`` keeps the trial's ``n`` samples,
+adding to its first ``pad`` the part before ``t = 0`` time-reversed (``band.start`` "fold";
+"crop", of folders written before, only keeps them).
 Without a band it is ``W{L1{e} + L2{d_f_prev}}``. The caller provides ``work``,
 ``PREFIX_LEARN_WORK(n)`` doubles (``2 (n + 2 pad)``); ``df_next`` may be ``e`` or
 ``df_prev``. It returns 0, or ``PREFIX_LEARN_EMPTY`` (n = 0) or ``PREFIX_LEARN_NULL`` (a
@@ -501,6 +503,7 @@ class _Learning:
     order: int | None            # F's Butterworth order, when stated
     why: str                     # the band's source and reason, for the README
     w_sos: np.ndarray | None     # the airframe correction W (None: none)
+    fold: bool = False           # the learning signal before t = 0 folded onto the first samples
 
 
 def _sections(value: object, key: str) -> np.ndarray:
@@ -562,6 +565,9 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
                             "frequency > 0 rad/s")
         order = band.get("order") if isinstance(band.get("order"), int) else None
         why = str(band.get("reason") or band.get("source") or "")
+        if band.get("start", "crop") not in ("crop", "fold"):
+            raise SpecError(f"`band.start`: got {band.get('start')!r:.80}, expected 'fold' (the part before t = 0 "
+                            "added, time-reversed, to the first samples) or 'crop'")
     elif cutoff is not None:
         raise SpecError(f"`band.sos`: missing, but `band.cutoff_rad_s` is {cutoff!r}; expected the sections of "
                         "the band's filter F (or cutoff_rad_s None: no filter)")
@@ -579,7 +585,8 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
     elif dist.get("at", "command") == "airframe":
         raise SpecError("`disturbance.W`: missing, but `disturbance.at` is 'airframe'; expected the airframe "
                         "correction {'sos': [[b0, b1, b2, 1, a1, a2], ...]}")
-    return _Learning(sos, zi, pad, end_fit, float(cutoff) if sos is not None else None, order, why, w_sos)
+    return _Learning(sos, zi, pad, end_fit, float(cutoff) if sos is not None else None, order, why, w_sos,
+                     sos is not None and band.get("start") == "fold")
 
 
 def _learn_c(prefix: str, lp: _Learning) -> str:
@@ -712,7 +719,11 @@ static void {prefix}w_pass(double *x, size_t n)
                 f"    for (k = 0; k < len; ++k)\n        a[k] = a[k] + b[k];\n"
                 f"{w_step}"
                 f"    {prefix}band_pass(a, len);\n"
-                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n    return 0;\n")
+                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n"
+                + (f"    /* fold: the part before t = 0, time-reversed, onto the first samples */\n"
+                   f"    for (k = 0; k < n && k < (size_t){macro}PAD; ++k)\n"
+                   f"        df_next[k] += a[{macro}PAD - 1 - k];\n" if lp.fold else "")
+                + "    return 0;\n")
     else:  # no band: W{L1{e} + L2{df_prev}} (W when present)
         body = (f"    double *a, *b;\n    size_t {'len, ' if w_step else ''}k;\n\n{checks}"
                 + ("    len = n;\n" if w_step else "")
@@ -785,8 +796,9 @@ def _law_comment(macro: str, lp: _Learning) -> str:
     """The lines of the header describing what ``learn`` computes."""
     if lp.sos is not None:
         order = f"order {lp.order} " if lp.order else ""
-        lines = ["    d_next = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f}}}}})" if lp.w_sos is not None
-                 else "    d_next = crop(F{L1{F{H{e}}} + L2{F{H{d_f}}}})",
+        ends = "fold" if lp.fold else "crop"
+        lines = [f"    d_next = {ends}(F{{W{{L1{{F{{H{{e}}}}}} + L2{{F{{H{{d_f}}}}}}}}}})" if lp.w_sos is not None
+                 else f"    d_next = {ends}(F{{L1{{F{{H{{e}}}}}} + L2{{F{{H{{d_f}}}}}}}})",
                  "exactly as ilcdob.design.export.apply_learning does (to rounding), where",
                  f"  F  is the learning band: a Butterworth {order}low-pass with corner {lp.cutoff:.6g} rad/s",
                  f"     ({macro}BAND_CUTOFF), run forwards from its steady state at the first sample, then",
@@ -796,7 +808,8 @@ def _law_comment(macro: str, lp: _Learning) -> str:
         if lp.w_sos is not None:
             lines.append("  W  is the airframe correction (the disturbance acts on the airframe), from rest;")
         lines += ["  L1, L2 run as the functions below, on the extended signals;",
-                  "  crop keeps the trial's n samples."]
+                  "  fold keeps the trial's n samples and adds, time-reversed, the learning signal computed"
+                  f" before t = 0 to the first {macro}PAD of them." if lp.fold else "  crop keeps the trial's n samples."]
     else:
         lines = ["    d_next = W{L1{e} + L2{d_f}}" if lp.w_sos is not None else "    d_next = L1{e} + L2{d_f}",
                  "exactly as ilcdob.design.export.apply_learning does (to rounding): no learning band",

@@ -61,7 +61,7 @@ from scipy import signal
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 
-from .band import learning_horizon
+from .band import fold_start, learning_horizon
 from .noncausal import LOOKAHEAD_MAX, ZPKFilter, lookahead
 
 __all__ = ["zpk_to_coefficients", "inversion_note", "order_sections", "section_growth", "order_grid",
@@ -488,13 +488,15 @@ def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> 
 
     What the C function ``<prefix>learn`` runs (:mod:`.c_export`), in numpy::
 
-        d_f = crop(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
+        d_f = fold(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
 
     ``H`` extends the trial by ``band.pad`` samples (zeros before, the least-squares line
     through its last ``band.end_fit`` samples after), ``F`` is ``band.sos`` run forwards then
     backwards from the steady state ``band.zi`` times the first sample of each pass, ``W``
     is ``disturbance.W.sos`` run forwards from rest, ``L1``/``L2`` run as
-    :func:`apply_coefficients`; ``crop`` keeps the trial's samples. Without a band (no
+    :func:`apply_coefficients`; ``fold`` keeps the trial's samples and adds the part before
+    ``t = 0``, time-reversed, to the first ``band.pad`` of them (``band.start`` "fold",
+    :func:`~ilcdob.design.band.fold_start`; "crop" only keeps them). Without a band (no
     ``band.sos``) it is ``W{L1{e} + L2{d_f_prev}}``.
 
     Parameters
@@ -529,4 +531,5 @@ def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> 
     y = apply_coefficients(filters["L1"], x1) + apply_coefficients(filters["L2"], x2)
     if w_sos is not None:
         y = signal.sosfilt(np.asarray(w_sos, float), y)
-    return _forward_backward(sos, zi, y)[pad:pad + e.size]
+    z = _forward_backward(sos, zi, y)
+    return fold_start(z, pad, e.size) if band.get("start") == "fold" else z[pad:pad + e.size]
