@@ -223,6 +223,33 @@ class PairDesign:
         d_f, report = enforce_limit(d_f, self.limits, self.on_limit, what, band.describe())
         return LearningSignal(d_f, band, report)
 
+    def finite_trial(self, n: int, source: LoopSystem | None = None, target: LoopSystem | None = None) -> Any:
+        """The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` of this law over ``n`` samples.
+
+        The lifted ``n``-sample error map (:mod:`.finite_horizon`): the law with its fixed band
+        (:attr:`band`), no limit, one trial of the source flown without learning. Closed-form and
+        robust-set designs with the paper's law.
+
+        Parameters
+        ----------
+        n : int
+            Samples of the trial.
+        source, target : LoopSystem, optional
+            True loops of the two vehicles (default: their models, exact models).
+
+        Returns
+        -------
+        FiniteHorizonRatio
+        """
+        from .finite_horizon import finite_horizon_ratio, law_map
+
+        method = getattr(self.raw, "__self__", None)
+        filters = method if isinstance(method, LearningFilters) else getattr(method, "filters", None)
+        if not isinstance(filters, LearningFilters):
+            raise SpecError(f"`finite_trial`: method {self.method!r} has no fixed linear law; closed-form and "
+                            "robust-set designs have one")
+        return finite_horizon_ratio(law_map(self, n), source or filters.source, target or filters.target)
+
     def learn(self, e_prev: object, df_prev: object) -> np.ndarray:
         """The learning signal only (``learning(e_prev, df_prev).d_f``), m/s^2.
 
@@ -475,7 +502,8 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
                    "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},
                    "learning": "d_f,j = F{L1{e_{j-1}} + L2{d_f,{j-1}}}, computed on a trial as (1 - Q_j){F{d_hat}} "
                                "with d_hat the disturbance reconstructed by the model (F: FIR, output(k) = "
-                               "sum_i num[i] input(k + advance - i)); no C code",
+                               "sum_i num[i] input(k + advance - i)), d_hat zero before the trial and continued "
+                               "past its end as `trial_ends` says; no C code",
                    "delta_set": {source: deltas[source].source}, **rs.to_dict()}
         return PairDesign(method, filters, rs.apply)
     if method == "robust":

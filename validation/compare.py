@@ -6,7 +6,10 @@ paired samples of both systems' Delta sets (:func:`ilcdob.design.delta_set`; the
 every learning design keep using the models). In every case system j-1 flies its DOB-only
 trial, each design turns that trial into system j's learning signal, and system j flies with
 it. The figure of merit is the paper's improvement ratio ``||e_j|| / ||e'_j||`` (Theorem:
-< 1 means learning helped), ``e'_j`` being system j's DOB-only error in the same case. The
+< 1 means learning helped), ``e'_j`` being system j's DOB-only error in the same case, both
+norms over the whole trial as flown (its first and last samples included: the designs'
+guarantees are per frequency, and the ends of a trial are where a finite trial departs from
+them, :mod:`ilcdob.design.finite_horizon`). The
 robust design's models are exactly these 1 + K cases (its own sample set), so theory promises
 its ratio <= rho on them, up to what its predictions cannot know: the two systems' own
 noises differ (paper Sec. IV; docs/theory.md section 4), and the reference term ``(1 - G_r) r`` of moving
@@ -217,8 +220,8 @@ class Comparison:
     def to_dict(self) -> dict[str, object]:
         """The content of ``compare.json`` (RMSE in m, design time in s)."""
         return {"scenario": self.scenario, "source": self.source, "target": self.target, "samples": self.samples,
-                "delta_set": self.delta_set, "law": self.law, "units": {"rmse": "m", "ratio": "||e_j|| / ||e'_j||",
-                                                        "design_time": "s"},
+                "delta_set": self.delta_set, "law": self.law,
+                "units": {"rmse": "m", "ratio": "||e_j|| / ||e'_j|| (whole trials)", "design_time": "s"},
                 "rmse_without_learning": {"nominal": self.rmse_without_nominal, "worst": self.rmse_without_worst},
                 "methods": {m.method: m.to_dict() for m in self.methods}}
 
@@ -226,7 +229,7 @@ class Comparison:
         """Plain-text table, one row per design."""
         head = (f"scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law}); "
                 f"nominal plants and "
-                f"{self.samples} Delta samples ({self.delta_set}); ratio = ||e_j|| / ||e'_j||\n"
+                f"{self.samples} Delta samples ({self.delta_set}); ratio = ||e_j|| / ||e'_j|| over whole trials\n"
                 f"without learning: RMSE {1e3 * self.rmse_without_nominal:.2f} mm nominal, "
                 f"{1e3 * self.rmse_without_worst:.2f} mm worst sample\n")
         cols = f"{'method':<13}{'RMSE nom mm':>12}{'ratio nom':>11}{'RMSE worst':>12}{'ratio worst':>12}" \

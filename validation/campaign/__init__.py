@@ -10,7 +10,8 @@ it and whenever. For every scenario the first pair of its learning order (j-1 ->
 flown as in :func:`ilcdob.validation.compare.evaluate_case`: system j-1 flies its DOB-only
 trial under its true plant, every design turns the trial into system j's learning signal,
 and system j flies with and without it under its true plant. The figure of merit is the
-paper's improvement ratio ``||e_j|| / ||e'_j||`` (Theorem: < 1 means learning helped).
+paper's improvement ratio ``||e_j|| / ||e'_j||`` over whole trials (Theorem: < 1 means learning
+helped).
 
 The designs only know the models: closed-form and norm-optimal are built from the nominal
 models, FIR from the nominal models and 8 samples of the identified uncertainty (its robust

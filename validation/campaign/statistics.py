@@ -140,7 +140,7 @@ class CampaignResult:
             "rejected_plants": self.rejected, "resumed_samples": self.resumed, "workers": self.workers,
             "wall_time_s": self.wall_time_s, "sample_time_s": self.sample_time_s,
             "sample_cpu_s": self.sample_cpu_s,
-            "ratio": "||e_j|| / ||e'_j|| (< 1: learning improved on the DOB-only flight)",
+            "ratio": "||e_j|| / ||e'_j|| over whole trials (< 1: learning improved on the DOB-only flight)",
             "methods": {m: s.to_dict() for m, s in self.methods.items()},
             "scenarios": {f"scenario {sid}: {self.pairs[sid][0]} -> {self.pairs[sid][1]}":
                           {"methods": {m: s.to_dict() for m, s in per.items()}}
