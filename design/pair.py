@@ -264,9 +264,11 @@ class PairDesign:
 
 
 def _filter_size(coeffs: dict[str, Any]) -> str:
-    """``"17 SOS, advance 24"`` for sections, ``"79/0"`` (numerator/denominator degree) otherwise."""
+    """``"23 taps + 6 SOS, advance 24"`` for look-ahead taps and sections (``"6 SOS, advance 0"``
+    without taps), ``"79/0"`` (numerator/denominator degree) otherwise."""
     if coeffs.get("sos"):
-        return f"{len(coeffs['sos'])} SOS, advance {coeffs['advance']}"
+        taps = f"{len(coeffs['lookahead'])} taps + " if coeffs.get("lookahead") else ""
+        return f"{taps}{len(coeffs['sos'])} SOS, advance {coeffs['advance']}"
     return f"{len(coeffs['num']) - 1}/{len(coeffs['den']) - 1}"
 
 
