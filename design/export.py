@@ -245,7 +245,8 @@ def inversion_note(f: ZPKFilter) -> dict[str, Any]:
     below = {}
     for level in (1e-6, 1e-4, 1e-2):
         over = np.flatnonzero(err > level)
-        below[f"{level:g}"] = float(w[over[0] - 1]) if over.size and over[0] > 0 else (0.0 if over.size else float(w[-1]))
+        first = over[0] if over.size else w.size   # first frequency over the level
+        below[f"{level:g}"] = float(w[first - 1]) if first else 0.0
     return {"method": "zero-phase-error substitute (z^-1 - p)/(1 - p)^2 for poles in the left half of the z-plane "
                       f"(sampling zeros) whose exact inverse would look ahead more than {LOOKAHEAD_MAX} samples or "
                       "that lie on the unit circle",
