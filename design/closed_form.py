@@ -53,7 +53,7 @@ from typing import Callable
 import control as ct
 import numpy as np
 
-from ilcdob.discretize import DiscreteBlock
+from ilcdob.discretize import DiscreteBlock, cancel_roots
 from ilcdob.errors import NumericalError, SpecError
 from ilcdob.loop import LoopSystem, delta_poles, freqresp
 from ilcdob.signals import as_signal
@@ -260,22 +260,6 @@ class LearningFilters:
         return te1, te1 * freqresp(src.G_f, w)
 
 
-def _cancel_common(zeros: np.ndarray, poles: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    """Remove pole/zero pairs that coincide (e.g. the zeros of ``1 - Q`` of two systems with the same
-    Q in ``L2``): they cancel exactly and only raise the order."""
-    zs, ps = list(zeros), list(poles)
-    kept = []
-    for z in zs:
-        if ps:
-            d = np.abs(np.asarray(ps) - z)
-            j = int(np.argmin(d))
-            if d[j] <= tol * max(1.0, abs(z)):
-                ps.pop(j)
-                continue
-        kept.append(z)
-    return np.asarray(kept, dtype=complex), np.asarray(ps, dtype=complex)
-
-
 #: Relative tolerance of the check of a zero-pole form against its block formula (:func:`matched`).
 MATCH_RTOL = 1e-5
 
@@ -330,7 +314,7 @@ def matched(zeros: np.ndarray, poles: np.ndarray, ts: float, exact: Callable, wh
         The zero-pole form does not match ``exact`` (the message names the filter, the largest
         relative disagreement and its frequency).
     """
-    zeros, poles = _cancel_common(zeros, poles)
+    zeros, poles = cancel_roots(zeros, poles, rtol=1e-9)
     unit = ZPKFilter(zeros, poles, 1.0, ts)
     w_gain = _GAIN_CHECK_W[_GAIN_CHECK_W < 0.8 * np.pi / ts]
     if w_gain.size < 2:

@@ -119,6 +119,7 @@ from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filte
                           simulate_map)
 from .fir import FIRFilter
 from .noncausal import lookahead
+from .value_set import complementary_sensitivity
 
 if TYPE_CHECKING:
     from .finite_horizon import FiniteHorizonRatio
@@ -388,10 +389,7 @@ def uncertainty_cones(source: LoopSystem, w: np.ndarray, W: np.ndarray,
         its stability boundary; 0 keeps the whole disc everywhere (then ``kind == 1`` never
         occurs and ``a <= 0`` marks frequencies with an unbounded worst case).
     """
-    src = source.nominal
-    p, m, c, q = (freqresp(blk, w) for blk in (src.P, src.M, src.C, src.Q))
-    pm = p * (m + c)
-    t0 = pm / (1 - q + pm)
+    t0 = complementary_sensitivity(source, w)
     W = np.asarray(W, float)
     s = 1 - np.abs(t0) ** 2 * W**2
     b1 = 1 - np.conj(t0) * W**2
@@ -708,7 +706,21 @@ class RobustSetDesign:
                             "infinite horizon, for every admissible Delta"}}
 
 
-def _intervals(w: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
+def mask_intervals(w: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
+    """Contiguous runs of ``mask`` as frequency intervals.
+
+    Parameters
+    ----------
+    w : numpy.ndarray
+        Frequencies, rad/s.
+    mask : numpy.ndarray
+        Booleans on ``w``.
+
+    Returns
+    -------
+    list of (float, float)
+        ``(w_first, w_last)`` of every run of True, rad/s.
+    """
     out, start = [], None
     for i, flag in enumerate(mask):
         if flag and start is None:
@@ -849,7 +861,7 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     rho_design = o.rho if feasible else float(min(1.0, rho_best + o.slack))
     if not feasible and not o.relax:
         return RobustSetDesign(None, FIRFilter(h_best, o.lead, ts), o.rho, rho_best, rho_best, rho_best, False,
-                               float(np.max(np.abs(1 - phi_v @ h_best))), _intervals(wv, kind_v == 1), wv,
+                               float(np.max(np.abs(1 - phi_v @ h_best))), mask_intervals(wv, kind_v == 1), wv,
                                worst_best, 0, time.perf_counter() - t_start)
     h, worst, _, rounds = run(rho_design)
     guaranteed = float(np.max(worst))
@@ -863,5 +875,5 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     nominal = float(np.max(np.abs(1 - phi_v @ h)))
     return RobustSetDesign(filters=None, F=FIRFilter(h, o.lead, ts), rho=o.rho, rho_best=rho_best,
                            rho_design=rho_design, rho_guaranteed=guaranteed, feasible=feasible,
-                           nominal_worst=nominal, margin_bands=_intervals(wv, kind_v == 1), w=wv, worst=worst,
+                           nominal_worst=nominal, margin_bands=mask_intervals(wv, kind_v == 1), w=wv, worst=worst,
                            exchanges=rounds, solve_time=time.perf_counter() - t_start)

@@ -62,7 +62,7 @@ from ilcdob.loop import LoopSystem, freqresp
 
 from .band import AMPLIFICATION_TOL, LearningBand
 from .delta import DeltaSet
-from .robust_set import ratio_for_delta, uncertainty_cones, worst_case_ratio
+from .robust_set import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
 
 __all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", "learning_pairs",
            "exact_worst_ratio", "exact_ratio_for_delta", "EXACT_TOL", "REFINE"]
@@ -79,18 +79,6 @@ REFINE = 8
 
 def _inf_to_none(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
-
-
-def _intervals(w: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
-    """Contiguous runs of ``mask`` as ``(w_first, w_last)``, rad/s."""
-    out, start = [], None
-    for i, flag in enumerate(mask):
-        if flag and start is None:
-            start = i
-        if start is not None and (not flag or i == mask.size - 1):
-            out.append((float(w[start]), float(w[i if flag else i - 1])))
-            start = None
-    return out
 
 
 def _bands_text(bands: list[tuple[float, float]]) -> str:
@@ -239,13 +227,13 @@ class PairCheck:
         """Frequency intervals (rad/s) where ``W |T0| >= 1``: the stated set reaches system j-1's
         stability boundary (``Delta = -1/T0`` admissible)."""
         self._require_exact()
-        return _intervals(self.exact_w, self.reach >= 1.0)
+        return mask_intervals(self.exact_w, self.reach >= 1.0)
 
     @property
     def exceed_bands(self) -> list[tuple[float, float]]:
         """Frequency intervals (rad/s) where the exact worst case exceeds ``1 + EXACT_TOL``."""
         self._require_exact()
-        return _intervals(self.exact_w, self.exact > 1.0 + EXACT_TOL)
+        return mask_intervals(self.exact_w, self.exact > 1.0 + EXACT_TOL)
 
     @property
     def known_worst(self) -> float | None:
@@ -263,7 +251,7 @@ class PairCheck:
         (by more than 0.1 %): there the disc does not cover it."""
         if self.known_delta is None:
             return []
-        return _intervals(self.exact_w, self.known_delta > self.exact_bound * (1 + 1e-3))
+        return mask_intervals(self.exact_w, self.known_delta > self.exact_bound * (1 + 1e-3))
 
     @property
     def holds_exact(self) -> bool:

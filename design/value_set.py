@@ -41,7 +41,7 @@ from scipy.spatial import ConvexHull, QhullError
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
-__all__ = ["TAU_RANGE", "ValueSet", "bound_family", "ellipse_family", "value_set_cones", "worst_over_set"]
+__all__ = ["TAU_RANGE", "ValueSet", "complementary_sensitivity", "bound_family", "ellipse_family", "value_set_cones", "worst_over_set"]
 
 #: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
 TAU_RANGE = (0.01, 1.0)
@@ -133,7 +133,24 @@ def ellipse_family(axes: np.ndarray, w: np.ndarray, n_phi: int = 72, n_rad: int 
     return ValueSet(w, xy[..., 0] + 1j * xy[..., 1], "linearised 3-sigma parameter ellipsoid")
 
 
-def _t0(source: LoopSystem, w: np.ndarray) -> np.ndarray:
+def complementary_sensitivity(source: LoopSystem, w: np.ndarray) -> np.ndarray:
+    """``T0 = P_hat (M + C) / (1 - Q + P_hat (M + C))`` of a system's nominal DOB loop.
+
+    The Moebius map ``g(Delta) = (1 + Delta)/(1 + T0 Delta)`` of the module docstring and of
+    :mod:`.robust_set` takes a model error of the source to its error-ratio factor.
+
+    Parameters
+    ----------
+    source : LoopSystem
+        The system (its nominal loop is used).
+    w : array_like
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``T0(e^{j w Ts})``, complex.
+    """
     src = source.nominal
     p, m, c, q = (freqresp(blk, w) for blk in (src.P, src.M, src.C, src.Q))
     pm = p * (m + c)
@@ -197,7 +214,7 @@ def value_set_cones(source: LoopSystem, vs: ValueSet, margin: float = 0.5) -> tu
     """
     if not 0 <= margin < 1:
         raise SpecError(f"`margin`: got {margin!r}, expected a number in [0, 1)")
-    t0 = _t0(source, vs.w)
+    t0 = complementary_sensitivity(source, vs.w)
     rows_i, rows_b, rows_r = [], [], []
     for i in range(vs.w.size):
         g, keep = _image(vs.values[i], t0[i], margin)

@@ -67,7 +67,7 @@ from .errors import SpecError
 from .specs import DOBSpec, PIDSpec, PlantSpec
 
 __all__ = ["zoh_with_delay", "discretize_plant", "discretize_pid", "q_filter", "discretize_q", "discretize_m",
-           "DiscreteBlock", "plant_block", "pid_block", "q_block", "m_block", "tustin_map", "rhp_zeros"]
+           "DiscreteBlock", "plant_block", "pid_block", "q_block", "m_block", "tustin_map", "rhp_zeros", "cancel_roots"]
 
 
 @dataclass(frozen=True)
@@ -768,8 +768,21 @@ def discretize_q(dob: DOBSpec, model: PlantSpec, ts: float) -> ct.StateSpace:
     return q_block(dob, model, ts).sys
 
 
-def _cancel_roots(zeros: np.ndarray, poles: np.ndarray, rtol: float = 1e-8) -> tuple[np.ndarray, np.ndarray]:
-    """Remove coinciding zero/pole pairs (what ``minreal`` did on the polynomial form)."""
+def cancel_roots(zeros: np.ndarray, poles: np.ndarray, rtol: float = 1e-8) -> tuple[np.ndarray, np.ndarray]:
+    """Remove coinciding zero/pole pairs (what ``minreal`` does on a polynomial form).
+
+    Parameters
+    ----------
+    zeros, poles : numpy.ndarray
+        Roots (complex).
+    rtol : float
+        A zero and its nearest remaining pole cancel when they are within ``rtol * max(1, |z|)``.
+
+    Returns
+    -------
+    zeros, poles : numpy.ndarray
+        What remains, complex.
+    """
     ps = list(poles)
     kept = []
     for z in zeros:
@@ -819,7 +832,7 @@ def m_block(dob: DOBSpec, model: PlantSpec, ts: float) -> DiscreteBlock:
     rhp = model_zeros.real > 1e-9 * np.abs(model_zeros)
     model_zeros = np.where(rhp, -np.conj(model_zeros), model_zeros)
     poles_s = np.concatenate([model_zeros, np.full(n, -1.0 / tau)])
-    zeros_s, poles_s = _cancel_roots(zeros_s, poles_s)
+    zeros_s, poles_s = cancel_roots(zeros_s, poles_s)
     if len(zeros_s) > len(poles_s):
         raise SpecError(
             f"`dob.q_order`: M = Q/P_hat is improper (Q order {dob.q_order} < model relative degree "
