@@ -46,7 +46,7 @@ from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, refe
 from .limit import LIMIT_POLICIES, LimitReport, enforce_limit
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
-from .robust_set import RobustSetOptions, design_robust_set
+from .robust_set import RobustSetOptions, design_robust_set, structured_set
 from .theorem import theorem_rhs
 
 __all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets", "METHODS",
@@ -498,7 +498,10 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
         return PairDesign(method, filters, lf.apply)
     if method == "robust-set":
         rs_opts = robust_set or RobustSetOptions(rho=min(1.0, robust.rho) if robust is not None else 0.95)
-        rs = design_robust_set(src, tgt, deltas[source].w, deltas[source].bound, rs_opts)
+        s_spec = next(s for s in fleet.systems if s.name == source)
+        ds = deltas[source]
+        rs = design_robust_set(src, tgt, ds.w, ds.bound, rs_opts,
+                               structured_set(s_spec, ds.source, ds.bound, rs_opts.delta_set))
         filters = {**head, "closed_form": {"L1": zpk_to_coefficients(rs.filters.L1),
                                            "L2": zpk_to_coefficients(rs.filters.L2)},
                    "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},

@@ -119,16 +119,25 @@ from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filte
                           simulate_map)
 from .fir import FIRFilter
 from .noncausal import lookahead
-from .value_set import complementary_sensitivity
+from .value_set import BoundFamily, EllipseFamily, complementary_sensitivity, family_cones
+
+#: A structured Delta set of the source (:mod:`.value_set`).
+StructuredSet = BoundFamily | EllipseFamily
 
 if TYPE_CHECKING:
     from .finite_horizon import FiniteHorizonRatio
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
            "uncertainty_cones", "worst_case_ratio", "ratio_for_delta", "design_robust_set", "bound_on_grid",
-           "admissible", "end_continuation", "trend_weights"]
+           "admissible", "end_continuation", "trend_weights", "structured_set", "DELTA_SETS"]
 
 _OK = ("optimal", "optimal_inaccurate")
+#: Choices of :attr:`RobustSetOptions.delta_set`.
+DELTA_SETS = ("auto", "disc", "structured")
+#: Supporting directions of a structured set's polygon in the SOCP: a coarser polygon than the verification's
+#: (:data:`~.value_set.DIRECTIONS`), containing it, so fewer and better conditioned cones (64 per frequency
+#: made Clarabel stall) and a design that the verification rarely sends back.
+_DESIGN_DIRECTIONS = 16
 _DIRECT_METHOD = "faer"  # supernodal, multithreaded: the dense tap columns make qdldl slow
 
 
@@ -208,6 +217,11 @@ class RobustSetOptions:
     finite_trial_s : float
         Length (s, >= 0) of the trial on which the whole-trial figure ``rho_N`` of the result is
         computed with exact models (:attr:`RobustSetDesign.finite`, :mod:`.finite_horizon`); 0 skips it.
+    delta_set : {"auto", "disc", "structured"}
+        The Delta set guaranteed over when a design is made from a fleet (:func:`structured_set`):
+        ``"disc"`` the frequency-wise disc ``|Delta| <= W``; ``"structured"`` the set the bound or the
+        identification stands for (:mod:`.value_set`); ``"auto"`` the identification's parameter
+        ellipsoid when the source carries one, else the disc.
     """
 
     rho: float = 0.95
@@ -225,6 +239,7 @@ class RobustSetOptions:
     margin: float = 0.5
     tol: float = 2e-3
     finite_trial_s: float = 60.0
+    delta_set: str = "auto"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.rho) and 0 < self.rho <= 1):
@@ -257,6 +272,8 @@ class RobustSetOptions:
             raise SpecError(f"`margin`: got {self.margin!r}, expected a stability margin in [0, 1)")
         if not (np.isfinite(self.tol) and 0 <= self.tol <= 0.01):
             raise SpecError(f"`tol`: got {self.tol!r}, expected a tolerance in [0, 0.01]")
+        if self.delta_set not in DELTA_SETS:
+            raise SpecError(f"`delta_set`: got {self.delta_set!r}, expected one of {list(DELTA_SETS)}")
         if not (np.isfinite(self.finite_trial_s) and self.finite_trial_s >= 0):
             raise SpecError(f"`finite_trial_s`: got {self.finite_trial_s!r}, expected a trial length >= 0 s "
                             "(0: no whole-trial figure)")
@@ -357,6 +374,30 @@ def bound_on_grid(w_bound: np.ndarray, bound: np.ndarray, w: np.ndarray) -> np.n
         return np.full(np.shape(w), float(b[0]))
     order = np.argsort(wb)
     return np.interp(np.log(np.asarray(w, float)), np.log(wb[order]), b[order])
+
+
+def structured_set(spec, source: str, bound: np.ndarray, choice: str = "auto") -> StructuredSet | None:
+    """The structured Delta set a robust-set design guarantees over, or None for the disc (:attr:`RobustSetOptions.delta_set`).
+
+    Parameters
+    ----------
+    spec : SystemSpec
+        System j-1.
+    source : str
+        Where its Delta set comes from (``DeltaSet.source``): ``"identification"`` or ``"fleet bound"``.
+    bound : array_like
+        Its bound ``W`` (a constant for a fleet bound).
+    choice : {"auto", "disc", "structured"}
+
+    Returns
+    -------
+    BoundFamily, EllipseFamily or None
+    """
+    if choice == "disc" or (choice == "auto" and source != "identification"):
+        return None
+    if source == "identification":
+        return EllipseFamily.from_spec(spec)
+    return BoundFamily(float(np.max(bound)))
 
 
 def uncertainty_cones(source: LoopSystem, w: np.ndarray, W: np.ndarray,
@@ -569,15 +610,18 @@ class RobustSetDesign:
     nominal_worst : float
         ``max_w |1 - F(w)|``: the ratio bound for the nominal plant.
     margin_bands : list of (float, float)
-        Frequency intervals (rad/s) where the margin disc is used (``W |T0| > 1 - margin`` and it is the
-        tighter bound): there the guarantee covers the Deltas with ``|1 + T0 Delta| >= margin`` only
-        (:func:`uncertainty_cones`), and ``F`` is near 0 where even those allow no learning.
+        Frequency intervals (rad/s) where the set reaches system j-1's stability boundary: there the
+        guarantee covers the Deltas with ``|1 + T0 Delta| >= margin`` only (the disc: where its margin
+        bound is used, :func:`uncertainty_cones`; a structured set: where some of its values are left
+        out, :mod:`.value_set`), and ``F`` is near 0 where even those allow no learning.
     w, worst : numpy.ndarray
         Verification grid (rad/s) and the worst-case ratio on it.
     exchanges : int
         Exchange rounds used.
     solve_time : float
         Total solver wall-clock time, s.
+    delta_set : str
+        The Delta set guaranteed over: ``"disc |Delta| <= W"`` or a structured set's description.
     finite : FiniteHorizonRatio or None
         The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` over a trial of
         ``options.finite_trial_s`` with exact models (:mod:`.finite_horizon`), the law of
@@ -600,6 +644,7 @@ class RobustSetDesign:
     worst: np.ndarray = field(repr=False)
     exchanges: int = 0
     solve_time: float = 0.0
+    delta_set: str = "disc |Delta| <= W"
     finite: FiniteHorizonRatio | None = None
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
@@ -689,7 +734,7 @@ class RobustSetDesign:
         """Summary for ``filters.json`` (the FIR taps under ``F``)."""
         return {"F": self.F.to_dict(), "rho": self.rho, "rho_best": self.rho_best, "rho_design": self.rho_design,
                 "rho_guaranteed": self.rho_guaranteed, "feasible": self.feasible,
-                "nominal_worst": self.nominal_worst, "margin_bands_rad_s": [list(b) for b in self.margin_bands],
+                "nominal_worst": self.nominal_worst, "guaranteed_over": self.delta_set, "margin_bands_rad_s": [list(b) for b in self.margin_bands],
                 "exchanges": self.exchanges,
                 "trial_ends": {"fade_samples": self.end_fade, "fit_samples": 2 * self.F.advance,
                                "rule": "F acts on the reconstructed disturbance d_hat, zero before the trial; with "
@@ -732,42 +777,73 @@ def mask_intervals(w: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]
     return out
 
 
-class _Problem:
-    """The SOCP on one grid; ``rho=None`` minimises rho instead of the nominal criterion."""
+def _set_rows(source: LoopSystem, w: np.ndarray, w_bound: np.ndarray, bound: np.ndarray,
+              structure: StructuredSet | None, margin: float, directions: int = 0) -> tuple[np.ndarray, ...]:
+    """Cone rows ``(index, a, b, R)`` of the Delta set on ``w`` and where values were left out for the margin:
+    one disc row per frequency (:func:`uncertainty_cones`), or a structured set's polygon of ``directions``
+    supporting lines (:func:`~.value_set.family_cones`)."""
+    if structure is not None:
+        return family_cones(source, structure, w, margin, directions)
+    a, b, r, _, kind = uncertainty_cones(source, w, bound_on_grid(w_bound, bound, w), margin)
+    return np.arange(w.size), a, b, r, kind == 1
 
-    def __init__(self, src: LoopSystem, w: np.ndarray, W: np.ndarray, opts: RobustSetOptions):
-        a, b, r, _, _ = uncertainty_cones(src, w, W, opts.margin)
+
+def _worst(F: np.ndarray, rows: tuple[np.ndarray, ...], n_w: int) -> np.ndarray:
+    """Worst-case ``|T|`` per frequency over cone rows (:func:`worst_case_ratio` row by row, the maximum)."""
+    idx, a, b, r = rows[:4]
+    out = np.full(n_w, -np.inf)
+    np.maximum.at(out, idx, worst_case_ratio(F[idx], a, b, r))
+    return out
+
+
+class _Problem:
+    """The SOCP on one grid; ``rho=None`` minimises rho instead of the nominal criterion.
+
+    ``F`` on the grid is a pair of variables tied to the taps (``F = Phi h``), so a frequency's many
+    cone rows (a structured set) each cost a 3-dimensional cone, not a dense row in the taps.
+    """
+
+    def __init__(self, ts: float, w: np.ndarray, rows: tuple[np.ndarray, ...], opts: RobustSetOptions,
+                 structured: bool = False):
+        idx, a, b, r = rows[:4]
+        self.structured = structured
         scale = np.maximum.reduce([np.abs(a), np.abs(b), r])  # rows are homogeneous: normalise each
-        self.a, self.b, self.r = a / scale, b / scale, r / scale
+        self.idx, self.a, self.b, self.r = idx, a / scale, b / scale, r / scale
         self.w, self.opts = w, opts
-        self.phi = np.exp(-1j * np.outer(w * src.ts, np.arange(opts.n_taps) - opts.lead))
+        self.phi = np.exp(-1j * np.outer(w * ts, np.arange(opts.n_taps) - opts.lead))
 
     def solve(self, rho: float | None) -> tuple[np.ndarray, float]:
         """Taps ``h`` and the imposed (or minimised) rho."""
         o = self.opts
         h = cp.Variable(o.n_taps)
-        # no F != 0 keeps the worst case <= 1 where the disc radius reaches its centre's distance (R >= |b|)
+        fr, fi = cp.Variable(self.w.size), cp.Variable(self.w.size)
+        # no F != 0 keeps the worst case <= 1 where the set's radius reaches its centre's distance (R >= |b|)
         # or the image is unbounded (a <= 0): there |F| <= cap, with cap (|b| + R)/a = tol/2 (F = 0 exactly,
         # as equalities, leaves the cones without interior and the equality rows rank deficient)
         hard = (self.a <= 1e-9) | (self.r >= np.abs(self.b) * (1 - 1e-9))
         ok, zero = np.flatnonzero(~hard), np.flatnonzero(hard)
-        phi_ok = self.phi[ok]
-        bphi = self.b[ok, None] * phi_ok
-        u, v = cp.Variable(ok.size), cp.Variable(ok.size)
-        cons = [cp.SOC(u, cp.vstack([self.a[ok] - bphi.real @ h, -(bphi.imag @ h)]), axis=0),
-                cp.SOC(v, cp.vstack([phi_ok.real @ h, phi_ok.imag @ h]), axis=0)]
+        i_ok = self.idx[ok]
+        br, bi = self.b[ok].real, self.b[ok].imag
+        u, v = cp.Variable(ok.size), cp.Variable(self.w.size)
+        cons = [fr == self.phi.real @ h, fi == self.phi.imag @ h,
+                cp.SOC(u, cp.vstack([self.a[ok] - (cp.multiply(br, fr[i_ok]) - cp.multiply(bi, fi[i_ok])),
+                                     -(cp.multiply(br, fi[i_ok]) + cp.multiply(bi, fr[i_ok]))]), axis=0),
+                cp.SOC(v, cp.vstack([fr, fi]), axis=0)]
         if zero.size:
             az = np.maximum(self.a[zero], 0.0)
             cap = 0.5 * o.tol * az / (np.abs(self.b[zero]) + self.r[zero])
-            cons.append(cp.SOC(cap, cp.vstack([self.phi[zero].real @ h, self.phi[zero].imag @ h]), axis=0))
-        t = cp.Variable() if rho is None else rho
-        cons.append(u + cp.multiply(self.r[ok], v) <= t * self.a[ok])
+            iz = self.idx[zero]
+            cons.append(cp.SOC(cap, cp.vstack([fr[iz], fi[iz]]), axis=0))
+        # a structured set's rows all pass through F = 0 at rho = 1: imposing rho + tol/2 there keeps F = 0 strictly
+        # inside (Clarabel stalls on a feasible set without interior); the verification allows tol anyway
+        t = cp.Variable() if rho is None else rho + (0.5 * o.tol if self.structured and rho >= 1 else 0.0)
+        cons.append(u + cp.multiply(self.r[ok], v[i_ok]) <= t * self.a[ok])
         if rho is None:
             obj = t + 1e-6 * cp.sum_squares(h)
         else:
             sw = np.sqrt(o.weights(self.w) / self.w.size)
-            obj = (cp.sum_squares(cp.multiply(sw, 1 - self.phi.real @ h))
-                   + cp.sum_squares(cp.multiply(sw, self.phi.imag @ h)) + o.ridge * cp.sum_squares(h))
+            obj = (cp.sum_squares(cp.multiply(sw, 1 - fr)) + cp.sum_squares(cp.multiply(sw, fi))
+                   + o.ridge * cp.sum_squares(h))
         prob = cp.Problem(cp.Minimize(obj), cons)
         try:
             with warnings.catch_warnings():  # "optimal_inaccurate" is accepted: the result is verified afterwards
@@ -783,7 +859,8 @@ class _Problem:
 
 
 def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, bound: np.ndarray,
-                      options: RobustSetOptions | None = None) -> RobustSetDesign:
+                      options: RobustSetOptions | None = None,
+                      structure: StructuredSet | None = None) -> RobustSetDesign:
     """Design the closed-form filters with a robustness FIR guaranteed over the Delta set.
 
     Parameters
@@ -794,6 +871,10 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         System j-1's multiplicative bound ``W`` on frequencies ``w_bound`` (rad/s), e.g.
         ``DeltaSet.w`` and ``DeltaSet.bound`` (:mod:`.delta`); a single value is a constant bound.
     options : RobustSetOptions, optional
+    structure : BoundFamily or EllipseFamily, optional
+        A structured Delta set of system j-1 (:mod:`.value_set`) to guarantee over instead of the
+        disc ``|Delta| <= W``: the fleet bound's gain/high-pass family or an identification's
+        parameter ellipsoid. ``w_bound`` and ``bound`` are then only reported.
 
     Returns
     -------
@@ -810,9 +891,9 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
     lf = closed_form_filters(source, target)
     # F depends on system j-1 and its bound only: designs of several targets from one source share it
     key = (repr(source.nominal.spec), source.ts, np.asarray(w_bound, float).tobytes(),
-           np.asarray(bound, float).tobytes(), o)
+           np.asarray(bound, float).tobytes(), o, structure)
     if key not in _CACHE:
-        _CACHE[key] = _design_filter(source, target, w_bound, bound, o)
+        _CACHE[key] = _design_filter(source, target, w_bound, bound, o, structure)
     design = _CACHE[key]
     if not design.feasible:
         msg = (f"robust-set design {source.name!r} -> {target.name!r}: rho = {o.rho:g} cannot be guaranteed over "
@@ -834,19 +915,22 @@ _CACHE: dict[tuple, RobustSetDesign] = {}
 
 
 def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, bound: np.ndarray,
-                   o: RobustSetOptions) -> RobustSetDesign:
+                   o: RobustSetOptions, structure: StructuredSet | None) -> RobustSetDesign:
     """The robustness FIR of :func:`design_robust_set` (steps 1-3 of the module docstring)."""
     ts = source.ts
-    wv = o.verify_grid(ts)
-    av, bv, rv, _, kind_v = uncertainty_cones(source, wv, bound_on_grid(w_bound, bound, wv), o.margin)
-    phi_v = np.exp(-1j * np.outer(wv * ts, np.arange(o.n_taps) - o.lead))
     t_start = time.perf_counter()
+    wv = o.verify_grid(ts)
+    rows_v = _set_rows(source, wv, w_bound, bound, structure, o.margin)
+    excluded_v = rows_v[4]
+    described = "disc |Delta| <= W" if structure is None else structure.describe()
+    phi_v = np.exp(-1j * np.outer(wv * ts, np.arange(o.n_taps) - o.lead))
 
     def run(rho: float | None) -> tuple[np.ndarray, np.ndarray, float, int]:
         grid, rounds = o.grid(ts), 0
         while True:
-            h, level = _Problem(source, grid, bound_on_grid(w_bound, bound, grid), o).solve(rho)
-            worst = worst_case_ratio(phi_v @ h, av, bv, rv)
+            rows = _set_rows(source, grid, w_bound, bound, structure, o.margin, _DESIGN_DIRECTIONS)
+            h, level = _Problem(ts, grid, rows, o, structure is not None).solve(rho)
+            worst = _worst(phi_v @ h, rows_v, wv.size)
             bad = worst > level + o.tol
             if not np.any(bad) or rounds >= o.max_exchange:
                 return h, worst, level, rounds
@@ -861,8 +945,8 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     rho_design = o.rho if feasible else float(min(1.0, rho_best + o.slack))
     if not feasible and not o.relax:
         return RobustSetDesign(None, FIRFilter(h_best, o.lead, ts), o.rho, rho_best, rho_best, rho_best, False,
-                               float(np.max(np.abs(1 - phi_v @ h_best))), mask_intervals(wv, kind_v == 1), wv,
-                               worst_best, 0, time.perf_counter() - t_start)
+                               float(np.max(np.abs(1 - phi_v @ h_best))), mask_intervals(wv, excluded_v), wv,
+                               worst_best, 0, time.perf_counter() - t_start, described)
     h, worst, _, rounds = run(rho_design)
     guaranteed = float(np.max(worst))
     if guaranteed > max(rho_design + o.tol, rho_best):  # the exchange did not converge: keep the min-max filter
@@ -875,5 +959,6 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     nominal = float(np.max(np.abs(1 - phi_v @ h)))
     return RobustSetDesign(filters=None, F=FIRFilter(h, o.lead, ts), rho=o.rho, rho_best=rho_best,
                            rho_design=rho_design, rho_guaranteed=guaranteed, feasible=feasible,
-                           nominal_worst=nominal, margin_bands=mask_intervals(wv, kind_v == 1), w=wv, worst=worst,
-                           exchanges=rounds, solve_time=time.perf_counter() - t_start)
+                           nominal_worst=nominal, margin_bands=mask_intervals(wv, excluded_v), w=wv, worst=worst,
+                           exchanges=rounds, solve_time=time.perf_counter() - t_start,
+                           delta_set=described)

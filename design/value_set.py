@@ -18,30 +18,56 @@ structured (paper Sec. III's Delta set, docs/theory.md section 3):
 At each frequency the set of values ``Delta(jw)`` is sampled on a grid and mapped through
 ``g(Delta) = (1 + Delta)/(1 + T0 Delta)`` (the exact ratio ``Gd/Gd_hat`` of the source's true
 and nominal disturbance maps, :mod:`.robust_set`). The target's error ratio
-``|1 - F g|`` is convex in ``g``, so its maximum over the convex hull of the image is reached at
-a hull vertex. Between grid lines the image bulges out of the sampled polygon by at most the
+``|1 - F g|`` is convex in ``g``, so its maximum over any convex polygon containing the image is
+reached at a vertex of that polygon. The polygon used is the outer one of ``K`` (:data:`DIRECTIONS`)
+supporting lines: in each direction ``n_k = e^{j 2 pi k/K}`` the largest ``Re(g conj(n_k))`` over the
+sampled image, and the vertices where consecutive lines meet. It contains the sampled image's
+convex hull (sound), it has exactly ``K`` vertices at every frequency, and it is computed for all
+frequencies at once; it exceeds the hull by at most ``tan(pi/K)`` times the hull's edge lengths
+(0.05 for ``K = 64``). Between grid lines the image bulges out of the sampled polygon by at most the
 grid's sagitta ``eps`` (measured on a grid twice as fine: the largest distance of a midpoint
 from the chord of its neighbours), and ``|1 - F g| <= |1 - F g_v| + eps |F|`` covers it. Each
-hull vertex ``g_v`` is therefore one cone row ``(a, b, R) = (1, g_v, eps)`` of the form the
+vertex ``g_v`` is therefore one cone row ``(a, b, R) = (1, g_v, eps)`` of the form the
 robust-set design already solves (``(|a - b F| + R |F|)/a <= rho``).
 
 Values of ``Delta`` with ``|1 + T0 Delta| < margin`` (the source's true loop closer than
 ``margin`` to its stability boundary at that frequency) are left out, as the disc design
 does where the disc reaches the boundary: the guarantee covers the plants of the set that
 keep that margin.
+
+The robust-set design takes a structured set as a :class:`BoundFamily` or an
+:class:`EllipseFamily`. Both evaluate ``Delta`` on the *sampled* loop, ``Delta_d(e^{jw Ts}) =
+P_d / P_hat_d - 1`` with both plants zero-order held (what the vehicle's loop sees; near Nyquist
+it differs from ``Delta(jw)``):
+
+* the fleet-bound family is linear in ``r``: ``P_d = P_hat_d + r ZOH[h P_hat]``, and
+  ``ZOH[h P_hat] = P_hat_d - ZOH[P_hat/(s tau + 1)]``, so ``Delta_d = r (1 - ZOH[P_hat/(s tau + 1)]/P_hat_d)``
+  exactly, one sampled plant per grid ``tau``;
+* the ellipsoid is linearised in the sampled response: ``A = k [Re g; Im g] Cov^(1/2)`` with ``g`` the
+  gradient of ``P_d/P_hat_d`` in the parameters (forward differences of the sampled model) and
+  ``k = sqrt(chi2_p^-1(0.99))``, so the ellipsoid holds 99 % of the Gaussian estimate's mass
+  (``p`` parameters).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
+from scipy.stats import chi2
 
+from ilcdob.discretize import plant_block
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.specs import PlantSpec
+from ilcdob.uncertainty import ModelStructure
 
-__all__ = ["TAU_RANGE", "ValueSet", "complementary_sensitivity", "bound_family", "ellipse_family", "value_set_cones", "worst_over_set"]
+__all__ = ["DIRECTIONS", "TAU_RANGE", "ValueSet", "BoundFamily", "EllipseFamily", "complementary_sensitivity", "bound_family",
+           "ellipse_family", "admissible_range", "value_set_cones", "worst_over_set", "family_cones"]
+
+#: Supporting directions of the outer polygon that bounds a value set at each frequency.
+DIRECTIONS = 64
 
 #: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
 TAU_RANGE = (0.01, 1.0)
@@ -55,16 +81,17 @@ class ValueSet:
     ----------
     w : numpy.ndarray
         Frequencies, rad/s.
-    values : numpy.ndarray
-        ``len(w) x (2 n1 - 1) x (2 n2 - 1)`` complex samples: a 2-D grid of the family's
-        parameters at each frequency, refined twice (the even rows and columns are the grid
-        whose hull is taken; the odd ones measure how far the family bulges between them).
+    values : tuple of numpy.ndarray
+        One array per connected piece of the family (the fleet-bound family: its gain errors and
+        its high-pass errors), each ``len(w) x (2 n1 - 1) x (2 n2 - 1)`` complex samples: a 2-D grid
+        of the piece's parameters at each frequency, refined twice (the even rows and columns are
+        the grid that bounds the set; the odd ones measure how far the piece bulges between them).
     source : str
         What the set stands for (for reports).
     """
 
     w: np.ndarray
-    values: np.ndarray
+    values: tuple
     source: str
 
 
@@ -74,7 +101,15 @@ def _check_bound(bound: float) -> float:
     return float(bound)
 
 
-def bound_family(bound: float, w: np.ndarray, n_r: int = 81, n_tau: int = 60) -> ValueSet:
+@lru_cache(maxsize=32)
+def _lag_blocks(model: PlantSpec, ts: float, tau: tuple) -> tuple:
+    """The sampled model and the sampled ``P_hat/(s tau + 1)`` for every ``tau`` (built once per source)."""
+    return (plant_block(model, ts),
+            *(plant_block(PlantSpec(model.num, tuple(np.polymul(model.den, [t, 1.0])), model.delay), ts) for t in tau))
+
+
+def bound_family(bound: float, w: np.ndarray, n_r: int = 21, n_tau: int = 30,
+                 source: LoopSystem | None = None, margin: float = 0.0) -> ValueSet:
     """Values of the fleet-bound family (module docstring) on ``w``.
 
     Parameters
@@ -85,22 +120,118 @@ def bound_family(bound: float, w: np.ndarray, n_r: int = 81, n_tau: int = 60) ->
         Frequencies, rad/s.
     n_r, n_tau : int
         Grid points in ``r`` and in ``tau`` (log-spaced over :data:`TAU_RANGE`).
+    source : LoopSystem, optional
+        The system whose model the errors multiply: with it ``Delta`` is the sampled loop's
+        ``Delta_d`` (module docstring) and ``r`` is limited, per error shape, to the plants whose
+        loop is stable and keeps the margin (:func:`admissible_range`); without it the continuous
+        ``Delta(jw)`` over ``|r| <= b``.
+    margin : float
+        With ``source``: the margin ``m`` of :func:`admissible_range`.
 
     Returns
     -------
     ValueSet
-        At each frequency the grid ``r x (1, h(tau_1), ..., h(tau_n))``, ``h = jw tau/(1 + jw tau)``
-        (``tau`` from the gain row's side ``tau -> inf``, ``h -> 1``, to the smallest ``tau``),
-        refined twice.
+        Two pieces: the gain errors ``r`` (one column) and the high-pass errors, the grid
+        ``r x (h(tau_1), ..., h(tau_n))``, ``h = jw tau/(1 + jw tau)``, both refined twice.
     """
     b = _check_bound(bound)
     w = np.asarray(w, float).reshape(-1)
-    r = np.linspace(-b, b, 2 * n_r - 1)
     tau = np.geomspace(TAU_RANGE[1], TAU_RANGE[0], 2 * n_tau - 1)
-    h = 1j * w[:, None] * tau[None, :] / (1 + 1j * w[:, None] * tau[None, :])
-    h = np.concatenate([np.ones((w.size, 1)), h], axis=1)
-    return ValueSet(w, r[None, :, None] * h[:, None, :], f"gain or first-order high-pass error within {b:g} "
-                    f"(time constants {TAU_RANGE[0]:g}-{TAU_RANGE[1]:g} s)")
+    unit = np.linspace(0.0, 1.0, 2 * n_r - 1)
+    if source is None:
+        h = 1j * w[:, None] * tau[None, :] / (1 + 1j * w[:, None] * tau[None, :])
+        lo, hi = np.full(tau.size + 1, -b), np.full(tau.size + 1, b)
+    else:
+        h = _highpass(source, tuple(tau), w)
+        lo, hi = admissible_range(source, tuple(tau), margin)
+        lo, hi = np.maximum(lo, -b), np.minimum(hi, b)
+    r = lo[None, :] + unit[:, None] * (hi - lo)[None, :]          # (2 n_r - 1) x (1 + len(tau))
+    gain = np.broadcast_to(r[None, :, :1], (w.size, unit.size, 1)).astype(complex)
+    what = "stable " if source is not None else ""
+    return ValueSet(w, (gain, r[None, :, 1:] * h[:, None, :]), f"{what}gain or first-order high-pass error within "
+                    f"{b:g} (time constants {TAU_RANGE[0]:g}-{TAU_RANGE[1]:g} s)")
+
+
+def _highpass(source: LoopSystem, tau: tuple, w: np.ndarray) -> np.ndarray:
+    """``h_d = 1 - ZOH[P_hat/(s tau + 1)]/P_hat_d`` of every ``tau`` on ``w`` (module docstring), ``len(w) x len(tau)``."""
+    model, *lags = _lag_blocks(source.spec.nominal_plant, source.ts, tau)
+    p_d = model.response(w)
+    return np.column_stack([1 - blk.response(w) / p_d for blk in lags])
+
+
+_RANGES: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
+                     n: int = 20000) -> tuple[np.ndarray, np.ndarray]:
+    """Per error shape (the gain, then every ``tau``) the interval ``(r_lo, r_hi)`` around 0 of the ``r`` whose
+    true loop of system j-1 is stable and keeps the margin.
+
+    Stability: with ``Delta = r h`` the true loop's return difference is the model's times ``1 + r T0 h``
+    (:mod:`.robust_set`); starting stable at ``r = 0``, its poles reach the unit circle first where
+    ``1 + r T0(w) h(w) = 0``, i.e. at the real values ``r = -1/(T0 h)`` taken where ``T0 h`` is real
+    (sign changes of its imaginary part, interpolated). Margin: the plant's disturbance map stays
+    within ``1/m`` of the model's at every frequency, ``|g| = |1 + r h|/|1 + r T0 h| <= 1/m``: at each
+    frequency a quadratic inequality in ``r`` whose violation set is an interval, or two half-lines,
+    not containing 0. Low-gain plants keep ``g`` near 1 where ``T0`` is, so the margin leaves out
+    only plants near their stability boundary (a margin on ``|1 + T0 Delta|`` itself would drop every
+    plant with less than ``m`` times the model's gain). Both on a dense grid (``n`` linear points to
+    Nyquist and 200 log-spaced below its first); the nearest limit on each side, less 1 %, bounds the
+    interval (``-inf``/``inf`` when there is none).
+
+    Parameters
+    ----------
+    source : LoopSystem
+        System j-1.
+    tau : tuple of float
+        Time constants of the high-pass shapes, s.
+    margin : float
+        ``m`` in [0, 1); 0: stability only.
+    n : int
+        Linear grid points.
+
+    Returns
+    -------
+    lo, hi : numpy.ndarray
+        ``1 + len(tau)`` limits each.
+    """
+    key = (repr(source.nominal.spec), source.ts, tau, float(margin), n)
+    if key not in _RANGES:
+        nyq = np.pi / source.ts
+        w = np.unique(np.concatenate([np.geomspace(1e-4, nyq / n, 200), np.linspace(nyq / n, nyq, n)]))
+        c = complementary_sensitivity(source, w)[:, None] * np.column_stack([np.ones(w.size), _highpass(source, tau, w)])
+        im0, im1 = c.imag[:-1], c.imag[1:]
+        cross = (np.sign(im0) != np.sign(im1)) | (im0 == 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(im0 == im1, 0.0, im0 / (im0 - im1))
+            re = c.real[:-1] + t * (c.real[1:] - c.real[:-1])
+            r_star = np.where(cross & (re != 0), -1.0 / re, np.nan)
+        lo = np.max(np.where(r_star < 0, r_star, -np.inf), axis=0)
+        hi = np.min(np.where(r_star > 0, r_star, np.inf), axis=0)
+        if margin > 0:
+            h = np.column_stack([np.ones(w.size), _highpass(source, tau, w)])
+            m_lo, m_hi = _margin_limits(c, h, margin)
+            lo, hi = np.maximum(lo, m_lo), np.minimum(hi, m_hi)
+        _RANGES[key] = (0.99 * lo, 0.99 * hi)
+    return _RANGES[key]
+
+
+def _margin_limits(c: np.ndarray, h: np.ndarray, m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest ``r`` on each side of 0 with ``|1 + r c| < m |1 + r h|`` at some grid frequency (per column)."""
+    qa = np.abs(c) ** 2 - m**2 * np.abs(h) ** 2          # violation: qa r^2 + 2 qb r + qc < 0
+    qb = c.real - m**2 * h.real
+    qc = 1.0 - m**2
+    disc = qb**2 - qa * qc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.sqrt(np.where(disc >= 0, disc, np.nan))
+        r1, r2 = (-qb - root) / qa, (-qb + root) / qa        # qa > 0: r1 < r2; qa < 0: r2 < 0 < r1
+        lin = -qc / (2 * qb)                                   # qa == 0: one limit
+    small = np.abs(qa) < 1e-14
+    pos = np.where(small, np.where(lin > 0, lin, np.inf),
+                   np.where(qa > 0, np.where(np.fmin(r1, r2) > 0, np.fmin(r1, r2), np.inf), r1))
+    neg = np.where(small, np.where(lin < 0, lin, -np.inf),
+                   np.where(qa > 0, np.where(np.fmax(r1, r2) < 0, np.fmax(r1, r2), -np.inf), r2))
+    return np.max(np.nan_to_num(neg, nan=-np.inf), axis=0), np.min(np.nan_to_num(pos, nan=np.inf), axis=0)
 
 
 def ellipse_family(axes: np.ndarray, w: np.ndarray, n_phi: int = 72, n_rad: int = 6) -> ValueSet:
@@ -130,7 +261,196 @@ def ellipse_family(axes: np.ndarray, w: np.ndarray, n_phi: int = 72, n_rad: int 
     rho = np.linspace(0, 1, 2 * n_rad - 1)
     u = rho[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)[None]   # n_rad x n_phi x 2
     xy = np.einsum("wij,rpj->wrpi", a, u)
-    return ValueSet(w, xy[..., 0] + 1j * xy[..., 1], "linearised 3-sigma parameter ellipsoid")
+    return ValueSet(w, (xy[..., 0] + 1j * xy[..., 1],), "linearised parameter ellipsoid")
+
+
+@dataclass(frozen=True)
+class BoundFamily:
+    """The fleet-bound family as a structured Delta set of the robust-set design (module docstring).
+
+    Attributes
+    ----------
+    bound : float
+        ``|r| <= bound``, in (0, 1).
+    n_r, n_tau : int
+        Grid points in ``r`` and ``tau`` (:func:`bound_family`).
+    """
+
+    bound: float
+    n_r: int = 21
+    n_tau: int = 30
+
+    def __post_init__(self) -> None:
+        _check_bound(self.bound)
+        for name in ("n_r", "n_tau"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and v >= 2):
+                raise SpecError(f"`{name}`: got {v!r}, expected an integer >= 2")
+
+    def values(self, source: LoopSystem, w: np.ndarray, margin: float = 0.0) -> ValueSet:
+        """Sampled ``Delta_d`` of ``source`` on ``w``, its plants stable and keeping ``margin`` (:func:`bound_family`).
+
+        Parameters
+        ----------
+        source : LoopSystem
+            System j-1.
+        w : array_like
+            Frequencies, rad/s.
+        margin : float
+            Per-plant margin ``m`` of :func:`admissible_range`.
+
+        Returns
+        -------
+        ValueSet
+        """
+        return bound_family(self.bound, w, self.n_r, self.n_tau, source, margin)
+
+    def describe(self) -> str:
+        """One line for reports."""
+        return (f"structured: gain or first-order high-pass error within {self.bound:g} (time constants "
+                f"{TAU_RANGE[0]:g}-{TAU_RANGE[1]:g} s)")
+
+
+@dataclass(frozen=True)
+class EllipseFamily:
+    """An identified model's parameter ellipsoid as a structured Delta set (module docstring).
+
+    Attributes
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : tuple of float
+        Its parameters (the model's ``P_hat``).
+    covariance : tuple of tuple of float
+        Their covariance (last row and column: the delay's, when ``delay_estimated``).
+    delay : float
+        The model's input delay, s.
+    delay_estimated : bool
+        Whether the delay is a parameter.
+    confidence : float
+        Probability mass of the Gaussian estimate inside the ellipsoid, in (0, 1).
+    n_phi, n_rad : int
+        Grid points of the ellipse (:func:`ellipse_family`).
+    """
+
+    structure: ModelStructure
+    theta: tuple
+    covariance: tuple
+    delay: float
+    delay_estimated: bool
+    confidence: float = 0.99
+    n_phi: int = 72
+    n_rad: int = 6
+    _sqrt_cov: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not 0 < self.confidence < 1:
+            raise SpecError(f"`confidence`: got {self.confidence!r}, expected a probability in (0, 1)")
+        cov = np.asarray(self.covariance, float)
+        p = len(self.theta) + (1 if self.delay_estimated else 0)
+        if cov.shape != (p, p) or not np.all(np.isfinite(cov)):
+            raise SpecError(f"`covariance`: got shape {cov.shape}, expected ({p}, {p}) finite values")
+        lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+        object.__setattr__(self, "_sqrt_cov", vec * np.sqrt(np.clip(lam, 0, None)))
+
+    @classmethod
+    def from_spec(cls, spec, confidence: float = 0.99) -> "EllipseFamily":
+        """The ellipsoid of a system's identification (``SystemSpec.identification``).
+
+        Parameters
+        ----------
+        spec : SystemSpec
+            The system.
+        confidence : float
+            Probability mass inside the ellipsoid.
+
+        Returns
+        -------
+        EllipseFamily
+
+        Raises
+        ------
+        SpecError
+            The system carries no identification.
+        """
+        ident = spec.identification
+        if ident is None:
+            raise SpecError(f"system {spec.name!r}: no identification, so no parameter ellipsoid; state a bound "
+                            "(`uncertainty = { bound = 0.2 }`) instead")
+        return cls(ModelStructure(ident.poles, ident.zeros, ident.integrators), tuple(ident.parameters),
+                   tuple(tuple(r) for r in ident.covariance), float(spec.nominal_plant.delay),
+                   bool(ident.delay_estimated), confidence)
+
+    @property
+    def k(self) -> float:
+        """Radius of the ellipsoid in standard deviations, ``sqrt(chi2_p^-1(confidence))``."""
+        return float(np.sqrt(chi2.ppf(self.confidence, self._sqrt_cov.shape[0])))
+
+    def axes(self, ts: float, w: np.ndarray) -> np.ndarray:
+        """``len(w) x 2 x 2`` matrices ``A(w)`` of the linearised, sampled ellipse (module docstring).
+
+        Parameters
+        ----------
+        ts : float
+            Sample time, s.
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``{A(w) v : |v| <= 1}`` is the set of ``(Re Delta_d, Im Delta_d)`` at each frequency.
+        """
+        w = np.asarray(w, float).reshape(-1)
+        model, *moved = _perturbed_blocks(self, ts)
+        g0 = model.response(w)
+        grads = np.array([(blk.response(w) / g0 - 1) / step for step, blk in moved]).reshape(-1, w.size)
+        jac = self.k * np.stack([grads.real.T @ self._sqrt_cov, grads.imag.T @ self._sqrt_cov], axis=1)  # w x 2 x p
+        lam, vec = np.linalg.eigh(jac @ np.swapaxes(jac, 1, 2))  # {J u : |u| <= 1} = {(J J')^(1/2) v : |v| <= 1}
+        return vec * np.sqrt(np.clip(lam, 0, None))[:, None, :]
+
+    def values(self, source: LoopSystem, w: np.ndarray, margin: float = 0.0) -> ValueSet:
+        """Sampled ``Delta_d`` of the ellipse on ``w`` (:func:`ellipse_family`).
+
+        Parameters
+        ----------
+        source : LoopSystem
+            System j-1 (its sample time is used).
+        w : array_like
+            Frequencies, rad/s.
+        margin : float
+            Not used here: the margin is applied value by value (:func:`value_set_cones`).
+
+        Returns
+        -------
+        ValueSet
+        """
+        w = np.asarray(w, float).reshape(-1)
+        vs = ellipse_family(self.axes(source.ts, w), w, self.n_phi, self.n_rad)
+        return ValueSet(vs.w, vs.values, self.describe())
+
+    def describe(self) -> str:
+        """One line for reports."""
+        return (f"structured: the identification's {100 * self.confidence:g} % parameter ellipsoid "
+                f"({self.k:.3g} sigma, linearised)")
+
+
+@lru_cache(maxsize=32)
+def _perturbed_blocks(family: EllipseFamily, ts: float) -> tuple:
+    """The sampled model and, per parameter, ``(step, sampled model with that parameter stepped)``."""
+    x0 = np.concatenate([family.theta, [family.delay]]) if family.delay_estimated else np.asarray(family.theta, float)
+
+    def block(x: np.ndarray):
+        th, d = (x[:-1], max(0.0, float(x[-1]))) if family.delay_estimated else (x, family.delay)
+        den, num = family.structure.split(th)
+        return plant_block(PlantSpec(tuple(num), tuple(den), d), ts)
+
+    moved = []
+    for i in range(x0.size):
+        x = x0.copy()
+        x[i] += 1e-6 * max(1.0, abs(x0[i]))
+        moved.append((x[i] - x0[i], block(x)))
+    return (block(x0), *moved)
 
 
 def complementary_sensitivity(source: LoopSystem, w: np.ndarray) -> np.ndarray:
@@ -157,40 +477,48 @@ def complementary_sensitivity(source: LoopSystem, w: np.ndarray) -> np.ndarray:
     return pm / (1 - q + pm)
 
 
-def _image(values: np.ndarray, t0: complex, margin: float) -> tuple[np.ndarray, np.ndarray]:
+def _image(values: np.ndarray, t0: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """``g(Delta)`` of ``values`` (frequency first) and which values keep the margin, ``|g| <= 1/margin``."""
+    t0 = np.asarray(t0).reshape((-1,) + (1,) * (values.ndim - 1))
     den = 1 + t0 * values
-    keep = np.abs(den) >= margin
+    keep = np.isfinite(values) & (np.abs(den) >= margin * np.abs(1 + values)) & (np.abs(den) > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(keep, (1 + values) / den, np.nan), keep
 
 
-def _sagitta(g: np.ndarray) -> float:
-    """Largest distance of a twice-refined grid's odd points from the chord of their even neighbours."""
-    out = 0.0
-    for arr in (g, g.T):
-        a, m, b = arr[0:-2:2], arr[1:-1:2], arr[2::2]
+def _sagitta(g: np.ndarray) -> np.ndarray:
+    """Per frequency (first axis), the largest distance of a twice-refined grid's odd points from
+    the chord of their even neighbours (0 where nothing is measured)."""
+    out = np.zeros(g.shape[0])
+    for arr in (g, np.swapaxes(g, 1, 2)):
+        a, m, b = arr[:, 0:-2:2], arr[:, 1:-1:2], arr[:, 2::2]
         chord = b - a
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.clip(np.real((m - a) * np.conj(chord)) / np.abs(chord) ** 2, 0, 1)
             d = np.abs(m - (a + np.where(np.abs(chord) > 0, t, 0) * chord))
-        d = d[np.isfinite(d)]
-        if d.size:
-            out = max(out, float(np.max(d)))
+        d = np.where(np.isfinite(d), d, 0.0).reshape(g.shape[0], -1)
+        if d.shape[1]:
+            out = np.maximum(out, d.max(axis=1))
     return out
 
 
-def _hull(points: np.ndarray) -> np.ndarray:
-    pts = np.unique(np.round(np.column_stack([points.real, points.imag]), 15), axis=0)
-    if pts.shape[0] < 3:
-        return pts[:, 0] + 1j * pts[:, 1]
-    try:
-        idx = ConvexHull(pts).vertices
-    except QhullError:  # collinear (e.g. a real gain error with real T0): the segment's ends
-        d = pts - pts.mean(axis=0)
-        direction = np.linalg.svd(d, full_matrices=False)[2][0]
-        proj = d @ direction
-        idx = [int(np.argmin(proj)), int(np.argmax(proj))]
-    return pts[idx, 0] + 1j * pts[idx, 1]
+def _outer_polygon(g: np.ndarray, keep: np.ndarray, k: int = 0) -> np.ndarray:
+    """Vertices (``len x K``) of the outer polygon of ``K`` supporting lines of each row's kept points
+    (``len x n`` arrays; module docstring); rows without any kept point are nan."""
+    k = k or DIRECTIONS
+    theta = 2 * np.pi * np.arange(k) / k
+    pts = np.where(keep, g, np.nan)
+    support = np.full((g.shape[0], k), -np.inf)
+    for i in range(k):  # one direction at a time keeps the temporaries at the size of the points
+        proj = pts.real * np.cos(theta[i]) + pts.imag * np.sin(theta[i])
+        support[:, i] = np.max(np.where(np.isfinite(proj), proj, -np.inf), axis=1)
+    s0, s1 = support, np.roll(support, -1, axis=1)
+    t0, t1 = theta, np.roll(theta, -1)
+    det = np.sin(2 * np.pi / k)
+    with np.errstate(invalid="ignore"):
+        x = (s0 * np.sin(t1) - s1 * np.sin(t0)) / det
+        y = (s1 * np.cos(t0) - s0 * np.cos(t1)) / det
+    return np.where(np.isfinite(support).all(axis=1, keepdims=True), x + 1j * y, np.nan)
 
 
 def value_set_cones(source: LoopSystem, vs: ValueSet, margin: float = 0.5) -> tuple[np.ndarray, ...]:
@@ -214,19 +542,20 @@ def value_set_cones(source: LoopSystem, vs: ValueSet, margin: float = 0.5) -> tu
     """
     if not 0 <= margin < 1:
         raise SpecError(f"`margin`: got {margin!r}, expected a number in [0, 1)")
-    t0 = complementary_sensitivity(source, vs.w)
-    rows_i, rows_b, rows_r = [], [], []
-    for i in range(vs.w.size):
-        g, keep = _image(vs.values[i], t0[i], margin)
-        eps = _sagitta(g)
-        coarse, kept = g[::2, ::2], keep[::2, ::2]
-        vert = _hull(coarse[kept]) if np.any(kept) else np.zeros(0, dtype=complex)
-        rows_i.append(np.full(vert.size, i))
-        rows_b.append(vert)
-        rows_r.append(np.full(vert.size, eps))
-    idx = np.concatenate(rows_i)
-    b = np.concatenate(rows_b)
-    return idx, np.ones(idx.size), b, np.concatenate(rows_r)
+    return _cone_rows(vs, complementary_sensitivity(source, vs.w), margin)[:4]
+
+
+def _cone_rows(vs: ValueSet, t0: np.ndarray, margin: float, directions: int = 0) -> tuple[np.ndarray, ...]:
+    """:func:`value_set_cones` given ``T0``, and per frequency whether some value was left out."""
+    images = [_image(piece, t0, margin) for piece in vs.values]
+    eps = np.max([_sagitta(g) for g, _ in images], axis=0)
+    n = vs.w.size
+    vert = _outer_polygon(np.concatenate([g[:, ::2, ::2].reshape(n, -1) for g, _ in images], axis=1),
+                          np.concatenate([k[:, ::2, ::2].reshape(n, -1) for _, k in images], axis=1), directions)
+    idx = np.repeat(np.arange(n), vert.shape[1])
+    ok = np.isfinite(vert.reshape(-1))
+    excluded = ~np.all([k.all(axis=(1, 2)) for _, k in images], axis=0)
+    return (idx[ok], np.ones(int(ok.sum())), vert.reshape(-1)[ok], np.repeat(eps, vert.shape[1])[ok], excluded)
 
 
 def worst_over_set(F: np.ndarray, index: np.ndarray, a: np.ndarray, b: np.ndarray, R: np.ndarray,
@@ -253,3 +582,41 @@ def worst_over_set(F: np.ndarray, index: np.ndarray, a: np.ndarray, b: np.ndarra
     out = np.full(n_w, -np.inf)
     np.maximum.at(out, index, per_row)
     return np.where(np.isfinite(out), out, np.nan)
+
+
+def family_cones(source: LoopSystem, family, w: np.ndarray, margin: float = 0.5, directions: int = 0,
+                 chunk: int = 400) -> tuple[np.ndarray, ...]:
+    """:func:`value_set_cones` of a structured set on ``w``, its values built a chunk of frequencies at a time.
+
+    Parameters
+    ----------
+    source : LoopSystem
+        System j-1.
+    family : BoundFamily or EllipseFamily
+        Its structured Delta set.
+    w : array_like
+        Frequencies, rad/s.
+    margin : float
+        As in :func:`value_set_cones`.
+    directions : int
+        Supporting directions of the outer polygon (default :data:`DIRECTIONS`); fewer give fewer,
+        more conservative rows (a polygon of ``K`` directions contains that of every multiple of ``K``).
+    chunk : int
+        Frequencies whose values are held at once.
+
+    Returns
+    -------
+    index, a, b, R : numpy.ndarray
+        The cone rows (``index`` into ``w``).
+    excluded : numpy.ndarray
+        Per frequency, whether some value of the set was left out for the margin.
+    """
+    if not 0 <= margin < 1:
+        raise SpecError(f"`margin`: got {margin!r}, expected a number in [0, 1)")
+    w = np.asarray(w, float).reshape(-1)
+    t0 = complementary_sensitivity(source, w)
+    parts = [_cone_rows(family.values(source, w[lo:lo + chunk], margin), t0[lo:lo + chunk], margin, directions)
+             for lo in range(0, w.size, chunk)]
+    starts = range(0, w.size, chunk)
+    return (np.concatenate([p[0] + lo for p, lo in zip(parts, starts)]),
+            *(np.concatenate([p[k] for p in parts]) for k in range(1, 5)))

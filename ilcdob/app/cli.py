@@ -199,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", type=_ids, default=[1, 2, 3, 4], help="comma-separated scenario ids")
     _delta_options(p, samples=False)
     p.add_argument("--robust-models", type=int, default=1, help="robust SOCP: Delta samples per system")
+    p.add_argument("--delta-set", default="structured", choices=["structured", "disc", "auto"],
+                   help="robust-set: guarantee over the family the plants are drawn from (structured), the disc "
+                        "|Delta| <= bound, or auto (default: structured)")
     p.add_argument("--duration", type=float, default=None, help="fly the first SECONDS of each scenario (default: all)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed")
     p = _sub(sub, "report", "one self-contained HTML report from reproduce/compare/campaign folders")

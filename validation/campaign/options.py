@@ -11,6 +11,7 @@ import numpy as np
 
 from ilcdob.design.laws import DEFAULT_LAW, check_law
 from ilcdob.design.pair import DEFAULT_METHODS, METHODS
+from ilcdob.design.robust_set import DELTA_SETS
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
 
@@ -59,6 +60,10 @@ class CampaignOptions:
         is refused (one pair from one DOB-only trial per scenario, where it is the paper's law).
         The default is left out of the settings hash, so campaigns started before the law
         existed resume.
+    delta_set : {"structured", "disc", "auto"}
+        The Delta set robust-set designs guarantee over (:attr:`ilcdob.design.robust_set.RobustSetOptions.delta_set`;
+        default: the family the true plants are drawn from). In the settings hash only when
+        robust-set is flown over another set than the disc (so campaigns from before the option resume).
     """
 
     samples: int = 200
@@ -71,6 +76,7 @@ class CampaignOptions:
     robust_models: int = 1
     rho: float = 0.95
     law: str = DEFAULT_LAW
+    delta_set: str = "structured"
 
     def __post_init__(self) -> None:
         def integer(v: object) -> bool:
@@ -100,6 +106,8 @@ class CampaignOptions:
                                 "(Delta samples besides the nominal pair)")
         if not (np.isfinite(self.rho) and self.rho > 0):
             raise CampaignError(f"`rho`: got {self.rho!r}, expected an improvement factor > 0 (e.g. 0.95)")
+        if self.delta_set not in DELTA_SETS:
+            raise CampaignError(f"`delta_set`: got {self.delta_set!r}, expected one of {list(DELTA_SETS)}")
         try:
             law = check_law(self.law)
         except IlcdobError as exc:
@@ -143,6 +151,8 @@ def campaign_settings(fleet: Fleet, options: CampaignOptions) -> dict[str, Any]:
     opts.pop("samples")
     if opts.get("law") == DEFAULT_LAW:  # the default law keeps the ids of campaigns started before laws existed
         opts.pop("law")
+    if "robust-set" not in options.methods or options.delta_set == "disc":  # only robust-set depends on it, and
+        opts.pop("delta_set")                                                # the disc was its set before the option
     opts["scenarios"], opts["methods"] = list(options.scenarios), list(options.methods)
     sources = {s.name: ("identification" if s.uncertainty is None and s.identification is not None
                         else f"bound {s.uncertainty.bound:g}" if s.uncertainty is not None else "none")

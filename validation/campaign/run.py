@@ -17,6 +17,7 @@ from ilcdob.design.delta import DeltaSet, delta_set
 from ilcdob.design.laws import DEFAULT_LAW
 from ilcdob.design.pair import PairDesign, design_pair, with_law
 from ilcdob.design.robust import RobustOptions
+from ilcdob.design.robust_set import RobustSetOptions
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
@@ -99,8 +100,11 @@ class _WorkerState:
             deltas = {name: replace(self._deltas[name], loops=self._deltas[name].loops[:k])
                       for name in (source, target)}
             try:
+                # robust-set guarantees over the family the true plants are drawn from (value sets, not samples)
                 self.designs[key] = design_pair(self.fleet, source, target, method, n=n, deltas=deltas,
-                                                robust=RobustOptions(rho=self.options.rho), lifted=False)
+                                                robust=RobustOptions(rho=self.options.rho), lifted=False,
+                                                robust_set=RobustSetOptions(rho=min(1.0, self.options.rho),
+                                                                            delta_set=self.options.delta_set))
             except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
                 self.designs[key] = f"design failed: {exc}"
         return self.designs[key]
