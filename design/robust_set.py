@@ -96,7 +96,10 @@ the band, against 0.05-0.07 zero-phase); (c) the guarantee concerns the disturba
 j-1's own learning signal (``d_f,j-1 != 0``, modelled by its nominal ``Gf``), the reference terms
 ``(1 - G_r) r`` and noise that differs between the two systems are outside it. The frequency-wise
 disc is a superset of any structured Delta (real gains, fixed-order high-pass errors), so the
-design is conservative for those.
+design is conservative for those: given a structured set (``structure``, :mod:`.value_set`: the
+fleet bound's gain/high-pass family, an identification's parameter ellipsoid) the same SOCP takes
+several cone rows per frequency, the vertices of a polygon containing that set's image, and the
+guarantee holds for every plant of the set that keeps the margin.
 """
 
 from __future__ import annotations
@@ -119,7 +122,7 @@ from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filte
                           simulate_map)
 from .fir import FIRFilter
 from .noncausal import lookahead
-from .value_set import BoundFamily, EllipseFamily, complementary_sensitivity, family_cones
+from .value_set import BoundFamily, EllipseFamily, complementary_sensitivity, family_cones, worst_over_set
 
 #: A structured Delta set of the source (:mod:`.value_set`).
 StructuredSet = BoundFamily | EllipseFamily
@@ -788,14 +791,6 @@ def _set_rows(source: LoopSystem, w: np.ndarray, w_bound: np.ndarray, bound: np.
     return np.arange(w.size), a, b, r, kind == 1
 
 
-def _worst(F: np.ndarray, rows: tuple[np.ndarray, ...], n_w: int) -> np.ndarray:
-    """Worst-case ``|T|`` per frequency over cone rows (:func:`worst_case_ratio` row by row, the maximum)."""
-    idx, a, b, r = rows[:4]
-    out = np.full(n_w, -np.inf)
-    np.maximum.at(out, idx, worst_case_ratio(F[idx], a, b, r))
-    return out
-
-
 class _Problem:
     """The SOCP on one grid; ``rho=None`` minimises rho instead of the nominal criterion.
 
@@ -930,7 +925,7 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
         while True:
             rows = _set_rows(source, grid, w_bound, bound, structure, o.margin, _DESIGN_DIRECTIONS)
             h, level = _Problem(ts, grid, rows, o, structure is not None).solve(rho)
-            worst = _worst(phi_v @ h, rows_v, wv.size)
+            worst = worst_over_set(phi_v @ h, *rows_v[:4], wv.size)
             bad = worst > level + o.tol
             if not np.any(bad) or rounds >= o.max_exchange:
                 return h, worst, level, rounds

@@ -10,10 +10,13 @@ structured (paper Sec. III's Delta set, docs/theory.md section 3):
 * the family a fleet's ``uncertainty = { bound = b }`` stands for (:mod:`.delta`): a real gain
   error ``Delta = r``, or a first-order high-pass error ``Delta(s) = r s tau/(s tau + 1)``
   (unmodelled fast dynamics), with ``|r| <= b`` and ``tau`` in ``TAU_RANGE`` (s);
-* an identified model's 3-sigma parameter ellipsoid, linearised as the frequency-wise bound
-  is (:func:`ilcdob.uncertainty.multiplicative_bound`): at each frequency ``Delta(jw)`` fills
-  the ellipse ``{A u : |u| <= 1}``, ``A = 3 [Re g; Im g] Cov^(1/2) / |G|`` (``g``: the
-  response's gradient in the parameters).
+* an identified model's parameter ellipsoid, linearised as the frequency-wise bound is
+  (:func:`ilcdob.uncertainty.multiplicative_bound`): at each frequency ``Delta`` fills an
+  ellipse ``{A u : |u| <= 1}`` (below: ``A`` from the relative gradient of the sampled response).
+
+The bound family is cut to the plants that keep system j-1's loop stable and its disturbance map
+within ``1/margin`` of the model's (:func:`admissible_range`, per plant); an ellipse's values
+are kept where ``|g| <= 1/margin`` (per value).
 
 At each frequency the set of values ``Delta(jw)`` is sampled on a grid and mapped through
 ``g(Delta) = (1 + Delta)/(1 + T0 Delta)`` (the exact ratio ``Gd/Gd_hat`` of the source's true
@@ -30,10 +33,11 @@ from the chord of its neighbours), and ``|1 - F g| <= |1 - F g_v| + eps |F|`` co
 vertex ``g_v`` is therefore one cone row ``(a, b, R) = (1, g_v, eps)`` of the form the
 robust-set design already solves (``(|a - b F| + R |F|)/a <= rho``).
 
-Values of ``Delta`` with ``|1 + T0 Delta| < margin`` (the source's true loop closer than
-``margin`` to its stability boundary at that frequency) are left out, as the disc design
-does where the disc reaches the boundary: the guarantee covers the plants of the set that
-keep that margin.
+In :func:`value_set_cones` values with ``|g| > 1/margin`` (the source's true disturbance map more
+than ``1/margin`` times its model's: a resonance near its stability boundary) are left out; the
+guarantee covers the plants of the set that keep that margin. (The disc design's margin is on
+``|1 + T0 Delta|`` instead, :mod:`.robust_set`; on a structured set that would drop every plant
+with less than ``margin`` times the model's gain, harmless ones included.)
 
 The robust-set design takes a structured set as a :class:`BoundFamily` or an
 :class:`EllipseFamily`. Both evaluate ``Delta`` on the *sampled* loop, ``Delta_d(e^{jw Ts}) =
@@ -531,7 +535,7 @@ def value_set_cones(source: LoopSystem, vs: ValueSet, margin: float = 0.5) -> tu
     vs : ValueSet
         Its structured ``Delta`` values on ``vs.w``.
     margin : float
-        Values with ``|1 + T0 Delta| < margin`` are left out (0 <= margin < 1).
+        Values with ``|g| > 1/margin`` are left out (0 <= margin < 1).
 
     Returns
     -------
@@ -578,7 +582,10 @@ def worst_over_set(F: np.ndarray, index: np.ndarray, a: np.ndarray, b: np.ndarra
         value of the set there is closer than the margin to the stability boundary).
     """
     F = np.asarray(F, complex).reshape(-1)
-    per_row = (np.abs(a - b * F[index]) + R * np.abs(F[index])) / a
+    f = F[index]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a <= 0 (a disc reaching the stability boundary):
+        per_row = np.where(a > 0, (np.abs(a - b * f) + R * np.abs(f)) / a,   # unbounded unless F = 0
+                           np.where(np.abs(f) == 0, 1.0, np.inf))
     out = np.full(n_w, -np.inf)
     np.maximum.at(out, index, per_row)
     return np.where(np.isfinite(out), out, np.nan)
