@@ -26,7 +26,10 @@ from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 
-__all__ = ["DeltaSet", "delta_set", "delta_bound", "MAX_DELTA_SAMPLES"]
+__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "MAX_DELTA_SAMPLES"]
+
+#: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
+TAU_RANGE = (0.01, 1.0)
 
 #: Most sampled plants per system in a Delta set (the fir/robust designs grow with their number).
 MAX_DELTA_SAMPLES = 200
@@ -98,8 +101,8 @@ def _bound_samples(spec: SystemSpec, bound: float, k: int, rng: np.random.Genera
         r = bound * rng.uniform(-1.0, 1.0)
         if rng.uniform() < 0.5:  # gain error
             yield PlantSpec(tuple(np.asarray(model.num) * (1 + r)), model.den, model.delay)
-        else:  # high-pass error: P (1 + r s tau/(s tau + 1)), tau log-uniform in [0.01, 1] s
-            tau = 10 ** rng.uniform(-2, 0)
+        else:  # high-pass error: P (1 + r s tau/(s tau + 1)), tau log-uniform over TAU_RANGE
+            tau = 10 ** rng.uniform(*np.log10(TAU_RANGE))
             num = np.polymul(model.num, [(1 + r) * tau, 1.0])
             den = np.polymul(model.den, [tau, 1.0])
             yield PlantSpec(tuple(num), tuple(den), model.delay)

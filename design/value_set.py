@@ -67,14 +67,14 @@ from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.specs import PlantSpec
 from ilcdob.uncertainty import ModelStructure
 
+from .delta import TAU_RANGE
+
 __all__ = ["DIRECTIONS", "TAU_RANGE", "ValueSet", "BoundFamily", "EllipseFamily", "complementary_sensitivity", "bound_family",
            "ellipse_family", "admissible_range", "value_set_cones", "worst_over_set", "family_cones"]
 
 #: Supporting directions of the outer polygon that bounds a value set at each frequency.
 DIRECTIONS = 64
 
-#: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
-TAU_RANGE = (0.01, 1.0)
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,8 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
     if key not in _RANGES:
         nyq = np.pi / source.ts
         w = np.unique(np.concatenate([np.geomspace(1e-4, nyq / n, 200), np.linspace(nyq / n, nyq, n)]))
-        c = complementary_sensitivity(source, w)[:, None] * np.column_stack([np.ones(w.size), _highpass(source, tau, w)])
+        h = np.column_stack([np.ones(w.size), _highpass(source, tau, w)])
+        c = complementary_sensitivity(source, w)[:, None] * h
         im0, im1 = c.imag[:-1], c.imag[1:]
         cross = (np.sign(im0) != np.sign(im1)) | (im0 == 0)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -213,7 +214,6 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
         lo = np.max(np.where(r_star < 0, r_star, -np.inf), axis=0)
         hi = np.min(np.where(r_star > 0, r_star, np.inf), axis=0)
         if margin > 0:
-            h = np.column_stack([np.ones(w.size), _highpass(source, tau, w)])
             m_lo, m_hi = _margin_limits(c, h, margin)
             lo, hi = np.maximum(lo, m_lo), np.minimum(hi, m_hi)
         _RANGES[key] = (0.99 * lo, 0.99 * hi)
