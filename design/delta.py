@@ -12,7 +12,12 @@ Two sources:
 
 Each sample becomes a :class:`~ilcdob.loop.LoopSystem` whose true plant is the sample and
 whose DOB and learning filters keep using the nominal model, exactly as a vehicle flies.
-Samples whose loop is unstable are redrawn (and counted).
+Samples whose loop is unstable are redrawn (and counted); so, given a margin ``m`` > 0, are those
+whose disturbance map leaves the model's by more than ``1/m`` at some frequency,
+``max_w |Gd(w)/Gd_hat(w)| > 1/m`` (:func:`disturbance_peak`). Without a margin a large bound
+admits plants arbitrarily close to the stability boundary of their loop, whose disturbance
+response is arbitrarily resonant; no learning filter that passes any band can be guaranteed for
+all of them (docs/theory.md section 3, "Robust-set over a structured Delta set").
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 
-__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "MAX_DELTA_SAMPLES"]
+__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "disturbance_peak", "MAX_DELTA_SAMPLES"]
 
 #: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
 TAU_RANGE = (0.01, 1.0)
@@ -51,7 +56,7 @@ class DeltaSet:
     bound : array
         ``|Delta(jw)|`` bound on ``w`` (3 sigma for identified models).
     rejected : int
-        Samples redrawn because their loop was unstable.
+        Samples redrawn because their loop was unstable or outside the margin.
     source : str
         ``"identification"`` or ``"fleet bound"``.
     """
@@ -110,7 +115,7 @@ def _bound_samples(spec: SystemSpec, bound: float, k: int, rng: np.random.Genera
 
 def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator | None = None,
               scale: float = 1.0, bound: float | None = None, w: np.ndarray | None = None,
-              max_rejections: int = 200) -> DeltaSet:
+              max_rejections: int = 200, margin: float = 0.0) -> DeltaSet:
     """Draw ``k`` plausible true plants of ``spec`` (see module docstring).
 
     Parameters
@@ -130,7 +135,11 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
     w : array, optional
         Frequencies of the bound, rad/s (default: log grid to Nyquist).
     max_rejections : int
-        Sampled plants whose loop is unstable are redrawn; more rejections than this raise.
+        Sampled plants whose loop is unstable (or outside the margin) are redrawn; more
+        rejections than this raise.
+    margin : float
+        ``m`` in [0, 1): also redraw plants whose disturbance map exceeds ``1/m`` times the
+        model's at some frequency (:func:`disturbance_peak`); 0: stability only.
 
     Returns
     -------
@@ -141,11 +150,13 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
     ------
     SpecError
         ``k`` outside 1 to :data:`MAX_DELTA_SAMPLES`, no uncertainty to sample from (neither a bound nor an identification), a
-        bound outside (0, 1), or too many unstable samples.
+        bound outside (0, 1), a margin outside [0, 1), or too many rejected samples.
     """
     if k < 1 or k > MAX_DELTA_SAMPLES:
         raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}: every sample is "
                         "a closed loop that is built, flown and constrained on by the fir/robust designs")
+    if not (np.isfinite(margin) and 0 <= margin < 1):
+        raise SpecError(f"`margin`: got {margin!r}, expected a number in [0, 1) (0: stability only)")
     rng = np.random.default_rng(0) if rng is None else rng
     nominal = build_loop(spec.exact(), ts)
     found = delta_bound(spec, ts, w, scale, bound)
@@ -160,16 +171,55 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
         gen = _identified_samples(spec, k, rng, scale)
     loops, rejected = [], 0
     model = spec.nominal_plant
+    peak = _PeakMeter(nominal) if margin > 0 else None
     while len(loops) < k:
         plant = next(gen)
         try:
-            loops.append(build_loop(replace(spec, plant=plant, model=model), ts))
+            loop = build_loop(replace(spec, plant=plant, model=model), ts)
         except (UnstableLoopError, SpecError):
-            rejected += 1
-            if rejected > max_rejections:
-                raise SpecError(f"system {spec.name!r}: {rejected} sampled plants gave unstable loops; the "
-                                "uncertainty is too large for this controller (lower `scale` or `bound`)") from None
+            loop = None
+        if loop is not None and (peak is None or peak(loop) <= 1 / margin):
+            loops.append(loop)
+            continue
+        rejected += 1
+        if rejected > max_rejections:
+            kept = "unstable loops" if margin == 0 else f"unstable loops or |Gd/Gd_hat| > {1 / margin:.3g}"
+            raise SpecError(f"system {spec.name!r}: {rejected} sampled plants gave {kept}; the "
+                            "uncertainty is too large for this controller (lower `scale` or `bound`)")
     return DeltaSet(spec.name, nominal, tuple(loops), w, bnd, rejected, source)
+
+
+class _PeakMeter:
+    """``max_w |Gd(w)/Gd_hat(w)|`` of true loops around one nominal loop (its response computed once), on 200
+    log-spaced frequencies from 1e-4 rad/s below 20,000 linearly spaced to Nyquist (0.008 rad/s apart at 50 Hz)."""
+
+    def __init__(self, nominal: LoopSystem, n: int = 20000):
+        nyq = np.pi / nominal.ts
+        self.w = np.unique(np.concatenate([np.geomspace(1e-4, nyq / n, 200), np.linspace(nyq / n, nyq, n)]))
+        self.gd_hat = freqresp(nominal.G_d, self.w)
+
+    def __call__(self, loop: LoopSystem) -> float:
+        return float(np.max(np.abs(freqresp(loop.G_d, self.w) / self.gd_hat)))
+
+
+def disturbance_peak(loop: LoopSystem, nominal: LoopSystem) -> float:
+    """``max_w |Gd(w)/Gd_hat(w)|``: how far a true loop's disturbance map leaves its model's, at worst.
+
+    ``Gd`` maps the disturbance to the tracking error (:mod:`ilcdob.loop`); the ratio is what the
+    model-based reconstruction of the disturbance from the error is off by (docs/theory.md
+    section 3). It grows without bound as the true loop nears its stability boundary.
+
+    Parameters
+    ----------
+    loop, nominal : LoopSystem
+        The true loop and the loop with the model as plant.
+
+    Returns
+    -------
+    float
+        The peak over 200 log-spaced frequencies from 1e-4 rad/s and 20,000 linearly spaced to Nyquist.
+    """
+    return _PeakMeter(nominal)(loop)
 
 
 def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale: float = 1.0,

@@ -142,6 +142,10 @@ DELTA_SETS = ("auto", "disc", "structured")
 #: made Clarabel stall) and a design that the verification rarely sends back.
 _DESIGN_DIRECTIONS = 16
 _DIRECT_METHOD = "faer"  # supernodal, multithreaded: the dense tap columns make qdldl slow
+#: Clarabel's static regularisation, tried in turn when a solve ends in NumericalError: its default first, then
+#: stronger ones (a structured set near the stability boundary, margin 0.1 and below, needed 1e-7 at the third
+#: exchange round; the result is verified on the dense grid either way).
+_STATIC_REGULARISATION = (1e-8, 1e-7, 1e-6)
 
 
 class RobustSetInfeasibleError(IlcdobError, ValueError):
@@ -840,13 +844,17 @@ class _Problem:
             obj = (cp.sum_squares(cp.multiply(sw, 1 - fr)) + cp.sum_squares(cp.multiply(sw, fi))
                    + o.ridge * cp.sum_squares(h))
         prob = cp.Problem(cp.Minimize(obj), cons)
-        try:
-            with warnings.catch_warnings():  # "optimal_inaccurate" is accepted: the result is verified afterwards
-                warnings.filterwarnings("ignore", message="Solution may be inaccurate", category=UserWarning)
-                prob.solve(solver="CLARABEL", direct_solve_method=_DIRECT_METHOD)
-        except cp.error.SolverError as exc:
-            raise RobustSetSolverError(f"robust-set design: Clarabel failed ({exc}); try fewer taps (`n_taps`) or "
-                                       "a coarser grid (`n_grid`)") from exc
+        for k, reg in enumerate(_STATIC_REGULARISATION):
+            try:
+                with warnings.catch_warnings():  # "optimal_inaccurate" is accepted: the result is verified afterwards
+                    warnings.filterwarnings("ignore", message="Solution may be inaccurate", category=UserWarning)
+                    prob.solve(solver="CLARABEL", direct_solve_method=_DIRECT_METHOD,
+                               static_regularization_constant=reg)
+                break
+            except cp.error.SolverError as exc:
+                if k + 1 == len(_STATIC_REGULARISATION):
+                    raise RobustSetSolverError(f"robust-set design: Clarabel failed ({exc}); try fewer taps "
+                                               "(`n_taps`) or a coarser grid (`n_grid`)") from exc
         if prob.status not in _OK or h.value is None:
             raise RobustSetSolverError(f"robust-set design: solver status {prob.status!r} at rho = {rho}; try fewer "
                                        "taps (`n_taps`), a coarser grid (`n_grid`) or a larger `ridge`")

@@ -180,8 +180,11 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
     not containing 0. Low-gain plants keep ``g`` near 1 where ``T0`` is, so the margin leaves out
     only plants near their stability boundary (a margin on ``|1 + T0 Delta|`` itself would drop every
     plant with less than ``m`` times the model's gain). Both on a dense grid (``n`` linear points to
-    Nyquist and 200 log-spaced below its first); the nearest limit on each side, less 1 %, bounds the
-    interval (``-inf``/``inf`` when there is none).
+    Nyquist and 200 log-spaced below its first); the nearest limit on each side bounds the interval
+    (``-inf``/``inf`` when there is none): a stability limit less 1 % (the set's image is unbounded
+    there), a margin limit that of ``0.99 m``, so that the interval holds every plant a sampler keeping
+    ``|Gd/Gd_hat| <= 1/m`` on another grid keeps (:func:`~ilcdob.design.delta.delta_set`); the values
+    beyond ``1/m`` are left out of the image value by value.
 
     Parameters
     ----------
@@ -211,12 +214,12 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
             t = np.where(im0 == im1, 0.0, im0 / (im0 - im1))
             re = c.real[:-1] + t * (c.real[1:] - c.real[:-1])
             r_star = np.where(cross & (re != 0), -1.0 / re, np.nan)
-        lo = np.max(np.where(r_star < 0, r_star, -np.inf), axis=0)
-        hi = np.min(np.where(r_star > 0, r_star, np.inf), axis=0)
+        lo = 0.99 * np.max(np.where(r_star < 0, r_star, -np.inf), axis=0)
+        hi = 0.99 * np.min(np.where(r_star > 0, r_star, np.inf), axis=0)
         if margin > 0:
-            m_lo, m_hi = _margin_limits(c, h, margin)
+            m_lo, m_hi = _margin_limits(c, h, 0.99 * margin)
             lo, hi = np.maximum(lo, m_lo), np.minimum(hi, m_hi)
-        _RANGES[key] = (0.99 * lo, 0.99 * hi)
+        _RANGES[key] = (lo, hi)
     return _RANGES[key]
 
 

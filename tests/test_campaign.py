@@ -163,6 +163,14 @@ def test_settings_guard_and_extension(fleet, tmp_path):
         run_campaign(fleet, SMALL, out, workers=1)
 
 
+def test_margin_enters_the_settings_only_when_it_changes_the_draws(fleet):
+    """``margin = 0`` (every stable plant) is how campaigns sampled before the option: their ids stay."""
+    ids = {m: campaign_settings(fleet, replace(SMALL, margin=m))["id"] for m in (0.0, 0.5, 0.3)}
+    assert len(set(ids.values())) == 3
+    before = campaign_settings(fleet, replace(SMALL, margin=0.0))
+    assert "margin" not in before and campaign_settings(fleet, SMALL)["margin"] == 0.5
+
+
 def test_sample_store_drops_a_torn_line_and_refuses_foreign_records(tmp_path):
     store = SampleStore(tmp_path / SAMPLES_FILE, "abc")
     store.append({"sample": 0, "settings": "abc", "x": 1})
@@ -203,7 +211,7 @@ def test_statistics_count_failed_runs_as_not_improved():
 def test_bad_inputs(fleet, fleet_file, tmp_path, capsys):
     for kwargs, name in [({"samples": 0}, "samples"), ({"methods": ("closed-form", "magic")}, "magic"),
                          ({"scenarios": (7,)}, "scenarios"), ({"robust_models": -1}, "robust_models"),
-                         ({"scale": 0.0}, "scale"), ({"duration": -1.0}, "duration")]:
+                         ({"scale": 0.0}, "scale"), ({"duration": -1.0}, "duration"), ({"margin": 1.0}, "margin")]:
         with pytest.raises(CampaignError, match=name):
             CampaignOptions(**kwargs)
     with pytest.raises(CampaignError, match=r"`scheduler`: got 'localhost:8786'.*tcp://HOST:PORT"):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import ilcdob
+from ilcdob.design.delta import delta_set, disturbance_peak
 from ilcdob.design.robust_set import RobustSetOptions, design_robust_set, structured_set
 from ilcdob.design.value_set import TAU_RANGE, BoundFamily, EllipseFamily, admissible_range
 from ilcdob.errors import SpecError, UnstableLoopError
@@ -98,6 +99,28 @@ def test_structured_design_holds_for_every_flown_plant_of_the_set():
     assert worst <= design.rho_guaranteed + 1e-6, (worst, design.rho_guaranteed)
     # and the set is not the disc: it learns where the disc design cannot (|1 - F| at 0.3 rad/s)
     assert abs(1 - design.response(np.array([0.3]))[0]) < 0.2
+
+
+def test_every_plant_the_sampler_keeps_is_covered():
+    """The campaigns' sampler (:func:`delta_set` with the margin: flown loops, peak of ``|Gd/Gd_hat|``) and
+    the design's set (admissible ranges, sampled responses) are separate constructions. Bound 0.9 on
+    UAV1, margin 0.5: every kept plant's exact ratio stays below rho_guaranteed; without the margin
+    the sampler keeps stable plants whose disturbance response the design does not cover."""
+    spec = FLEET.systems[0]
+    src, tgt = FLEET.loop(spec.name), FLEET.loop(FLEET.systems[1].name)
+    design = design_robust_set(src, tgt, np.array([1.0]), np.array([0.9]), OPTS, BoundFamily(0.9))
+    w = np.concatenate([np.geomspace(0.01, 1.0, 100), np.linspace(1.0, 0.999 * np.pi / TS, 1500)])
+    F, gd_hat = design.response(w), freqresp(src.nominal.G_d, w)
+    kept = delta_set(spec, TS, 40, np.random.default_rng(5), bound=0.9, margin=OPTS.margin)
+    assert kept.rejected > 0
+    worst = max(float(np.max(np.abs(1 - F * freqresp(lp.G_d, w) / gd_hat))) for lp in kept.loops)
+    assert worst <= design.rho_guaranteed + 1e-6, (worst, design.rho_guaranteed)
+    assert all(disturbance_peak(lp, kept.nominal) <= 1 / OPTS.margin for lp in kept.loops)
+    # the same draws without the margin: some stable plants amplify the disturbance map more than 2x
+    every = delta_set(spec, TS, 40, np.random.default_rng(5), bound=0.9)
+    assert max(disturbance_peak(lp, every.nominal) for lp in every.loops) > 1 / OPTS.margin
+    with pytest.raises(SpecError, match="`margin`"):
+        delta_set(spec, TS, 1, bound=0.9, margin=1.0)
 
 
 def test_structured_design_learns_where_the_disc_does_not():

@@ -202,6 +202,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--delta-set", default="structured", choices=["structured", "disc", "auto"],
                    help="robust-set: guarantee over the family the plants are drawn from (structured), the disc "
                         "|Delta| <= bound, or auto (default: structured)")
+    p.add_argument("--margin", type=float, default=0.5,
+                   help="redraw true plants whose disturbance response exceeds 1/MARGIN times the model's at some "
+                        "frequency; robust-set guarantees over the same plants (default 0.5: within 6 dB; "
+                        "0: every stable plant)")
     p.add_argument("--duration", type=float, default=None, help="fly the first SECONDS of each scenario (default: all)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed")
     p = _sub(sub, "report", "one self-contained HTML report from reproduce/compare/campaign folders")

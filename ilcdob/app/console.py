@@ -251,7 +251,8 @@ def _campaign(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
     opts = CampaignOptions(samples=a.samples, seed=a.seed, scale=a.scale, bound=a.bound, scenarios=tuple(a.scenarios),
                            methods=tuple(a.methods or DEFAULT_METHODS), duration=a.duration,
-                           robust_models=a.robust_models, rho=a.rho, law=a.law, delta_set=a.delta_set)
+                           robust_models=a.robust_models, rho=a.rho, law=a.law, delta_set=a.delta_set,
+                           margin=a.margin)
     result = uc.campaign_to_folder(a.out, opts, fleet=a.fleet, scheduler=a.scheduler, workers=a.workers,
                                    overwrite=a.overwrite, progress=con.progress,
                                    dashboard=con.note if a.dashboard else None, argv=argv)

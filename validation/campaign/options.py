@@ -64,6 +64,14 @@ class CampaignOptions:
         The Delta set robust-set designs guarantee over (:attr:`ilcdob.design.robust_set.RobustSetOptions.delta_set`;
         default: the family the true plants are drawn from). In the settings hash only when
         robust-set is flown over another set than the disc (so campaigns from before the option resume).
+    margin : float
+        ``m`` in [0, 1): a sampled true plant (and a design sample) is redrawn when its disturbance
+        map exceeds ``1/m`` times its model's at some frequency (:func:`ilcdob.design.delta.delta_set`),
+        and robust-set designs over the structured family guarantee over the same plants
+        (:attr:`~ilcdob.design.robust_set.RobustSetOptions.margin`; the disc keeps its own margin).
+        Default 0.5: within 6 dB of the model. 0 keeps every stable plant, as campaigns did before
+        the option; it is then left out of the settings hash (they resume) unless robust-set flies
+        over the structured family, whose design it changes.
     """
 
     samples: int = 200
@@ -77,6 +85,7 @@ class CampaignOptions:
     rho: float = 0.95
     law: str = DEFAULT_LAW
     delta_set: str = "structured"
+    margin: float = 0.5
 
     def __post_init__(self) -> None:
         def integer(v: object) -> bool:
@@ -108,6 +117,9 @@ class CampaignOptions:
             raise CampaignError(f"`rho`: got {self.rho!r}, expected an improvement factor > 0 (e.g. 0.95)")
         if self.delta_set not in DELTA_SETS:
             raise CampaignError(f"`delta_set`: got {self.delta_set!r}, expected one of {list(DELTA_SETS)}")
+        if not (isinstance(self.margin, (int, float)) and np.isfinite(self.margin) and 0 <= self.margin < 1):
+            raise CampaignError(f"`margin`: got {self.margin!r}, expected a number in [0, 1) (0.5: true disturbance "
+                                "maps within 6 dB of the models'; 0: every stable plant)")
         try:
             law = check_law(self.law)
         except IlcdobError as exc:
@@ -122,6 +134,7 @@ class CampaignOptions:
         object.__setattr__(self, "seed", int(self.seed))
         object.__setattr__(self, "robust_models", int(self.robust_models))
         object.__setattr__(self, "scale", float(self.scale))
+        object.__setattr__(self, "margin", float(self.margin))
 
 
 def _fleet_fingerprint(fleet: Fleet) -> str:
@@ -153,6 +166,9 @@ def campaign_settings(fleet: Fleet, options: CampaignOptions) -> dict[str, Any]:
         opts.pop("law")
     if "robust-set" not in options.methods or options.delta_set == "disc":  # only robust-set depends on it, and
         opts.pop("delta_set")                                                # the disc was its set before the option
+    designs_on_margin = "robust-set" in options.methods and options.delta_set == "structured"
+    if options.margin == 0 and not designs_on_margin:  # every stable plant: how campaigns sampled before the option
+        opts.pop("margin")
     opts["scenarios"], opts["methods"] = list(options.scenarios), list(options.methods)
     sources = {s.name: ("identification" if s.uncertainty is None and s.identification is not None
                         else f"bound {s.uncertainty.bound:g}" if s.uncertainty is not None else "none")

@@ -39,9 +39,10 @@ def _rng(seed: int, *key: int) -> np.random.Generator:
 
 
 def draw_true_loops(fleet: Fleet, options: CampaignOptions, index: int) -> tuple[dict[str, LoopSystem], int]:
-    """Sample ``index``'s true loops, one per vehicle in fleet order, and the redraws of unstable loops.
+    """Sample ``index``'s true loops, one per vehicle in fleet order, and the redraws of unstable loops
+    (and of loops outside ``options.margin``).
 
-    Depends on ``(options.seed, index)``, ``scale`` and ``bound`` only.
+    Depends on ``(options.seed, index)``, ``scale``, ``bound`` and ``margin`` only.
 
     Parameters
     ----------
@@ -57,13 +58,13 @@ def draw_true_loops(fleet: Fleet, options: CampaignOptions, index: int) -> tuple
     loops : dict of str to LoopSystem
         The true loop of every system (true plant; controller, Q and M from the model).
     rejected : int
-        Draws rejected because their loop was unstable.
+        Draws rejected because their loop was unstable or outside the margin.
     """
     rng = _rng(options.seed, 0, index)
     loops, rejected = {}, 0
     for spec in fleet.systems:
         ds = delta_set(spec, fleet.sample_time, 1, rng, scale=options.scale, bound=options.bound,
-                       w=np.array([1.0]))
+                       w=np.array([1.0]), margin=options.margin)
         loops[spec.name], rejected = ds.loops[0], rejected + ds.rejected
     return loops, rejected
 
@@ -72,7 +73,8 @@ def _design_deltas(fleet: Fleet, options: CampaignOptions) -> dict[str, DeltaSet
     """The designers' Delta samples: identified uncertainty (scale 1) or the bound, seeded ``(seed, 1)``."""
     k = max(FIR_DESIGN_SAMPLES, options.robust_models, 1)
     rng = _rng(options.seed, 1)
-    return {s.name: delta_set(s, fleet.sample_time, k, rng, bound=options.bound) for s in fleet.systems}
+    return {s.name: delta_set(s, fleet.sample_time, k, rng, bound=options.bound, margin=options.margin)
+            for s in fleet.systems}
 
 
 class _WorkerState:
@@ -103,11 +105,17 @@ class _WorkerState:
                 # robust-set guarantees over the family the true plants are drawn from (value sets, not samples)
                 self.designs[key] = design_pair(self.fleet, source, target, method, n=n, deltas=deltas,
                                                 robust=RobustOptions(rho=self.options.rho), lifted=False,
-                                                robust_set=RobustSetOptions(rho=min(1.0, self.options.rho),
-                                                                            delta_set=self.options.delta_set))
+                                                robust_set=self._robust_set_options())
             except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
                 self.designs[key] = f"design failed: {exc}"
         return self.designs[key]
+
+    def _robust_set_options(self) -> RobustSetOptions:
+        """robust-set's options: over the structured family it guarantees over the plants the campaign keeps (its
+        margin); the disc and "auto" keep the disc's own margin (``|1 + T0 Delta| >= m``, another quantity)."""
+        o = self.options
+        rs = RobustSetOptions(rho=min(1.0, o.rho), delta_set=o.delta_set)
+        return replace(rs, margin=o.margin) if o.delta_set == "structured" else rs
 
     def with_law(self, sid: int, method: str, design: PairDesign) -> PairDesign:
         """``design`` learning with the campaign's law on scenario ``sid`` (its reference terms, built once)."""
