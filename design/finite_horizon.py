@@ -400,6 +400,20 @@ def _trend_map(n: int, advance: int, fade: int) -> LinearMap:
     return LinearMap(n, n + int(advance), fwd, adj, "trend")
 
 
+def _odd_start(n: int, m: int) -> LinearMap:
+    """``x -> [-x[m-1], ..., -x[0], x[0], ..., x[n-1]]``: ``m`` samples of the odd extension before the trial."""
+
+    def fwd(x: np.ndarray) -> np.ndarray:
+        return np.concatenate([-x[:m][::-1], x])
+
+    def adj(y: np.ndarray) -> np.ndarray:
+        out = np.array(y[m:], dtype=float)
+        out[:m] -= y[:m][::-1]
+        return out
+
+    return LinearMap(n, n + m, fwd, adj, "odd start")
+
+
 def _method_map(method: Any, n: int) -> LinearMap:
     """The method's learning filter on a trial of ``n`` samples, the source flying without learning."""
     from .robust_set import RobustSetDesign  # robust_set imports this module's neighbours
@@ -409,6 +423,13 @@ def _method_map(method: Any, n: int) -> LinearMap:
     if isinstance(method, RobustSetDesign):
         inv = zpk_map(inverse_gd_filter(method.filters.source, model=True), n)
         a = method.F.advance
+        if method.projected(n):  # -P F_N Gd_hat_j {d_hat}, P the least-squares inverse of Gf_hat_j
+            ti = method.trial_inverse(n)
+            proj = LinearMap(n, n, ti.solve, ti.adjoint, "Gf_j^+")
+            gd_t = causal_map(method.filters.target.nominal.G_d, n, "Gd_hat_j")
+            m = min(a, n)
+            fn = fir_map(method.F.h, a + m, n, fold=False, n_in=n + m) @ _odd_start(n, m)
+            return proj @ fn @ gd_t @ inv
         steps = [-inv]
         if a:
             steps.append(_trend_map(n, a, method.end_fade))

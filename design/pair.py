@@ -507,8 +507,8 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
                    "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},
                    "learning": "d_f,j = F{L1{e_{j-1}} + L2{d_f,{j-1}}}, computed on a trial as (1 - Q_j){F{d_hat}} "
                                "with d_hat the disturbance reconstructed by the model (F: FIR, output(k) = "
-                               "sum_i num[i] input(k + advance - i)), d_hat zero before the trial and continued "
-                               "past its end as `trial_ends` says; no C code",
+                               "sum_i num[i] input(k + advance - i)); the trial's ends as `trial_ends` says; "
+                               "no C code",
                    "delta_set": {source: deltas[source].source}, **rs.to_dict()}
         return PairDesign(method, filters, rs.apply)
     if method == "robust":
