@@ -14,9 +14,9 @@ without hardware: the nonlinear vehicles of :mod:`ilcdob.vehicles.quadrotor` are
    the fleet cyclically as in :mod:`ilcdob.validation.reproduce`.
 
 The outer loop of one vehicle (x axis, the loop of paper Sec. II), at the flight computer's rate
-``Ts`` (the fleet's sample time), is the same discrete blocks as the linear loop
-(:class:`ilcdob.loop.LoopSystem` ``C``, ``Q``, ``M``) stepped sample by sample with the
-nonlinear vehicle in between::
+``Ts`` (the fleet's sample time), is the same control law as the linear loop's
+(:class:`ilcdob.controller.OuterLoopController` over ``C``, ``Q``, ``M``) stepped sample by
+sample with the nonlinear vehicle in between::
 
     x_m[k]   = x(t_k) + n[k]                       (position sensor, white noise n)
     u1[k]    = C{r - x_m}[k] + a_ref[k]            (a_ref if the PID feeds it forward)
@@ -60,6 +60,7 @@ from scipy import signal as sps
 from ilcdob.design.band import check_bandwidth
 from ilcdob.design.flown import model_attitude
 from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.controller import OuterLoopController
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.fleet_io import fleet_to_toml
@@ -183,28 +184,6 @@ class NonlinearFlight(Flight):
         return rmse(self.d_est - self.d)
 
 
-def _mats(sys_) -> tuple[list[list[float]], list[float], list[float], float]:
-    """Block matrices as nested lists: pure-Python products beat NumPy for 2-3 states."""
-    a = np.asarray(sys_.A, float)
-    return (a.tolist(), np.asarray(sys_.B, float)[:, 0].tolist(), np.asarray(sys_.C, float)[0].tolist(),
-            float(np.asarray(sys_.D).ravel()[0]))
-
-
-class _Block:
-    """A discrete SISO state-space block stepped by hand: ``y = C x + D u``, ``x+ = A x + B u``."""
-
-    def __init__(self, sys_) -> None:
-        self.a, self.b, self.c, self.d = _mats(sys_)
-        self.x = [0.0] * len(self.b)
-
-    def output(self, u: float = 0.0) -> float:
-        return sum(ci * xi for ci, xi in zip(self.c, self.x)) + self.d * u
-
-    def update(self, u: float) -> None:
-        x = self.x
-        self.x = [sum(aij * xj for aij, xj in zip(row, x)) + bi * u for row, bi in zip(self.a, self.b)]
-
-
 def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance: object,
              d_f: object | None = None, mode: str = "dob", a_ref: object | None = None,
              noise_std: float = 0.0, rng: np.random.Generator | None = None) -> NonlinearFlight:
@@ -273,38 +252,25 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
     if a_ref is not None and loop.spec.controller.acceleration_feedforward:
         aff = as_signal(a_ref, "a_ref", n)
     noise = rng.normal(0.0, noise_std, size=(n, 3)) if noise_std > 0 else np.zeros((n, 3))
-    if float(np.asarray(loop.Q.D).ravel()[0]) != 0.0:
-        raise SpecError("Q must be strictly proper in discrete time (algebraic loop through the DOB)")
-
+    ctl = OuterLoopController(loop, dob=mode == "dob")  # the control law, as any vehicle flies it
     advance = make_advance(vehicle)
-    c_blk, q_blk, m_blk = _Block(loop.C), _Block(loop.Q), _Block(loop.M)
     pid_y = DiscretePID(loop.spec.controller, ts)
     pid_z = DiscretePID(vehicle.z_controller, ts)
     s = [0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3 + [vehicle.hover_rotor_speed] * 4
     wprev = (0.0, 0.0)
     d_list = d_inner.tolist()
     tan_max = math.tan(vehicle.max_tilt)
-    use_dob = mode == "dob"
     r_l, aff_l, df_l, nz = r.tolist(), aff.tolist(), df.tolist(), noise.tolist()
     y, ym_arr, dh, u2 = (np.zeros(n) for _ in range(4))
     saturated = 0
     for k in range(n):
         x_true = s[0]
         xm, ym, zm = x_true + nz[k][0], s[1] + nz[k][1], s[2] + nz[k][2]
-        em = r_l[k] - xm
-        u1 = c_blk.output(em) + aff_l[k]
-        c_blk.update(em)
-        if use_dob:
-            dhk = m_blk.output(xm) - q_blk.output()
-            u2k = u1 - dhk - df_l[k]
-        else:
-            dhk, u2k = 0.0, u1
+        u2k = ctl.command(r_l[k], xm, feedforward=aff_l[k], learning=df_l[k])
         u2k, ay, az, limited = limit_tilt(u2k, pid_y(-ym), pid_z(-zm), tan_max)
+        ctl.update(u2k)  # the DOB sees the command the airframe received
         saturated += limited
-        if use_dob:
-            q_blk.update(u2k)
-            m_blk.update(xm)
-        y[k], ym_arr[k], dh[k], u2[k] = x_true, xm, dhk, u2k
+        y[k], ym_arr[k], dh[k], u2[k] = x_true, xm, ctl.d_hat, u2k
         if k < n - 1:
             s, wprev = advance(s, u2k, ay, az, d_list, k * nin, nin, wprev, None)
     est = sps.lfilter(ab, aa, dh + df)

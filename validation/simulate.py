@@ -2,7 +2,8 @@
 
 Unlike the closed-loop maps of :mod:`ilcdob.loop`, this steps each discrete block (P, C, Q,
 M) sample by sample exactly as a flight computer would, so it is an independent check of
-the maps. Per sample ``k``::
+the maps: the plant ``P`` here, the control law through :class:`ilcdob.controller.OuterLoopController`,
+the object any vehicle flies. Per sample ``k``::
 
     y[k]     = P output (strictly proper: depends on the state only)
     e[k]     = r[k] - y[k]
@@ -25,9 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ilcdob.signals import as_signal
+from ilcdob.controller import OuterLoopController
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
+from ilcdob.signals import as_signal
 
 __all__ = ["Flight", "simulate_flight", "rmse"]
 
@@ -135,32 +137,18 @@ def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None =
     if mode == "no_dob" and np.any(df):
         raise SpecError("`d_f`: a learning signal needs the DOB loop (mode='dob')")
     ap, bp, cp, dp = _mats(loop.P)
-    ac, bc, cc, dc = _mats(loop.C)
-    aq, bq, cq, dq = _mats(loop.Q)
-    am, bm, cm, dm = _mats(loop.M)
-    if dp != 0 or dq != 0:
-        raise SpecError("P and Q must be strictly proper in discrete time (algebraic loop)")
-    xp, xc = np.zeros(ap.shape[0]), np.zeros(ac.shape[0])
-    xq, xm = np.zeros(aq.shape[0]), np.zeros(am.shape[0])
+    if dp != 0:
+        raise SpecError("P must be strictly proper in discrete time (algebraic loop)")
+    ctl = OuterLoopController(loop, dob=mode == "dob")  # the control law, as any vehicle flies it
+    xp = np.zeros(ap.shape[0])
     y, e, dh, u2 = (np.zeros(n) for _ in range(4))
-    use_dob = mode == "dob"
     nz = np.zeros(n) if noise is None else noise
     for k in range(n):
         yk = cp @ xp
         ymk = yk + nz[k]
-        ek = r[k] - ymk
-        u1 = cc @ xc + dc * ek + aff[k]
-        if use_dob:
-            dhk = (cm @ xm + dm * ymk) - cq @ xq
-            u2k = u1 - dhk - df[k]
-            xq = aq @ xq + bq * u2k
-            xm = am @ xm + bm * ymk
-        else:
-            dhk = 0.0
-            u2k = u1
+        u2k = ctl.step(r[k], ymk, feedforward=aff[k], learning=df[k])
         xp = ap @ xp + bp * (u2k + d[k])
-        xc = ac @ xc + bc * ek
-        y[k], e[k], dh[k], u2[k] = yk, ek, dhk, u2k
+        y[k], e[k], dh[k], u2[k] = yk, r[k] - ymk, ctl.d_hat, u2k
     t = np.arange(n) * loop.ts
     if noise is None:
         return Flight(system=loop.name, mode=mode, t=t, r=r, y=y, e=e, d=d, d_hat=dh, d_f=df, u2=u2)
