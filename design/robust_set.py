@@ -685,7 +685,7 @@ class RobustSetDesign:
         trial (:mod:`.trial_inverse`). Over an infinite horizon it is the same law
         (``Gf_j (1 - Q_j) = -Gd_j``); on the trial, with exact models, ``e_j = P (I - F_N) e'_j`` with
         ``P`` a projection, so ``||e_j|| <= sqrt(2) max |1 - F| ||e'_j||`` for every disturbance
-        (the odd extension at most doubles the energy ``F`` sees). Measured ``rho_N`` 0.150 / 0.012 /
+        (the odd extension at most doubles the energy ``F`` sees). Measured ``rho_N`` 0.153 / 0.012 /
         0.070 on the built-in cycle at |Delta| <= 0.3 (``max |1 - F|`` 0.153 / 0 / 0.070), against
         1.74 / 2.06 / 1.63 extended. The price: to give the trial's first and last samples their
         error exactly, ``d_f`` has spikes there (10-50 m/s^2 on 30 s of ``sin(w t)``, against 1-2

@@ -259,7 +259,7 @@ def test_projected_trial_law_keeps_the_bound_for_every_disturbance(fleet):
     """``trial="projected"``: the learning map of the target inverted over the trial by least squares.
     With exact models ``e_j = P (I - F_N) e'_j`` with ``P`` a projection and ``F_N`` the FIR on the odd
     extension, so ``rho_N <= sqrt(2) max |1 - F|`` plus the source inversion's end term (the closed
-    form's, <= 0.014 measured). Measured 0.150 / 0.012 / 0.070 against max |1 - F| 0.153 / 0 / 0.070
+    form's, <= 0.014 measured). Measured (101 taps) 0.150 / 0.012 / 0.072 against max |1 - F| 0.150 / 0 / 0.072
     (extended: 1.74 / 2.06 / 1.63). ``law_map`` reproduces ``apply``: the least-squares inverse (ridge
     1e-12) amplifies rounding by up to ~1e6 along the inputs ``Gf`` hardly passes, so the learning
     signals agree to 1e-5 and the errors they give, ``Gf{d_f}``, to 1e-8 (measured 3e-8 / 5e-11)."""
