@@ -1,0 +1,204 @@
+"""A vehicle ilcdob can fly, and one trial of ilcdob's control law on it (docs/theory.md section 1).
+
+The protocol is what a flight computer sees of its airframe at the outer loop's rate: an
+acceleration command per axis goes in, a measured position comes out. Anything that offers
+it (a third-party simulator, a hardware-in-the-loop bench, a companion computer's link to
+the autopilot) is flown by :func:`fly_vehicle` with one
+:class:`~ilcdob.controller.OuterLoopController` per axis: the same control law as ilcdob's own
+linear and nonlinear simulations.
+
+Frames and units: world frame, z up; positions in m, accelerations in m/s^2 with gravity
+excluded (a hovering vehicle is commanded 0). Axis ``i`` of a command or a position is x, y, z
+for ``i`` = 0, 1, 2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Protocol, runtime_checkable
+
+import numpy as np
+
+from ilcdob.controller import OuterLoopController
+from ilcdob.errors import SpecError
+from ilcdob.loop import LoopSystem
+
+__all__ = ["Vehicle", "VehicleTrial", "fly_vehicle", "AXES"]
+
+#: Axis names, in the order of the command and position vectors.
+AXES = ("x", "y", "z")
+
+
+@runtime_checkable
+class Vehicle(Protocol):
+    """What ilcdob needs of a vehicle to fly it (module docstring).
+
+    A structural type: any object with these members is a ``Vehicle`` (``isinstance`` checks
+    them); nothing derives from it or constructs it.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        None: a protocol is not instantiated.
+
+    Attributes
+    ----------
+    ts : float
+        The outer loop's sample time, s: :meth:`step` advances the vehicle by it.
+    """
+
+    ts: float
+
+    def reset(self) -> None:
+        """Back to hover, at rest, at the position that :meth:`position` reports as 0."""
+
+    def position(self) -> np.ndarray:
+        """The measured position now, ``(3,)``, m (relative to where :meth:`reset` left the vehicle)."""
+
+    def step(self, command: np.ndarray) -> np.ndarray:
+        """Hold an acceleration command for one sample time.
+
+        Parameters
+        ----------
+        command : numpy.ndarray
+            ``(3,)``, m/s^2, world frame, gravity excluded.
+
+        Returns
+        -------
+        numpy.ndarray
+            The command the vehicle applied (after its own limits; the command itself when it
+            has none): the DOB must see what was flown.
+        """
+
+
+@dataclass(frozen=True)
+class VehicleTrial:
+    """One trial flown by :func:`fly_vehicle`; arrays are ``N x 3`` (columns x, y, z) unless stated.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        Sample times, s (``N``).
+    r, y_meas : numpy.ndarray
+        Reference and measured position, m.
+    command, applied : numpy.ndarray
+        Acceleration command of the control law and as the vehicle applied it, m/s^2.
+    d_hat, d_f : numpy.ndarray
+        The DOB's estimate and the learning signal flown, m/s^2.
+    """
+
+    t: np.ndarray
+    r: np.ndarray
+    y_meas: np.ndarray
+    command: np.ndarray
+    applied: np.ndarray
+    d_hat: np.ndarray
+    d_f: np.ndarray
+
+    @property
+    def e_meas(self) -> np.ndarray:
+        """The measured tracking error ``r - y_meas``, m."""
+        return self.r - self.y_meas
+
+    def rmse(self, axis: int = 0) -> float:
+        """RMSE of the measured tracking error of one axis, m.
+
+        Parameters
+        ----------
+        axis : int
+            0, 1 or 2 (x, y, z).
+
+        Returns
+        -------
+        float
+        """
+        return float(np.sqrt(np.mean(self.e_meas[:, axis] ** 2)))
+
+
+def _per_axis(value: object, n: int, name: str) -> np.ndarray:
+    """``value`` as an ``n x 3`` array: None (zeros), ``(n, 3)``, or a mapping axis name -> ``(n,)``."""
+    if value is None:
+        return np.zeros((n, 3))
+    if isinstance(value, Mapping):
+        bad = [k for k in value if k not in AXES]
+        if bad:
+            raise SpecError(f"`{name}`: unknown axes {bad}, expected keys from {list(AXES)}")
+        out = np.zeros((n, 3))
+        for i, ax in enumerate(AXES):
+            if ax in value:
+                col = np.asarray(value[ax], float).reshape(-1)
+                if col.size != n:
+                    raise SpecError(f"`{name}[{ax!r}]`: got {col.size} samples, expected {n}")
+                out[:, i] = col
+    else:
+        out = np.asarray(value, float)
+        if out.shape != (n, 3):
+            raise SpecError(f"`{name}`: got shape {out.shape}, expected ({n}, 3) or a mapping axis -> samples")
+    if not np.all(np.isfinite(out)):
+        raise SpecError(f"`{name}`: contains NaN or inf")
+    return out
+
+
+def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem], reference: object, *, learning: object = None,
+                feedforward: object = None, dob: bool = True, n: int | None = None) -> VehicleTrial:
+    """Fly one trial of ``vehicle`` with ilcdob's control law on every axis, from :meth:`Vehicle.reset`.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        Anything with the protocol (module docstring).
+    loops : mapping of str to LoopSystem
+        The loop (PID, Q, M from the model) of each axis ``"x"``, ``"y"``, ``"z"``; all three are
+        needed. Their sample time must be ``vehicle.ts``.
+    reference : array_like or mapping
+        Reference position, m: ``N x 3``, or per axis (missing axes: 0, i.e. hold the start).
+    learning, feedforward : array_like or mapping, optional
+        Learning signal ``d_f`` and reference acceleration ``a_ff`` per axis, m/s^2 (default 0).
+    dob : bool
+        Run the DOB on every axis (False: the PID alone; then no learning signal).
+    n : int, optional
+        Samples of the trial (default: the reference's; needed when it is a mapping without axes).
+
+    Returns
+    -------
+    VehicleTrial
+
+    Raises
+    ------
+    SpecError
+        ``vehicle`` lacks the protocol, an axis has no loop, sample times differ, or a signal has the
+        wrong shape.
+    """
+    if not isinstance(vehicle, Vehicle):
+        raise SpecError(f"`vehicle`: got {type(vehicle).__name__}, expected an object with ts, reset(), "
+                        "position() and step(command) (ilcdob.vehicles.interface.Vehicle)")
+    missing = [ax for ax in AXES if ax not in loops]
+    if missing:
+        raise SpecError(f"`loops`: no loop for axes {missing}; every axis needs one (the same loop may serve several)")
+    for ax in AXES:
+        if abs(loops[ax].ts - vehicle.ts) > 1e-12 * vehicle.ts:
+            raise SpecError(f"`loops[{ax!r}]`: sample time {loops[ax].ts} s, but the vehicle steps {vehicle.ts} s")
+    if n is None:
+        if isinstance(reference, Mapping):
+            sizes = {np.asarray(v).size for v in reference.values()}
+            if len(sizes) != 1:
+                raise SpecError("`reference`: give every axis the same number of samples, or `n`")
+            n = sizes.pop()
+        else:
+            n = np.asarray(reference).shape[0]
+    r = _per_axis(reference, n, "reference")
+    d_f = _per_axis(learning, n, "learning")
+    a_ff = _per_axis(feedforward, n, "feedforward")
+    if not dob and np.any(d_f):
+        raise SpecError("`learning`: a learning signal needs the DOB (dob=True)")
+    ctl = [OuterLoopController(loops[ax], dob=dob) for ax in AXES]
+    vehicle.reset()
+    y, cmd, applied, d_hat = (np.zeros((n, 3)) for _ in range(4))
+    for k in range(n):
+        y[k] = vehicle.position()
+        cmd[k] = [c.command(r[k, i], y[k, i], feedforward=a_ff[k, i], learning=d_f[k, i]) for i, c in enumerate(ctl)]
+        d_hat[k] = [c.d_hat for c in ctl]
+        applied[k] = vehicle.step(cmd[k].copy())
+        for i, c in enumerate(ctl):
+            c.update(applied[k, i])
+    return VehicleTrial(np.arange(n) * vehicle.ts, r, y, cmd, applied, d_hat, d_f)

@@ -1,0 +1,153 @@
+"""A rotorpy multirotor as a :class:`~ilcdob.vehicles.interface.Vehicle`: a simulator nobody here wrote.
+
+rotorpy (PyPI ``rotorpy``, MIT licence; the ``[rotorpy]`` extra) integrates a quadrotor's rigid
+body with first-order motors, rotor drag, parasitic drag and translational lift on the airspeed
+``v - wind`` (its ``Multirotor``), one ``scipy.integrate.solve_ivp`` call per step. ilcdob's
+outer loop commands an acceleration per axis; rotorpy's own geometric controller (``SE3Control``)
+is the inner loop that turns it into thrust and attitude: given the vehicle's current position
+and velocity as its reference and the command as the reference acceleration, its position and
+velocity terms vanish and it asks the rotors for ``m (a + g e3)`` (pure feed-forward through
+its attitude loop, which lags 0.1-0.2 s). Nothing of ilcdob's vehicle models is used.
+
+Two disturbances, as in the paper and beyond it:
+
+* ``command_disturbance(t)``: the paper's virtual disturbance, an acceleration (m/s^2, ``(3,)``)
+  added to the command before the inner loop;
+* ``wind(t)``: a wind velocity (m/s, world frame, ``(3,)``) acting through the airframe's drag
+  (``state["wind"]``, held over each step), so one wind gives vehicles of different mass and
+  drag different accelerations.
+
+The vehicle starts each trial hovering at rest at ``altitude``; :meth:`RotorpyVehicle.position`
+is measured from there. rotorpy draws its motor noise from NumPy's global generator on every
+step (also when the noise is zero), so trials are repeatable but not independent of it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Callable
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+
+__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES"]
+
+#: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.5 and 1.0 kg,
+#: arm 4.3, 17 and 24 cm; their drag differs in kind (rotor drag only; both; parasitic only).
+ROTORPY_VEHICLES = {"crazyflie": "crazyflie_params", "hummingbird": "hummingbird_params",
+                    "px4": "px4_sihsim_quadx_params"}
+_G = 9.81
+
+
+def _rotorpy():
+    try:
+        multirotor = importlib.import_module("rotorpy.vehicles.multirotor")
+        control = importlib.import_module("rotorpy.controllers.quadrotor_control")
+    except ImportError as exc:
+        raise SpecError("the rotorpy vehicles need the optional package rotorpy: pip install 'ilcdob[rotorpy]' "
+                        f"({exc})") from None
+    return multirotor.Multirotor, control.SE3Control
+
+
+class RotorpyVehicle:
+    """One rotorpy quadrotor flown through ilcdob's vehicle protocol (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`ROTORPY_VEHICLES`.
+    ts : float
+        Outer-loop sample time, s (> 0): each :meth:`step` integrates this long.
+    altitude : float
+        Hover altitude at the start of a trial, m.
+    command_disturbance : callable, optional
+        ``t -> (3,)`` acceleration added to the command, m/s^2 (the paper's disturbance).
+    wind : callable, optional
+        ``t -> (3,)`` wind velocity, m/s, world frame.
+    noise_std : float
+        Standard deviation of white position-sensor noise per axis, m (>= 0).
+    seed : int
+        Seed of the sensor noise.
+    params : dict, optional
+        Changes to rotorpy's parameter set (e.g. ``{"mass": 0.6}``).
+    """
+
+    def __init__(self, name: str, ts: float = 0.01, *, altitude: float = 1.0,
+                 command_disturbance: Callable[[float], np.ndarray] | None = None,
+                 wind: Callable[[float], np.ndarray] | None = None, noise_std: float = 0.0, seed: int = 0,
+                 params: dict | None = None):
+        if name not in ROTORPY_VEHICLES:
+            raise SpecError(f"`name`: got {name!r}, expected one of {sorted(ROTORPY_VEHICLES)}")
+        if not (np.isfinite(ts) and ts > 0):
+            raise SpecError(f"`ts`: got {ts!r}, expected a sample time > 0 s")
+        if not (np.isfinite(noise_std) and noise_std >= 0):
+            raise SpecError(f"`noise_std`: got {noise_std!r}, expected a standard deviation >= 0 m")
+        for what, fn in (("command_disturbance", command_disturbance), ("wind", wind)):
+            if fn is not None and not callable(fn):
+                raise SpecError(f"`{what}`: got {type(fn).__name__}, expected a callable of time (s) returning (3,)")
+        multirotor, se3 = _rotorpy()
+        base = importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params
+        self.params = {**base, **(params or {})}
+        self.name, self.ts, self.altitude = name, float(ts), float(altitude)
+        self.command_disturbance, self.wind = command_disturbance, wind
+        self.noise_std, self.seed = float(noise_std), int(seed)
+        self._model = multirotor(self.params, initial_state=self._hover(), control_abstraction="cmd_motor_speeds",
+                                 aero=True)
+        self._inner = se3(self.params)
+        self.reset()
+
+    @property
+    def mass(self) -> float:
+        """Mass, kg."""
+        return float(self.params["mass"])
+
+    def _hover(self) -> dict:
+        p = self.params
+        w_hover = np.sqrt(p["mass"] * _G / (p["num_rotors"] * p["k_eta"]))
+        return {"x": np.array([0.0, 0.0, self.altitude]), "v": np.zeros(3), "q": np.array([0.0, 0.0, 0.0, 1.0]),
+                "w": np.zeros(3), "wind": np.zeros(3), "rotor_speeds": np.full(p["num_rotors"], w_hover)}
+
+    def reset(self) -> None:
+        """Hover at rest at ``altitude``, time 0, the sensor noise restarted from ``seed``."""
+        self.state = self._hover()
+        self.t = 0.0
+        self._rng = np.random.default_rng(self.seed)
+
+    def position(self) -> np.ndarray:
+        """Measured position relative to the start, ``(3,)``, m."""
+        y = self.state["x"] - np.array([0.0, 0.0, self.altitude])
+        return y + self._rng.normal(0.0, self.noise_std, 3) if self.noise_std else y
+
+    def _vector(self, fn: Callable[[float], np.ndarray] | None, what: str) -> np.ndarray:
+        if fn is None:
+            return np.zeros(3)
+        v = np.asarray(fn(self.t), float).reshape(-1)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise SpecError(f"`{what}`: at t = {self.t:g} s it returned {v!r}, expected 3 finite values")
+        return v
+
+    def step(self, command: np.ndarray) -> np.ndarray:
+        """Hold the acceleration ``command`` (``(3,)``, m/s^2) plus the command disturbance for ``ts``.
+
+        Parameters
+        ----------
+        command : array_like
+            World-frame acceleration, gravity excluded.
+
+        Returns
+        -------
+        numpy.ndarray
+            The command (rotorpy limits the rotor speeds inside its model; what the airframe
+            then does is the simulator's own).
+        """
+        a = np.asarray(command, float).reshape(-1)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise SpecError(f"`command`: got {command!r}, expected 3 finite accelerations (m/s^2)")
+        s = self.state
+        s["wind"] = self._vector(self.wind, "wind")
+        flat = {"x": s["x"], "x_dot": s["v"], "x_ddot": a + self._vector(self.command_disturbance, "command_disturbance"),
+                "x_dddot": np.zeros(3), "x_ddddot": np.zeros(3), "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
+        self.state = self._model.step(s, self._inner.update(self.t, s, flat), self.ts)
+        self.t += self.ts
+        return a

@@ -1,0 +1,141 @@
+"""Flying vehicles through the protocol (:mod:`ilcdob.vehicles.interface`): a linear vehicle written here
+against the loop's closed-loop map (python-control's interconnection), and rotorpy's multirotors, a
+simulator nobody here wrote, with ilcdob's control law."""
+
+from __future__ import annotations
+
+import control as ct
+import numpy as np
+import pytest
+
+import ilcdob
+from ilcdob.errors import SpecError
+from ilcdob.vehicles.interface import Vehicle, fly_vehicle
+
+FLEET = ilcdob.default_fleet()
+TS_ROTORPY = 0.01
+
+
+class _LinearVehicle:
+    """The loop's discrete plant on every axis, the disturbance added to the x command (the paper's loop)."""
+
+    def __init__(self, loop, d):
+        self.ts = loop.ts
+        self.a, self.b, self.c = (np.asarray(m, float) for m in (loop.P.A, loop.P.B, loop.P.C))
+        self.d = d
+
+    def reset(self):
+        self.x, self.k = np.zeros((3, self.a.shape[0])), 0
+
+    def position(self):
+        return self.x @ self.c[0]
+
+    def step(self, command):
+        u = np.asarray(command, float) + np.array([self.d[self.k], 0.0, 0.0])
+        self.x = self.x @ self.a.T + np.outer(u, self.b[:, 0])
+        self.k += 1
+        return command
+
+
+def test_a_trial_through_the_protocol_is_the_closed_loop_map():
+    """x of a linear vehicle: position, DOB estimate and command equal the loop's closed-loop map
+    (python-control interconnection) driven by the same reference, disturbance and learning signal;
+    y and z at rest stay at 0. Rounding-level agreement (measured ~1e-14 of the signals): 1e-9."""
+    loop = FLEET.loop("UAV2")
+    n = 600
+    t = np.arange(n) * loop.ts
+    r, d, d_f = 0.5 * np.sin(0.7 * t), 0.8 * np.sin(1.3 * t) + 0.2, 0.1 * np.cos(0.4 * t)
+    vehicle = _LinearVehicle(loop, d)
+    assert isinstance(vehicle, Vehicle)
+    trial = fly_vehicle(vehicle, {"x": loop, "y": loop, "z": loop}, {"x": r}, learning={"x": d_f})
+    out = ct.forced_response(loop.closed_loop, T=t, U=np.vstack([r, d, d_f])).outputs
+    for name, got in (("y", trial.y_meas[:, 0]), ("d_hat", trial.d_hat[:, 0]), ("u2", trial.command[:, 0])):
+        want = out[loop.closed_loop.output_labels.index(name)]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.max(np.abs(want)), err_msg=name)
+    assert np.all(trial.y_meas[:, 1:] == 0) and trial.rmse(0) > 0
+
+
+def test_protocol_errors_name_what_is_wrong():
+    loop = FLEET.loop("UAV1")
+    v = _LinearVehicle(loop, np.zeros(10))
+    loops = {"x": loop, "y": loop, "z": loop}
+    with pytest.raises(SpecError, match=r"no loop for axes \['z'\]"):
+        fly_vehicle(v, {"x": loop, "y": loop}, np.zeros((10, 3)))
+    with pytest.raises(SpecError, match="expected an object with ts, reset"):
+        fly_vehicle(object(), loops, np.zeros((10, 3)))
+    with pytest.raises(SpecError, match=r"`reference`: got shape \(10, 2\)"):
+        fly_vehicle(v, loops, np.zeros((10, 2)))
+    with pytest.raises(SpecError, match="unknown axes"):
+        fly_vehicle(v, loops, {"w": np.zeros(10)})
+    with pytest.raises(SpecError, match="needs the DOB"):
+        fly_vehicle(v, loops, np.zeros((10, 3)), learning={"x": np.ones(10)}, dob=False)
+    other = ilcdob.build_loop(FLEET.systems[0], 0.01)
+    with pytest.raises(SpecError, match="sample time"):
+        fly_vehicle(v, {"x": other, "y": loop, "z": loop}, np.zeros((10, 3)))
+
+
+# ------------------------------------------------------------------------------------------------ rotorpy
+
+def _rotorpy_loop():
+    """A rough model of a rotorpy vehicle's outer loop: 1/(s^2 (0.1 s + 1)) (its attitude loop lags
+    0.1-0.2 s), a PID and a third-order DOB at 100 Hz."""
+    spec = ilcdob.SystemSpec("rotorpy", ilcdob.PlantSpec((1.0,), (0.1, 1.0, 0.0, 0.0)),
+                             ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05), ilcdob.DOBSpec(3, 0.2))
+    return ilcdob.build_loop(spec, TS_ROTORPY)
+
+
+@pytest.mark.parametrize("name", ["crazyflie", "hummingbird", "px4"])
+def test_rotorpy_vehicles_fly_ilcdobs_control_law(name):
+    """20 s of hover under the paper's disturbance (0.3 + 0.5 sin(0.94 t) m/s^2 on the x command), on
+    rotorpy's own rotor, drag and attitude dynamics: the DOB halves the PID's error (measured 0.52 / 0.57
+    / 0.49 of it for crazyflie / hummingbird / px4), though its model is rough; y and z stay within 1 mm."""
+    pytest.importorskip("rotorpy")
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
+
+    loop = _rotorpy_loop()
+    loops = {"x": loop, "y": loop, "z": loop}
+    dist = lambda t: np.array([0.3 + 0.5 * np.sin(0.9425 * t), 0.0, 0.0])  # noqa: E731
+    n = int(20.0 / TS_ROTORPY)
+    rms = {}
+    for dob in (False, True):
+        vehicle = RotorpyVehicle(name, TS_ROTORPY, command_disturbance=dist)
+        assert isinstance(vehicle, Vehicle)
+        trial = fly_vehicle(vehicle, loops, np.zeros((n, 3)), dob=dob)
+        rms[dob] = trial.rmse(0)
+        assert max(trial.rmse(1), trial.rmse(2)) < 1e-3
+    assert rms[True] < 0.7 * rms[False], rms
+
+
+def test_one_wind_gives_rotorpy_vehicles_different_accelerations():
+    """The same sinusoidal wind (2 m/s at 0.94 rad/s) through each airframe's drag, hover with the PID
+    and DOB: the DOB's estimates (the disturbance each vehicle meets) differ by a factor > 5 between
+    the hummingbird (rotor and parasitic drag, 0.5 kg) and the px4 quad (parasitic drag only, 1 kg):
+    measured RMS 0.66 / 0.34 / 0.024 m/s^2 for hummingbird / crazyflie / px4 over the last 10 s. The
+    paper's 'similar disturbances' do not hold for one wind and different airframes."""
+    pytest.importorskip("rotorpy")
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
+
+    loop = _rotorpy_loop()
+    wind = lambda t: np.array([2.0 * np.sin(0.9425 * t), 0.0, 0.0])  # noqa: E731
+    n = int(20.0 / TS_ROTORPY)
+    est = {}
+    for name in ("hummingbird", "px4"):
+        trial = fly_vehicle(RotorpyVehicle(name, TS_ROTORPY, wind=wind), {"x": loop, "y": loop, "z": loop},
+                            np.zeros((n, 3)))
+        est[name] = float(np.sqrt(np.mean(trial.d_hat[n // 2:, 0] ** 2)))
+    assert est["hummingbird"] > 5 * est["px4"], est
+
+
+def test_rotorpy_vehicle_refuses_bad_input():
+    pytest.importorskip("rotorpy")
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
+
+    with pytest.raises(SpecError, match="`name`"):
+        RotorpyVehicle("blimp")
+    with pytest.raises(SpecError, match="`ts`"):
+        RotorpyVehicle("crazyflie", 0.0)
+    v = RotorpyVehicle("crazyflie", wind=lambda t: np.array([np.nan, 0.0, 0.0]))
+    with pytest.raises(SpecError, match="`wind`: at t = 0 s"):
+        v.step(np.zeros(3))
+    with pytest.raises(SpecError, match="`command`"):
+        RotorpyVehicle("crazyflie").step(np.zeros(2))
