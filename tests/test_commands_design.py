@@ -238,3 +238,30 @@ def test_noisy_trials_learn_through_the_cli_and_the_c_code(fleet, tmp_path, plan
                 e_in, correction = e_in - terms["e_ref"], terms["c"]
             from_c = _c_learn(cc, out, tmp_path, e_in, data["d_f"]) + correction
             np.testing.assert_allclose(from_c, d_f, rtol=0, atol=1e-9 * np.max(np.abs(d_f)))
+
+
+def test_learn_matches_design_trial_and_refuses_bad_input(fleet, tmp_path, capsys):
+    """``ilcdob learn`` designs here (closed form, band fixed to the trial) and computes what
+    ``ilcdob design --trial`` writes for the same trial (the coefficients' route against the design's:
+    rounding, measured ~1e-12 of the peak; tolerance 1e-9). Bad input ends in one line, exit 2, no folder."""
+    trial = tmp_path / "trial.csv"
+    _trial(fleet, trial)
+    assert main(["design", "--from", "UAV1", "--to", "UAV2", "--trial", str(trial), "--out", str(tmp_path / "d"),
+                 "--quiet"]) == 0
+    assert main(["learn", str(trial), "--from", "UAV1", "--to", "UAV2", "--error", "error", "--learning", "learning",
+                 "--out", str(tmp_path / "l"), "--quiet"]) == 0
+    want = load_csv(tmp_path / "d" / "learning_signal.csv", {"d_f": "learning"})["d_f"]
+    got = np.fromfile(tmp_path / "l" / "learning_signal.bin", dtype="<f8")
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.max(np.abs(want)))
+    summary = json.loads((tmp_path / "l" / "learning.json").read_text())
+    assert summary["trial"]["samples"] == want.size and summary["units"]["learning"] == "m/s^2"
+    capsys.readouterr()
+    for args, message in [(["--error", "error", "--reference", "error"], "not both"),
+                          ([], "give --error COLUMN"),
+                          (["--error", "error", "--design", str(tmp_path / "nothing")], "cannot read"),
+                          (["--error", "error", "--design", str(tmp_path / "d"), "--to", "UAV3"], "was designed"),
+                          (["--error", "nope"], "nope")]:
+        out = tmp_path / "bad"
+        code = main(["learn", str(trial), "--from", "UAV1", "--to", "UAV2", *args, "--out", str(out), "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2 and message in err and not out.exists(), (args, code, err)

@@ -29,6 +29,7 @@ _EXAMPLES = {
                 "--out model.json",
     "identify-fleet": "ilcdob identify-fleet --out identified/",
     "design": "ilcdob design --from UAV1 --to UAV2 --out uav1_uav2/",
+    "learn": "ilcdob learn uav1_trial.csv --design uav1_uav2/ --reference ref --position x --out uav2_next/",
     "check": "ilcdob check --fleet identified/identified_fleet.toml",
     "compare": "ilcdob compare --scenario 1 --out compare/",
     "extensions": "ilcdob extensions --out extensions/",
@@ -167,6 +168,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
                    help="a learning signal beyond the fleet's acceleration limit of --to: clip it (with a warning) or "
                         "refuse it (exit 1)")
+    p = _sub(sub, "learn", "the next vehicle's learning signal from a recorded trial of the previous one, computed as "
+                           "the emitted C code computes it; writes it as CSV, binary and a C array")
+    _common(p, "output folder (written as a unit)")
+    p.add_argument("trial", help="the recorded trial of --from: .csv, .parquet, .ulg or .bin")
+    p.add_argument("--from", dest="source", default=None, help="system learned from (j-1); read from --design if given")
+    p.add_argument("--to", dest="target", default=None, help="system that learns (j); read from --design if given")
+    p.add_argument("--design", default=None, help="a folder written by `ilcdob design` whose filters run (default: "
+                                                  "design them here from the fleet)")
+    p.add_argument("--method", default="closed-form", help="without --design: closed-form or fir")
+    p.add_argument("--error", default=None, help="tracking error column, m: COLUMN, TOPIC.FIELD (ULog) or "
+                                                 "MESSAGE.FIELD (DataFlash)")
+    p.add_argument("--reference", default=None, help="instead of --error: reference position, m (same forms)")
+    p.add_argument("--position", default=None, help="with --reference: measured position, m (same forms)")
+    p.add_argument("--learning", default=None, help="learning signal the trial flew, m/s^2 (default: none)")
+    p.add_argument("--time", default=None, help="time column of CSV/Parquet files (default: time)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
+                   help="unit of that column (default: the file's '# units:' line, else s)")
+    p.add_argument("--start", type=float, default=None, help="trial start, s (log clock)")
+    p.add_argument("--stop", type=float, default=None, help="trial end, s (log clock)")
+    _band_options(p)
+    p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
+                   help="a learning signal beyond the acceleration limit of --to: clip it (with a warning) or refuse "
+                        "it (exit 1)")
     p = _sub(sub, "check", "will learning help? per pair and frequency the exact worst case of the error ratio "
                            "|e_j/e'_j| over the Delta set (|Delta| <= W) for the law with its learning band, the "
                            "ratio for a stated plant, and the paper's first-order condition |Delta| < |1 + P C|/2 "

@@ -13,6 +13,7 @@ and quick commands start without loading cvxpy, CasADi and Dask.
 | :func:`identify_to_json` | ``identify`` | model.json (+ a figure folder) |
 | :func:`identify_fleet_to_folder` | ``identify-fleet`` | flights, models, figures, identified_fleet.toml |
 | :func:`design_to_folder` | ``design`` | filters.json, filters.h/.c, README.md, lifted.npz, learning_signal.csv |
+| :func:`learn_to_folder` | ``learn`` | learning_signal.csv/.bin/.h, learning.json |
 | :func:`check_to_json` | ``check`` | the check as JSON: exact worst case, paper's condition |
 | :func:`compare_to_folder` | ``compare`` | compare.json, compare.txt, compare_ratios.png |
 | :func:`extensions_to_folder` | ``extensions`` | extensions.json, README.md |
@@ -24,6 +25,7 @@ and quick commands start without loading cvxpy, CasADi and Dask.
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +41,7 @@ from .output import OutputFolder, Provenance, check_output_path, write_file
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "identify_fleet_to_folder",
            "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
-           "add_to_fleet", "report_to_html", "IdentifyInputs"]
+           "add_to_fleet", "report_to_html", "IdentifyInputs", "learn_to_folder", "TrialColumns"]
 
 #: ``progress(done, total, what)``: called as long work advances.
 Progress = Callable[[int, int, str], None]
@@ -197,18 +199,24 @@ class IdentifyInputs:
         files : sequence of str or Path
             .csv, .parquet, .ulg or .bin files.
         """
-        from ilcdob.identification.loaders import load_flight
+        return _load_logs(files, {"u": self.input, "y": self.output}, self.time, self.time_unit, self.start, self.stop)
 
-        kw: dict[str, Any] = {"start": self.start, "stop": self.stop}
-        if self.time is not None:
-            kw["time"] = self.time
-        if self.time_unit is not None:
-            logs = [f for f in files if Path(f).suffix.lower() not in (".csv", ".parquet", ".pq")]
-            if logs:
-                raise SpecError(f"`--time-unit`: given with {logs[0]}; a flight log carries its own clock, so "
-                                "--time-unit applies to .csv/.parquet files only")
-            kw["units"] = {"time": self.time_unit}
-        return [load_flight(f, {"u": self.input, "y": self.output}, **kw) for f in files]
+
+def _load_logs(files: Sequence[str | Path], fields: dict[str, str], time: str | None, time_unit: str | None,
+               start: float | None, stop: float | None) -> list[Any]:
+    """Load flight files as FlightData with ``fields`` (signal name -> column or selector), on their clock."""
+    from ilcdob.identification.loaders import load_flight
+
+    kw: dict[str, Any] = {"start": start, "stop": stop}
+    if time is not None:
+        kw["time"] = time
+    if time_unit is not None:
+        logs = [f for f in files if Path(f).suffix.lower() not in (".csv", ".parquet", ".pq")]
+        if logs:
+            raise SpecError(f"`--time-unit`: given with {logs[0]}; a flight log carries its own clock, so "
+                            "--time-unit applies to .csv/.parquet files only")
+        kw["units"] = {"time": time_unit}
+    return [load_flight(f, fields, **kw) for f in files]
 
 
 def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, structure: Any, options: Any, out: str | Path,
@@ -467,6 +475,185 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     files, written = design_files(filters, list(others), prefix=c_prefix, float_variant=c_float)
     _write_folder(out, _provenance("design", argv, digest, law), others, files, overwrite=overwrite)
     return design, written
+
+
+@dataclass(frozen=True)
+class TrialColumns:
+    """Which signals of a recorded trial :func:`learn_to_folder` reads.
+
+    Attributes
+    ----------
+    error : str or None
+        Tracking error ``r - y`` of the source, m: CSV/Parquet column, ULog ``TOPIC.FIELD`` or
+        DataFlash ``MESSAGE.FIELD``.
+    reference, position : str or None
+        Instead of ``error``: reference and measured position, m (the error is their difference).
+    learning : str or None
+        The learning signal the source flew, m/s^2 (None: it flew none).
+    time, time_unit, start, stop
+        As in :class:`IdentifyInputs`.
+
+    Raises
+    ------
+    SpecError
+        Neither ``error`` nor both ``reference`` and ``position``, or both ways at once.
+    """
+
+    error: str | None = None
+    reference: str | None = None
+    position: str | None = None
+    learning: str | None = None
+    time: str | None = None
+    time_unit: str | None = None
+    start: float | None = None
+    stop: float | None = None
+
+    def __post_init__(self) -> None:
+        by_position = self.reference is not None or self.position is not None
+        if self.error is not None and by_position:
+            raise SpecError("`--error` and `--reference`/`--position`: give the error column, or the reference and "
+                            "position columns it is computed from, not both")
+        if self.error is None and (self.reference is None or self.position is None):
+            raise SpecError("the source's tracking error: give --error COLUMN, or --reference COLUMN and --position "
+                            "COLUMN (error = reference - position, m)")
+
+    def load(self, path: str | Path) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The trial, its error (m) and the learning signal flown (m/s^2, zeros if none).
+
+        Parameters
+        ----------
+        path : str or Path
+            .csv, .parquet, .ulg or .bin file.
+        """
+        fields = {"e": self.error} if self.error is not None else {"r": self.reference, "y": self.position}
+        if self.learning is not None:
+            fields["d_f"] = self.learning
+        data = _load_logs([path], fields, self.time, self.time_unit, self.start, self.stop)[0]
+        e = data["e"] if self.error is not None else data["r"] - data["y"]
+        return data, np.asarray(e, float), (np.asarray(data["d_f"], float) if self.learning is not None
+                                            else np.zeros(len(data)))
+
+
+def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *, source: str | None = None,
+                    target: str | None = None, fleet: str | Path | None = None, design: str | Path | None = None,
+                    method: str = "closed-form", bandwidth: object = "auto", on_limit: str = "clip",
+                    overwrite: bool = False, argv: Sequence[str] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """The next vehicle's learning signal from a recorded trial of the previous one (the paper's law).
+
+    Computed from the filters' coefficients exactly as the emitted C function ``<prefix>learn``
+    runs them (:func:`ilcdob.design.export.apply_learning`), then checked against the learning
+    vehicle's acceleration limit. The filters are a design folder's ``filters.json``
+    (``design``), or designed here from the fleet (``method``, the learning band fixed to the
+    trial as ``ilcdob design --trial`` does).
+
+    Written, as a unit: ``learning_signal.csv`` (time, s; learning, m/s^2), ``learning_signal.bin``
+    (the samples as little-endian float64), ``learning_signal.h`` (a C array with its length and
+    sample time), ``learning.json`` (what was computed from what) and ``manifest.json``.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder.
+    trial : str or Path
+        The source's recorded trial (.csv, .parquet, .ulg, .bin).
+    columns : TrialColumns
+        Its signals.
+    source, target : str, optional
+        Systems j-1 and j (required without ``design``; checked against it with one).
+    fleet : str or Path, optional
+        Fleet TOML (None: the built-in fleet); not read with ``design``.
+    design : str or Path, optional
+        A folder written by ``ilcdob design`` (closed-form or fir: filters with L1/L2).
+    method : str
+        Design method without ``design``: closed-form or fir.
+    bandwidth : "auto", float or None
+        The learning band without ``design`` (:mod:`ilcdob.design.band`).
+    on_limit : {"clip", "refuse"}
+        A signal beyond the limit: clip it (with a warning) or refuse it (no folder written).
+    overwrite : bool
+        Replace a non-empty folder that ilcdob did not write.
+    argv : sequence of str, optional
+        Command line, recorded in ``manifest.json``.
+
+    Returns
+    -------
+    (numpy.ndarray, dict)
+        The learning signal (m/s^2) and the ``learning.json`` content.
+    """
+    from ilcdob.design.c_export import default_c_prefix
+    from ilcdob.design.export import apply_learning
+    from ilcdob.design.limit import enforce_limit
+    from ilcdob.signals import FlightData
+    from ilcdob.specs import LimitSpec
+
+    check_output_path(out, folder=True, overwrite=overwrite)
+    data, e, df_prev = columns.load(trial)
+    digest = None
+    if design is not None:
+        path = Path(design) / "filters.json"
+        try:
+            filters = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise SpecError(f"`--design`: cannot read {path} ({exc}); give a folder written by `ilcdob design`") from None
+        for name, given, key in (("--from", source, "from"), ("--to", target, "to")):
+            if given is not None and given != filters.get(key):
+                raise SpecError(f"`{name}`: got {given!r}, but {path} was designed {filters.get('from')!r} -> "
+                                f"{filters.get('to')!r}")
+        source, target = filters.get("from"), filters.get("to")
+        origin = f"filters.json of {Path(design).name}"
+    else:
+        if source is None or target is None:
+            raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
+                            "(or give --design FOLDER)")
+        from ilcdob.design.pair import design_pair, design_with_band
+
+        flt, digest = fleet_and_hash(fleet)
+        if abs(data.ts - flt.sample_time) > 1e-9:
+            raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
+        made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit)
+        if made.choose is not None:
+            made = design_with_band(made, made.band_for(e, df_prev))
+        filters = dict(made.filters)
+        origin = f"designed here ({method})"
+    if filters.get("law", "paper") != "paper" or "L1" not in filters or "L2" not in filters:
+        raise SpecError(f"the filters ({origin}): method {filters.get('method')!r}, law {filters.get('law')!r}; "
+                        "`ilcdob learn` computes the paper's law from L1/L2 filters (closed-form or fir designs)")
+    ts = float(filters["sample_time"])
+    if abs(data.ts - ts) > 1e-9:
+        raise SignalError(f"{trial}: sample time {data.ts} s differs from the filters' {ts} s")
+    d_f = apply_learning(filters, e, df_prev)
+    limit = (filters.get("limit") or {}).get("acceleration_m_s2")
+    d_f, report = enforce_limit(d_f, None if limit is None else LimitSpec(acceleration=float(limit)), on_limit,
+                                f"learning signal of {target} from {source}")
+    n = d_f.size
+    prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target))
+    macro = prefix.upper()
+    values = ",\n".join("    " + ", ".join(f"{v:.17g}" for v in d_f[i:i + 4]) for i in range(0, n, 4))
+    header = (f"/* Learning signal (m/s^2), one sample per {ts:g} s, written by ilcdob learn. */\n"
+              f"#ifndef {macro}DF_H\n#define {macro}DF_H\n#define {macro}DF_SAMPLES {n}u\n"
+              f"#define {macro}DF_TS {ts!r}\n"
+              f"static const double {prefix}df[{macro}DF_SAMPLES] = {{\n{values}\n}};\n#endif\n")
+    summary = {"from": source, "to": target, "filters": origin, "method": filters.get("method"), "law": "paper",
+               "trial": {"file": Path(trial).name, "samples": n, "sample_time_s": ts,
+                         "error": (f"column {columns.error}" if columns.error is not None
+                                   else f"{columns.reference} - {columns.position}"),
+                         "learning_flown": columns.learning},
+               "computes": "ilcdob.design.export.apply_learning (what the C function <prefix>learn runs), then "
+                           "the acceleration limit",
+               "band": {k: (filters.get("band") or {}).get(k) for k in ("cutoff_rad_s", "source", "reason")},
+               "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))) if n else 0.0,
+                                   "rms_m_s2": float(np.sqrt(np.mean(d_f ** 2))) if n else 0.0},
+               "limit": None if report is None else report.to_dict(),
+               "files": {"learning_signal.csv": "time (s), learning (m/s^2)",
+                         "learning_signal.bin": f"{n} little-endian float64 samples, m/s^2",
+                         "learning_signal.h": f"static const double {prefix}df[{n}], m/s^2"},
+               "units": {"learning": "m/s^2", "time": "s"}}
+    files = {"learning_signal.csv": FlightData(data.t, {"learning": d_f}, {"learning": "m/s^2"},
+                                               source=f"learning signal of {target} from {Path(trial).name}").to_csv,
+             "learning_signal.bin": d_f.astype("<f8").tobytes(), "learning_signal.h": header,
+             "learning.json": summary}
+    _write_folder(out, _provenance("learn", argv, digest, "paper"), files, overwrite=overwrite)
+    return d_f, summary
 
 
 def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, order: Sequence[str] | None = None,

@@ -201,6 +201,17 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     return 0
 
 
+def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    columns = uc.TrialColumns(error=a.error, reference=a.reference, position=a.position, learning=a.learning,
+                              time=a.time, time_unit=a.time_unit, start=a.start, stop=a.stop)
+    _, summary = uc.learn_to_folder(a.out, a.trial, columns, source=a.source, target=a.target, fleet=a.fleet,
+                                    design=a.design, method=a.method, bandwidth=a.bandwidth, on_limit=a.on_limit,
+                                    overwrite=a.overwrite, argv=argv)
+    print(json.dumps({k: summary[k] for k in ("from", "to", "filters", "trial", "learning_signal", "limit")}))
+    con.note(f"wrote {a.out}")
+    return 0
+
+
 def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     import math
 
@@ -302,6 +313,7 @@ def _report(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
 
 _COMMANDS = {"reproduce": _reproduce, "identify": _identify, "identify-fleet": _identify_fleet, "design": _design,
+             "learn": _learn,
              "check": _check, "compare": _compare, "campaign": _campaign, "extensions": _extensions,
              "report": _report, "fleet": _fleet}
 
