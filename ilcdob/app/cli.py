@@ -129,9 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
     p.add_argument("--input", required=True, help="input signal: COLUMN, TOPIC.FIELD (ULog) or MESSAGE.FIELD")
     p.add_argument("--output", required=True, help="output signal, same forms as --input")
-    p.add_argument("--time", default=None, help="time column of CSV/Parquet files (default: time)")
-    p.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
-                   help="unit of that column (default: the file's '# units:' line, else s)")
+    _clock_options(p, "segment")
     p.add_argument("--poles", type=_pos, required=True, help="number of poles, integrators included")
     p.add_argument("--zeros", type=int, default=0, help="number of zeros")
     p.add_argument("--integrators", type=int, default=0, help="poles fixed at s = 0")
@@ -141,8 +139,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-limit", type=float, default=None, help="wall-time limit of the fit, s (none)")
     p.add_argument("--min-fit", type=float, default=None, help="exit 1 when the held-out fit (%%) is below this")
     p.add_argument("--validate", nargs="*", default=[], help="held-out data files")
-    p.add_argument("--start", type=float, default=None, help="segment start, s (log clock)")
-    p.add_argument("--stop", type=float, default=None, help="segment end, s (log clock)")
     p.add_argument("--segment", type=float, default=None, metavar="SECONDS",
                    help="cut every file (estimation and --validate alike) into consecutive windows of SECONDS, each "
                         "fitted with its own initial condition; a last piece of at most half a window joins the one "
@@ -182,11 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", default=None, help="instead of --error: reference position, m (same forms)")
     p.add_argument("--position", default=None, help="with --reference: measured position, m (same forms)")
     p.add_argument("--learning", default=None, help="learning signal the trial flew, m/s^2 (default: none)")
-    p.add_argument("--time", default=None, help="time column of CSV/Parquet files (default: time)")
-    p.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
-                   help="unit of that column (default: the file's '# units:' line, else s)")
-    p.add_argument("--start", type=float, default=None, help="trial start, s (log clock)")
-    p.add_argument("--stop", type=float, default=None, help="trial end, s (log clock)")
+    _clock_options(p, "trial")
     _band_options(p)
     p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
                    help="a learning signal beyond the acceleration limit of --to: clip it (with a warning) or refuse "
@@ -253,6 +245,15 @@ def build_parser() -> argparse.ArgumentParser:
     fad.add_argument("--q-time-constant", type=float, required=True, help="time constant of Q, s")
     fad.add_argument("--sample-time", type=float, default=None, help="new file: sample time, s (default: model's)")
     return parser
+
+
+def _clock_options(p: argparse.ArgumentParser, segment: str) -> None:
+    """--time, --time-unit, --start and --stop (``segment``: what the start and end are of)."""
+    p.add_argument("--time", default=None, help="time column of CSV/Parquet files (default: time)")
+    p.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), default=None,
+                   help="unit of that column (default: the file's '# units:' line, else s)")
+    p.add_argument("--start", type=float, default=None, help=f"{segment} start, s (log clock)")
+    p.add_argument("--stop", type=float, default=None, help=f"{segment} end, s (log clock)")
 
 
 def _band_options(p: argparse.ArgumentParser) -> None:

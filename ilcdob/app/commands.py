@@ -41,7 +41,7 @@ from .output import OutputFolder, Provenance, check_output_path, write_file
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "identify_fleet_to_folder",
            "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
-           "add_to_fleet", "report_to_html", "IdentifyInputs", "learn_to_folder", "TrialColumns"]
+           "add_to_fleet", "report_to_html", "LogClock", "IdentifyInputs", "learn_to_folder", "TrialColumns"]
 
 #: ``progress(done, total, what)``: called as long work advances.
 Progress = Callable[[int, int, str], None]
@@ -151,21 +151,62 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     return res
 
 
-@dataclass(frozen=True)
-class IdentifyInputs:
-    """How to read the flight files of :func:`identify_to_json`.
+@dataclass(frozen=True, kw_only=True)
+class LogClock:
+    """Where a flight file's samples are read: its time column and segment (keyword-only fields).
 
     Attributes
     ----------
-    input, output : str
-        Input and output signal: CSV/Parquet column, ULog ``TOPIC.FIELD`` or DataFlash
-        ``MESSAGE.FIELD``.
     time : str or None
         Time column of CSV/Parquet files (None: ``time``).
     time_unit : str or None
         Unit of that column: s, ms, us or ns (None: the file's ``# units:`` line, else s).
     start, stop : float or None
         Segment of the log, s on its clock.
+    """
+
+    time: str | None = None
+    time_unit: str | None = None
+    start: float | None = None
+    stop: float | None = None
+
+    def load_fields(self, files: Sequence[str | Path], fields: dict[str, str]) -> list[Any]:
+        """Load ``files`` as FlightData with ``fields`` (signal name -> column or selector).
+
+        Parameters
+        ----------
+        files : sequence of str or Path
+            .csv, .parquet, .ulg or .bin files.
+        fields : dict of str to str
+            Signal name -> CSV/Parquet column, ULog ``TOPIC.FIELD`` or DataFlash ``MESSAGE.FIELD``.
+
+        Returns
+        -------
+        list of FlightData
+        """
+        from ilcdob.identification.loaders import load_flight
+
+        kw: dict[str, Any] = {"start": self.start, "stop": self.stop}
+        if self.time is not None:
+            kw["time"] = self.time
+        if self.time_unit is not None:
+            logs = [f for f in files if Path(f).suffix.lower() not in (".csv", ".parquet", ".pq")]
+            if logs:
+                raise SpecError(f"`--time-unit`: given with {logs[0]}; a flight log carries its own clock, so "
+                                "--time-unit applies to .csv/.parquet files only")
+            kw["units"] = {"time": self.time_unit}
+        return [load_flight(f, fields, **kw) for f in files]
+
+
+@dataclass(frozen=True)
+class IdentifyInputs(LogClock):
+    """How to read the flight files of :func:`identify_to_json` (and, keyword-only, :class:`LogClock`'s fields).
+
+    Attributes
+    ----------
+    input, output : str
+        Input and output signal: CSV/Parquet column, ULog ``TOPIC.FIELD`` or DataFlash
+        ``MESSAGE.FIELD``.
     segment : float or None
         Cut every loaded file (estimation and held-out alike) into consecutive windows of this
         many seconds, each fitted with its own initial condition (:func:`ilcdob.signals.segments`:
@@ -179,10 +220,6 @@ class IdentifyInputs:
 
     input: str
     output: str
-    time: str | None = None
-    time_unit: str | None = None
-    start: float | None = None
-    stop: float | None = None
     segment: float | None = None
 
     def __post_init__(self) -> None:
@@ -199,24 +236,7 @@ class IdentifyInputs:
         files : sequence of str or Path
             .csv, .parquet, .ulg or .bin files.
         """
-        return _load_logs(files, {"u": self.input, "y": self.output}, self.time, self.time_unit, self.start, self.stop)
-
-
-def _load_logs(files: Sequence[str | Path], fields: dict[str, str], time: str | None, time_unit: str | None,
-               start: float | None, stop: float | None) -> list[Any]:
-    """Load flight files as FlightData with ``fields`` (signal name -> column or selector), on their clock."""
-    from ilcdob.identification.loaders import load_flight
-
-    kw: dict[str, Any] = {"start": start, "stop": stop}
-    if time is not None:
-        kw["time"] = time
-    if time_unit is not None:
-        logs = [f for f in files if Path(f).suffix.lower() not in (".csv", ".parquet", ".pq")]
-        if logs:
-            raise SpecError(f"`--time-unit`: given with {logs[0]}; a flight log carries its own clock, so "
-                            "--time-unit applies to .csv/.parquet files only")
-        kw["units"] = {"time": time_unit}
-    return [load_flight(f, fields, **kw) for f in files]
+        return self.load_fields(files, {"u": self.input, "y": self.output})
 
 
 def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, structure: Any, options: Any, out: str | Path,
@@ -478,8 +498,8 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
 
 
 @dataclass(frozen=True)
-class TrialColumns:
-    """Which signals of a recorded trial :func:`learn_to_folder` reads.
+class TrialColumns(LogClock):
+    """Which signals of a recorded trial :func:`learn_to_folder` reads (and, keyword-only, :class:`LogClock`'s fields).
 
     Attributes
     ----------
@@ -490,8 +510,6 @@ class TrialColumns:
         Instead of ``error``: reference and measured position, m (the error is their difference).
     learning : str or None
         The learning signal the source flew, m/s^2 (None: it flew none).
-    time, time_unit, start, stop
-        As in :class:`IdentifyInputs`.
 
     Raises
     ------
@@ -503,10 +521,6 @@ class TrialColumns:
     reference: str | None = None
     position: str | None = None
     learning: str | None = None
-    time: str | None = None
-    time_unit: str | None = None
-    start: float | None = None
-    stop: float | None = None
 
     def __post_init__(self) -> None:
         by_position = self.reference is not None or self.position is not None
@@ -528,7 +542,7 @@ class TrialColumns:
         fields = {"e": self.error} if self.error is not None else {"r": self.reference, "y": self.position}
         if self.learning is not None:
             fields["d_f"] = self.learning
-        data = _load_logs([path], fields, self.time, self.time_unit, self.start, self.stop)[0]
+        data = self.load_fields([path], fields)[0]
         e = data["e"] if self.error is not None else data["r"] - data["y"]
         return data, np.asarray(e, float), (np.asarray(data["d_f"], float) if self.learning is not None
                                             else np.zeros(len(data)))

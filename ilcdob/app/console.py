@@ -157,7 +157,8 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     trend = _number(a.trend, "--trend", "'none' or a polynomial degree 0-5", ("none",), int)
     structure = ModelStructure(a.poles, a.zeros, a.integrators)
     options = FitOptions(delay=delay, max_delay=a.max_delay, trend=trend, time_limit=a.time_limit)
-    inputs = uc.IdentifyInputs(a.input, a.output, a.time, a.time_unit, a.start, a.stop, a.segment)
+    inputs = uc.IdentifyInputs(a.input, a.output, a.segment, time=a.time, time_unit=a.time_unit, start=a.start,
+                               stop=a.stop)
     est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out, validate=a.validate,
                                                   plot=a.plot, progress=con.progress, argv=argv)
     if a.segment is not None:
