@@ -16,7 +16,9 @@ the target's model, comes nearest to ``-F_N y``::
 given (up to ``lam``), so with exact models ``e_j = P (I - F_N) e'_j`` on the trial with ``P`` a
 projection: ``||e_j|| <= ||I - F_N|| ||e'_j|| <= max_w |1 - F(w)| ||e'_j||`` for every
 disturbance, the norm of a finite section of a convolution being at most the peak of its
-frequency response. Over an infinite horizon the law is the same as before.
+frequency response (``sqrt(2)`` times it when ``y`` is extended before ``t = 0`` as an odd
+function, as robust-set does so that ``F``'s output starts near 0: the extension at most doubles
+the energy ``F`` sees). Over an infinite horizon the law is the same as before.
 
 ``lam`` is ``ridge`` times the mean diagonal of ``Gf_N^T Gf_N``. It must lie below the squared
 gain of ``Gf`` wherever the error has content (``|Gf|`` falls to ~1e-5 of its peak at Nyquist on

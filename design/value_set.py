@@ -67,7 +67,7 @@ from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.specs import PlantSpec
 from ilcdob.uncertainty import ModelStructure
 
-from .delta import TAU_RANGE
+from .delta import TAU_RANGE, dense_grid
 
 __all__ = ["DIRECTIONS", "TAU_RANGE", "ValueSet", "BoundFamily", "EllipseFamily", "complementary_sensitivity", "bound_family",
            "ellipse_family", "admissible_range", "value_set_cones", "worst_over_set", "family_cones"]
@@ -204,8 +204,7 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
     """
     key = (repr(source.nominal.spec), source.ts, tau, float(margin), n)
     if key not in _RANGES:
-        nyq = np.pi / source.ts
-        w = np.unique(np.concatenate([np.geomspace(1e-4, nyq / n, 200), np.linspace(nyq / n, nyq, n)]))
+        w = dense_grid(source.ts, n)
         h = np.column_stack([np.ones(w.size), _highpass(source, tau, w)])
         c = complementary_sensitivity(source, w)[:, None] * h
         im0, im1 = c.imag[:-1], c.imag[1:]
