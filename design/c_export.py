@@ -582,8 +582,8 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
         if not isinstance(w, dict) or w.get("sos") is None:
             raise SpecError(f"`disturbance.W`: got {w!r:.80}, expected {{'sos': [[b0, b1, b2, 1, a1, a2], ...]}}")
         w_sos = _sections(w["sos"], "disturbance.W.sos")
-    elif dist.get("at", "command") == "airframe":
-        raise SpecError("`disturbance.W`: missing, but `disturbance.at` is 'airframe'; expected the airframe "
+    elif dist.get("at", "command") in ("airframe", "wind"):
+        raise SpecError(f"`disturbance.W`: missing, but `disturbance.at` is {dist.get('at')!r}; expected the airframe "
                         "correction {'sos': [[b0, b1, b2, 1, a1, a2], ...]}")
     return _Learning(sos, zi, pad, end_fit, float(cutoff) if sos is not None else None, order, why, w_sos,
                      sos is not None and band.get("start") == "fold")

@@ -355,7 +355,7 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
         The error of the trial learned from (``"auto"``: chooses from it).
     deltas : dict name -> DeltaSet, optional
         Delta set of the source (default: its identification or stated bound).
-    disturbance : {"command", "airframe"}
+    disturbance : {"command", "airframe", "wind"}
         Where the disturbance acts (the airframe correction enters the noise budget).
 
     Returns
@@ -364,7 +364,7 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
     """
     check_disturbance(disturbance)
     src, tgt = fleet.loop(source), fleet.loop(target)
-    path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
+    path = airframe_path_filter(src, tgt, disturbance == "wind") if disturbance != "command" else None
     request = check_bandwidth(bandwidth, fleet.sample_time)
     return _band_chooser(fleet, src, tgt, request, path, deltas, cache(partial(closed_form_filters, src, tgt)))(
         error=error)
@@ -420,9 +420,11 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         filter as it is. For the designs of :data:`GUARANTEED` the automatic band leaves out
         the model edge: they are robust to the Delta set by construction, and a band closed on
         it only takes learning away (and, on whole trials, some of their guarantee).
-    disturbance : {"command", "airframe"}
-        Where the disturbance acts (:mod:`.flown`): at the command, as in the paper's loop, or
-        on the airframe (adds the correction W; models with a rigid body to split off).
+    disturbance : {"command", "airframe", "wind"}
+        Where the disturbance acts (:mod:`.flown`): at the command, as in the paper's loop, on
+        the airframe (adds the correction W; models with a rigid body to split off), or as a
+        wind velocity through each airframe's drag (W times the ratio of the drag poles; models
+        with one integrator and a drag pole).
     on_limit : {"clip", "refuse"}
         A learning signal beyond the target's acceleration limit (fleet ``limits``) is clipped
         with a warning, or refused.
@@ -445,7 +447,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
     request = check_bandwidth(bandwidth, fleet.sample_time)
     src, tgt = fleet.loop(source), fleet.loop(target)
-    path = airframe_path_filter(src, tgt) if disturbance == "airframe" else None
+    path = airframe_path_filter(src, tgt, disturbance == "wind") if disturbance != "command" else None
     closed_form = cache(partial(closed_form_filters, src, tgt))  # built once, when first needed
     head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
     if method in ("fir", "robust", "robust-set"):

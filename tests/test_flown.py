@@ -116,3 +116,21 @@ def test_different_model_delays_are_refused(fleet_file):
     flt = ilcdob.load_fleet(fleet_file(text, "delayed.toml"))
     with pytest.raises(SpecError, match="delays 0 s and 0.04 s differ"):
         airframe_path_filter(flt.loop("A"), flt.loop("B"))
+
+
+def test_wind_path_is_the_airframe_path_times_the_drag_ratio():
+    """``disturbance="wind"``: W times a_j / a_{j-1} (drag poles 0.25 and 0.4 1/s of the drag fleet),
+    against the Tustin image of the continuous ratio built here; a model without a drag pole is refused."""
+    flt = _drag_fleet()
+    ts = flt.sample_time
+    w = np.geomspace(0.05, 0.9 * np.pi / ts, 200)
+    got = _sos_response(airframe_path_filter(flt.loop("D1"), flt.loop("D2"), wind=True), w, ts)
+    # A_1 / A_2 = (20/(s + 10)) / (13/(s + 7)); times the drag ratio 0.25 / 0.4
+    want = (0.25 / 0.4) * _tustin([20.0, 140.0], [13.0, 130.0], w, ts)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    with pytest.raises(SpecError, match="two integrators, no drag pole"):
+        airframe_path_filter(flt.loop("D1"), flt.loop("R"), wind=True)
+    from ilcdob.design.pair import design_pair
+
+    design = design_pair(flt, "D1", "D2", disturbance="wind")
+    assert design.filters["disturbance"]["at"] == "wind" and design.path is not None

@@ -398,7 +398,7 @@ def pair_designs(fleet: Fleet, filters: dict, law: str, r: np.ndarray, a_ref: np
         The scenario's reference (m) and its acceleration (m/s^2), for ``exact-reference``.
     bandwidth : "auto", float or None
         The learning band.
-    disturbance : {"command", "airframe"}
+    disturbance : {"command", "airframe", "wind"}
         Where the disturbance acts (:mod:`ilcdob.design.flown`).
 
     Returns

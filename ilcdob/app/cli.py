@@ -158,9 +158,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--c-prefix", default=None, help="prefix of the C symbols (default: ilcdob_<from>_<to>_)")
     p.add_argument("--c-float", action="store_true", help="also emit float C functions, with their measured error")
     _band_options(p)
-    p.add_argument("--disturbance", choices=("command", "airframe"), default="command",
-                   help="where the disturbance acts: added to the command (the paper's loop) or on the airframe "
-                        "(wind: adds the attitude-chain correction)")
+    p.add_argument("--disturbance", choices=("command", "airframe", "wind"), default="command",
+                   help="where the disturbance acts: added to the command (the paper's loop), on the airframe (adds "
+                        "the attitude-chain correction), or a wind velocity through each airframe's drag (also "
+                        "scales by the ratio of the models' drag poles)")
     p.add_argument("--on-limit", choices=("clip", "refuse"), default="clip",
                    help="a learning signal beyond the fleet's acceleration limit of --to: clip it (with a warning) or "
                         "refuse it (exit 1)")

@@ -386,7 +386,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     bandwidth : "auto", float or None
         The learning band's corner, rad/s (:mod:`ilcdob.design.band`): ``"auto"`` chooses it
         from the trial (or the fleet without one); None or ``"off"``: no filter.
-    disturbance : {"command", "airframe"}
+    disturbance : {"command", "airframe", "wind"}
         Where the disturbance acts (:mod:`ilcdob.design.flown`).
     on_limit : {"clip", "refuse"}
         A learning signal beyond the target's acceleration limit: clip it (with a
