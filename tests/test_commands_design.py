@@ -260,6 +260,8 @@ def test_learn_matches_design_trial_and_refuses_bad_input(fleet, tmp_path, capsy
                           ([], "give --error COLUMN"),
                           (["--error", "error", "--design", str(tmp_path / "nothing")], "cannot read"),
                           (["--error", "error", "--design", str(tmp_path / "d"), "--to", "UAV3"], "was designed"),
+                          (["--error", "error", "--design", str(tmp_path / "d"), "--bandwidth", "2"],
+                           "--bandwidth would be ignored"),
                           (["--error", "nope"], "nope")]:
         out = tmp_path / "bad"
         code = main(["learn", str(trial), "--from", "UAV1", "--to", "UAV2", *args, "--out", str(out), "--quiet"])

@@ -575,13 +575,14 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     source, target : str, optional
         Systems j-1 and j (required without ``design``; checked against it with one).
     fleet : str or Path, optional
-        Fleet TOML (None: the built-in fleet); not read with ``design``.
+        Fleet TOML (None: the built-in fleet); refused with ``design``.
     design : str or Path, optional
         A folder written by ``ilcdob design`` (closed-form or fir: filters with L1/L2).
     method : str
-        Design method without ``design``: closed-form or fir.
+        Design method without ``design``: closed-form or fir (other than the default: refused with ``design``).
     bandwidth : "auto", float or None
-        The learning band without ``design`` (:mod:`ilcdob.design.band`).
+        The learning band without ``design`` (:mod:`ilcdob.design.band`; other than "auto": refused with
+        ``design``).
     on_limit : {"clip", "refuse"}
         A signal beyond the limit: clip it (with a warning) or refuse it (no folder written).
     overwrite : bool
@@ -604,6 +605,11 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     data, e, df_prev = columns.load(trial)
     digest = None
     if design is not None:
+        ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != "closed-form"),
+                                            ("--bandwidth", bandwidth != "auto")) if given]
+        if ignored:
+            raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
+                            "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
         path = Path(design) / "filters.json"
         try:
             filters = json.loads(path.read_text(encoding="utf-8"))
