@@ -33,10 +33,11 @@ from ilcdob.errors import SpecError
 
 __all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES"]
 
-#: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.5 and 1.0 kg,
-#: arm 4.3, 17 and 24 cm; their drag differs in kind (rotor drag only; both; parasitic only).
-ROTORPY_VEHICLES = {"crazyflie": "crazyflie_params", "hummingbird": "hummingbird_params",
-                    "px4": "px4_sihsim_quadx_params"}
+#: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.044, 0.5
+#: and 1.0 kg, arm 4.3, 4.3, 17 and 24 cm; their drag differs in kind (rotor drag only; rotor drag and translational
+#: lift; both and lift; parasitic only).
+ROTORPY_VEHICLES = {"crazyflie": "crazyflie_params", "crazyfliebrushless": "crazyfliebrushless_params",
+                    "hummingbird": "hummingbird_params", "px4": "px4_sihsim_quadx_params"}
 _G = 9.81
 
 

@@ -1,0 +1,63 @@
+"""The paper's pipeline on rotorpy's multirotors (ilcdob.validation.vehicle_chain): identification with the
+structure chosen from the flights, then the scenario's learning chain, judged by rotorpy's own flights."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import ilcdob
+from ilcdob.validation.scenarios import scenario
+
+pytest.importorskip("rotorpy")
+
+TS = 0.01
+NAMES = ["crazyflie", "hummingbird"]
+
+
+def _make(name, command, wind):
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
+
+    return RotorpyVehicle(name, TS, command_disturbance=command, wind=wind, noise_std=5e-4, seed=3)
+
+
+@pytest.fixture(scope="module")
+def identified():
+    from ilcdob.validation.vehicle_chain import identify_vehicles
+
+    pid = {n: ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05) for n in NAMES}
+    dob = {n: ilcdob.DOBSpec(3, 0.2) for n in NAMES}
+    return identify_vehicles(_make, NAMES, pid, dob, TS)
+
+
+def test_the_structure_is_chosen_from_the_flights(identified):
+    """One integrator and a drag pole on both (held-out 94.7 % / 96.2 % measured; four poles add 0.1-0.2
+    point); the paper's two integrators fit far worse (73.8 % / 46.4 %). Asserted: chosen >= 90 %, the
+    paper's structure at least 10 points below."""
+    _, fits = identified
+    for name in NAMES:
+        fit = fits[name]
+        assert (fit.structure.n_poles, fit.structure.n_integrators) == (3, 1), (name, fit.fits)
+        assert fit.fit >= 90.0 and fit.fits["3p0z2i"] <= fit.fit - 10.0, (name, fit.fits)
+
+
+def test_hover_chain_in_the_papers_disturbance_and_in_wind(identified):
+    """Scenario 1's hover, 15 s, one learning flight each, the chain crazyflie -> hummingbird -> crazyflie.
+    The paper's disturbance on the command: learning leaves (measured) 0.35 % / 1.4 % of the DOB-only
+    error (crazyflie / hummingbird). The same signal as a wind (2 m/s per m/s^2) through each airframe's
+    drag, learned through the drag ratio (``path="wind"``): 0.117 / 0.115 of DOB-only (the paper's law:
+    0.87 / 0.47). Asserted: paper's disturbance below 5 %, DOB below no DOB; wind through the drag below
+    0.3 for both."""
+    from ilcdob.validation.vehicle_chain import run_vehicle_scenario
+
+    fleet, _ = identified
+    sc = replace(scenario(1), duration=15.0)
+    paper = run_vehicle_scenario(fleet, _make, sc, 1, order=NAMES)
+    wind = run_vehicle_scenario(fleet, _make, sc, 1, order=NAMES, wind_gain=2.0, path="wind")
+    for name in NAMES:
+        assert paper.systems[name].learning[0].rmse < 0.05 * paper.systems[name].dob.rmse, name
+        assert paper.systems[name].dob.rmse < paper.systems[name].no_dob.rmse, name
+        assert wind.systems[name].learning[0].rmse < 0.3 * wind.systems[name].dob.rmse, name
+    assert wind.chain == [("crazyflie", "hummingbird"), ("hummingbird", "crazyflie")]

@@ -1,0 +1,203 @@
+"""The paper's experimental pipeline on vehicles ilcdob did not model (docs/theory.md sections 4 and 6).
+
+Any vehicle with the protocol of :mod:`ilcdob.vehicles.interface` (rotorpy's multirotors,
+:mod:`ilcdob.vehicles.rotorpy_vehicle`, are the test bed) goes through what a lab does:
+
+1. :func:`identify_vehicles`: per vehicle, closed-loop flights with a rough outer loop (the PID
+   alone, a chirp added to the x command, reference steps), fitted with each candidate model
+   structure (:data:`STRUCTURES`) and held out on a second flight; the structure is chosen from
+   the data (the best held-out fit; one with fewer parameters wins unless a larger one fits 1
+   point better). The paper assumes ``b0/(s^2 (s + a0))``; a vehicle whose drag damps its
+   velocity needs one integrator and a drag pole.
+2. :func:`run_vehicle_scenario`: a scenario flown with every vehicle, no DOB, DOB only and the
+   cyclic learning chain of :mod:`ilcdob.validation.reproduce`, each learning signal computed from
+   the previous flight's measured error as ``ilcdob design --trial`` does; the disturbance is the
+   scenario's, either added to the command (the paper's) or as a wind velocity through each
+   airframe's drag (``wind_gain`` m/s per m/s^2 of the scenario's disturbance).
+
+Units: s, m, m/s, m/s^2. The flights are :class:`~ilcdob.validation.simulate.Flight` records
+(x axis), so results, tables and figures are those of the other reproductions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+from ilcdob.fleet import Fleet, fleet_from_systems
+from ilcdob.loop import build_loop
+from ilcdob.signals import FlightData
+from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec, SystemSpec
+from ilcdob.uncertainty import ModelStructure
+from ilcdob.vehicles.interface import Vehicle, fly_vehicle
+
+from .reproduce import ScenarioResult, SystemResult, learning_chain, pair_designs
+from .scenarios import Scenario, check_order
+from .simulate import Flight
+
+__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_scenario", "MakeVehicle"]
+
+#: Candidate structures of the x plant, fewest parameters first: one integrator and a drag pole (with one
+#: pole more), and the paper's two integrators and a pole.
+STRUCTURES = (ModelStructure(n_poles=3, n_integrators=1), ModelStructure(n_poles=3, n_integrators=2),
+              ModelStructure(n_poles=4, n_integrators=1))
+#: ``make(name, command_disturbance, wind) -> Vehicle``: a fresh vehicle (at rest) with these disturbances, each
+#: a callable of time returning ``(3,)`` (m/s^2 on the command; m/s of wind) or None.
+MakeVehicle = Callable[[str, Callable | None, Callable | None], Vehicle]
+
+
+@dataclass(frozen=True)
+class VehicleFit:
+    """The identification of one vehicle.
+
+    Attributes
+    ----------
+    name : str
+    structure : ModelStructure
+        The structure chosen.
+    plant : PlantSpec
+        Its fit.
+    fits : dict of str to float
+        Held-out fit (%) of every candidate structure, by ``repr``-like label ``"3p1i"``.
+    """
+
+    name: str
+    structure: ModelStructure
+    plant: PlantSpec
+    fits: dict[str, float]
+
+    @property
+    def fit(self) -> float:
+        """Held-out fit of the chosen structure, %."""
+        return self.fits[_label(self.structure)]
+
+
+def _label(st: ModelStructure) -> str:
+    return f"{st.n_poles}p{st.n_zeros}z{st.n_integrators}i"
+
+
+def _rough_loop(ts: float):
+    """The outer loop the identification flights fly: the PID of a rough model 1/(s^2 (0.1 s + 1))."""
+    spec = SystemSpec("rough", PlantSpec((1.0,), (0.1, 1.0, 0.0, 0.0)), PIDSpec(2.5, 0.3, 2.2, 0.05), DOBSpec(3, 0.2))
+    return build_loop(spec, ts)
+
+
+def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: float) -> FlightData:
+    loop = _rough_loop(ts)
+    n = int(round(duration / ts))
+    t = np.arange(n) * ts
+    inj = 0.5 * np.sin(2 * np.pi * (0.1 * t + (3.0 - 0.1) * t**2 / (2 * duration)))  # 0.1 -> 3 Hz
+    r = 0.05 * np.sign(np.sin(2 * np.pi * t / 10 + seed))
+    trial = fly_vehicle(make(name, None, None), {"x": loop, "y": loop, "z": loop}, {"x": r},
+                        feedforward={"x": inj}, dob=False)
+    return FlightData(t, {"u": trial.applied[:, 0], "y": trial.y_meas[:, 0]}, {"u": "m/s^2", "y": "m"})
+
+
+def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str, PIDSpec],
+                      dobs: dict[str, DOBSpec], ts: float, duration: float = 20.0) -> tuple[Fleet, dict[str, VehicleFit]]:
+    """Identify every vehicle's x plant from its own flights and build the fleet of the fits (module docstring).
+
+    Parameters
+    ----------
+    make : callable
+        ``make(name, command_disturbance, wind)``: a fresh vehicle (:data:`MakeVehicle`).
+    names : list of str
+        The vehicles.
+    controllers, dobs : dict
+        Per vehicle its PID and DOB for the fleet (the DOB's ``q_order`` raised to the chosen
+        model's relative degree where it is lower, so that ``M = Q/P_hat`` is proper).
+    ts : float
+        Sample time, s.
+    duration : float
+        Length of each identification flight, s (two per vehicle: estimation and held out).
+
+    Returns
+    -------
+    (Fleet, dict of str to VehicleFit)
+    """
+    from ilcdob.identification.tfest import tfest
+
+    systems, fits = [], {}
+    for name in names:
+        est = _chirp_flight(make, name, ts, 0, duration)
+        val = _chirp_flight(make, name, ts, 1, duration)
+        results = {}
+        for st in STRUCTURES:
+            fit = tfest(est, "u", "y", st, validation=val)
+            results[_label(st)] = (fit.fit_validation, st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay))
+        best = max(results.values(), key=lambda v: v[0])
+        chosen = next(v for v in results.values() if v[0] >= best[0] - 1.0)  # fewest parameters within 1 point
+        fits[name] = VehicleFit(name, chosen[1], chosen[2], {k: v[0] for k, v in results.items()})
+        relative_degree = chosen[1].n_poles - chosen[1].n_zeros  # M = Q/P_hat must stay proper
+        dob = dobs[name] if dobs[name].q_order >= relative_degree else replace(dobs[name], q_order=relative_degree)
+        systems.append(SystemSpec(name, chosen[2], controllers[name], dob))
+    return fleet_from_systems(systems, ts), fits
+
+
+def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
+                         wind_gain: float | None = None, path: str = "command", law: str = "paper",
+                         order: list[str] | None = None, filters: dict | None = None) -> ScenarioResult:
+    """Fly one scenario with every vehicle: no DOB, DOB only and ``iterations`` learning flights each.
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The identified models (:func:`identify_vehicles`), one system per vehicle name.
+    make : callable
+        ``make(name, command_disturbance, wind)`` (:data:`MakeVehicle`).
+    sc : Scenario
+        Reference, disturbance and learning order.
+    iterations : int
+        Learning flights per vehicle (>= 1).
+    wind_gain : float, optional
+        None: the scenario's disturbance is added to every vehicle's command (the paper's). A
+        number: it is a wind velocity instead, ``wind_gain`` m/s per m/s^2 of the scenario's
+        disturbance, acting through each airframe's drag.
+    path : {"command", "airframe", "wind"}
+        Where the learning law assumes the disturbance acts (:mod:`ilcdob.design.flown`).
+    law : str
+        Learning law (paper or exact-reference).
+    order : list of str, optional
+        Learning order (default: the scenario's).
+    filters : dict, optional
+        Cache of closed-form filters per pair.
+
+    Returns
+    -------
+    ScenarioResult
+        Flights of the x axis as :class:`~ilcdob.validation.simulate.Flight` (``d``: the command
+        disturbance, or for wind the scenario's disturbance the wind was made from).
+    """
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    ts = fleet.sample_time
+    t = sc.time(ts)
+    r, a_ref, d = sc.reference(t), sc.acceleration(t), sc.disturbance(t)
+    order = sc.order(fleet.names) if order is None else check_order(fleet.names, order)
+
+    def along_x(scale: float) -> Callable:
+        return lambda tt: np.array([scale * float(sc.disturbance(np.array([tt]))[0]), 0.0, 0.0])
+
+    command, wind = (along_x(1.0), None) if wind_gain is None else (None, along_x(float(wind_gain)))
+
+    def flight(name: str, mode: str, d_f: np.ndarray | None = None) -> Flight:
+        loop = fleet.loop(name)
+        ff = {"x": a_ref} if loop.spec.controller.acceleration_feedforward else None
+        trial = fly_vehicle(make(name, command, wind), {"x": loop, "y": loop, "z": loop}, {"x": r},
+                            learning=None if d_f is None else {"x": d_f}, feedforward=ff, dob=mode == "dob")
+        y = trial.y_meas[:, 0]
+        return Flight(system=name, mode=mode, t=t, r=r, y=y, e=r - y, d=d, d_hat=trial.d_hat[:, 0],
+                      d_f=trial.d_f[:, 0], u2=trial.command[:, 0])
+
+    base = {name: (flight(name, "no_dob"), flight(name, "dob")) for name in order}
+    design = pair_designs(fleet, {} if filters is None else filters, law, r, a_ref, "auto", path)
+
+    def step(src: str, tgt: str, prev: Flight) -> Flight:
+        return flight(tgt, "dob", design(src, tgt).learning(prev.e, prev.d_f).d_f)
+
+    learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
+    systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name])) for name in order}
+    return ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
