@@ -17,10 +17,10 @@ TS = 0.01
 NAMES = ["crazyflie", "hummingbird"]
 
 
-def _make(name, command, wind):
+def _make(name, command, wind, seed):
     from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
 
-    return RotorpyVehicle(name, TS, command_disturbance=command, wind=wind, noise_std=5e-4, seed=3)
+    return RotorpyVehicle(name, TS, command_disturbance=command, wind=wind, noise_std=5e-4, seed=seed)
 
 
 @pytest.fixture(scope="module")
@@ -33,22 +33,25 @@ def identified():
 
 
 def test_the_structure_is_chosen_from_the_flights(identified):
-    """One integrator and a drag pole on both (held-out 94.7 % / 96.2 % measured; four poles add 0.1-0.2
-    point); the paper's two integrators fit far worse (73.8 % / 46.4 %). Asserted: chosen >= 90 %, the
-    paper's structure at least 10 points below."""
-    _, fits = identified
+    """One integrator and a drag pole on both, the hummingbird with 3 poles (held-out 96.3 % measured), the
+    crazyflie with one pole more (96.2 %, 3 poles 94.7 %: more than 1 point less); the paper's two
+    integrators fit far worse (73.7 % / 46.4 %). Asserted: one integrator, >= 90 %, the paper's structure at
+    least 10 points below; the DOB's Q order raised to the chosen model's relative degree."""
+    fleet, fits = identified
     for name in NAMES:
         fit = fits[name]
-        assert (fit.structure.n_poles, fit.structure.n_integrators) == (3, 1), (name, fit.fits)
-        assert fit.fit >= 90.0 and fit.fits["3p0z2i"] <= fit.fit - 10.0, (name, fit.fits)
+        assert fit.structure.n_integrators == 1 and fit.fit >= 90.0, (name, fit.fits)
+        assert fit.fits["3p0z2i"] <= fit.fit - 10.0, (name, fit.fits)
+        spec = next(s for s in fleet.systems if s.name == name)
+        assert spec.dob.q_order >= max(3, fit.structure.n_poles - fit.structure.n_zeros)
 
 
 def test_hover_chain_in_the_papers_disturbance_and_in_wind(identified):
     """Scenario 1's hover, 15 s, one learning flight each, the chain crazyflie -> hummingbird -> crazyflie.
-    The paper's disturbance on the command: learning leaves (measured) 0.35 % / 1.4 % of the DOB-only
+    The paper's disturbance on the command: learning leaves (measured) 0.29 % / 1.8 % of the DOB-only
     error (crazyflie / hummingbird). The same signal as a wind (2 m/s per m/s^2) through each airframe's
-    drag, learned through the drag ratio (``path="wind"``): 0.117 / 0.115 of DOB-only (the paper's law:
-    0.87 / 0.47). Asserted: paper's disturbance below 5 %, DOB below no DOB; wind through the drag below
+    drag, learned through the drag ratio (``path="wind"``): 0.111 / 0.113 of DOB-only (the paper's law:
+    0.87 / 0.48). Asserted: paper's disturbance below 5 %, DOB below no DOB; wind through the drag below
     0.3 for both."""
     from ilcdob.validation.vehicle_chain import run_vehicle_scenario
 

@@ -143,35 +143,21 @@ def test_rotorpy_vehicle_refuses_bad_input():
 
 @pytest.fixture(scope="module")
 def identified_rotorpy():
-    """The crazyflie and the hummingbird identified from their own flights: 20 s closed-loop chirp flights
-    (PID of the rough loop, chirp added to the command, 0.5 mm sensor noise) fitted with one integrator and
-    a drag pole (3 poles), held out on a second flight; returns the fleet of the fits and their held-out fits."""
+    """The crazyflie and the hummingbird identified from their own flights
+    (:func:`ilcdob.validation.vehicle_chain.identify_vehicles`: 20 s closed-loop chirp flights, the structure
+    with the best held-out fit, one integrator and a drag pole here); returns the fleet of the fits and
+    their held-out fits (%)."""
     pytest.importorskip("rotorpy")
-    from ilcdob.identification.tfest import tfest
-    from ilcdob.signals import FlightData
-    from ilcdob.uncertainty import ModelStructure
+    from ilcdob.validation.vehicle_chain import identify_vehicles
     from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
 
-    rough = _rotorpy_loop()
-    rough3 = {"x": rough, "y": rough, "z": rough}
-
-    def chirp(name, seed, duration=20.0):
-        n = int(duration / TS_ROTORPY)
-        t = np.arange(n) * TS_ROTORPY
-        inj = 0.5 * np.sin(2 * np.pi * (0.1 * t + (3.0 - 0.1) * t**2 / (2 * duration)))
-        r = 0.05 * np.sign(np.sin(2 * np.pi * t / 10 + seed))
-        tr = fly_vehicle(RotorpyVehicle(name, TS_ROTORPY, noise_std=5e-4, seed=seed), rough3, {"x": r},
-                         feedforward={"x": inj}, dob=False)
-        return FlightData(t, {"u": tr.applied[:, 0], "y": tr.y_meas[:, 0]}, {"u": "m/s^2", "y": "m"})
-
-    pid = ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05)
-    systems, fits = [], {}
-    for name in ("crazyflie", "hummingbird"):
-        fit = tfest(chirp(name, 0), "u", "y", ModelStructure(n_poles=3, n_integrators=1), validation=chirp(name, 1))
-        fits[name] = fit.fit_validation
-        systems.append(ilcdob.SystemSpec(name, ilcdob.PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay), pid,
-                                         ilcdob.DOBSpec(3, 0.2)))
-    return ilcdob.fleet_from_systems(systems, TS_ROTORPY), fits
+    names = ["crazyflie", "hummingbird"]
+    fleet, fits = identify_vehicles(
+        lambda name, command, wind, seed: RotorpyVehicle(name, TS_ROTORPY, command_disturbance=command, wind=wind,
+                                                         noise_std=5e-4, seed=seed),
+        names, {n: ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05) for n in names}, {n: ilcdob.DOBSpec(3, 0.2) for n in names},
+        TS_ROTORPY)
+    return fleet, {n: f.fit for n, f in fits.items()}
 
 
 def _fly_fleet(fleet, name, n, d_f=None, **disturbance):
@@ -187,8 +173,8 @@ def test_learning_between_rotorpy_vehicles_identified_from_their_flights(identif
     plant identified from its own chirp flights (:func:`identified_rotorpy`), the closed-form filters
     designed from the two identified models, the crazyflie flies 20 s of hover in the paper's
     disturbance (sin(0.94 t) m/s^2 on the command) with its DOB, and its measured error becomes the
-    hummingbird's learning signal. Measured: held-out fits 94.7 % / 96.3 %; the hummingbird's RMSE
-    with learning 1.4 % of its DOB-only RMSE (0.0019 m against 0.132 m; 0.5 mm sensor noise).
+    hummingbird's learning signal. Measured: held-out fits 96.2 % / 96.3 %; the hummingbird's RMSE
+    with learning 1.8 % of its DOB-only RMSE (0.0024 m against 0.132 m; 0.5 mm sensor noise).
     Asserted: fits above 85 %, learning below 10 % of DOB-only."""
     from ilcdob.design.pair import design_pair
 

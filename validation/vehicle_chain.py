@@ -44,9 +44,10 @@ __all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_scenari
 #: pole more), and the paper's two integrators and a pole.
 STRUCTURES = (ModelStructure(n_poles=3, n_integrators=1), ModelStructure(n_poles=3, n_integrators=2),
               ModelStructure(n_poles=4, n_integrators=1))
-#: ``make(name, command_disturbance, wind) -> Vehicle``: a fresh vehicle (at rest) with these disturbances, each
-#: a callable of time returning ``(3,)`` (m/s^2 on the command; m/s of wind) or None.
-MakeVehicle = Callable[[str, Callable | None, Callable | None], Vehicle]
+#: ``make(name, command_disturbance, wind, seed) -> Vehicle``: a fresh vehicle (at rest) with these disturbances,
+#: each a callable of time returning ``(3,)`` (m/s^2 on the command; m/s of wind) or None, and ``seed`` for its
+#: sensor noise (every flight gets its own).
+MakeVehicle = Callable[[str, Callable | None, Callable | None, int], Vehicle]
 
 
 @dataclass(frozen=True)
@@ -91,7 +92,7 @@ def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: 
     t = np.arange(n) * ts
     inj = 0.5 * np.sin(2 * np.pi * (0.1 * t + (3.0 - 0.1) * t**2 / (2 * duration)))  # 0.1 -> 3 Hz
     r = 0.05 * np.sign(np.sin(2 * np.pi * t / 10 + seed))
-    trial = fly_vehicle(make(name, None, None), {"x": loop, "y": loop, "z": loop}, {"x": r},
+    trial = fly_vehicle(make(name, None, None, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
                         feedforward={"x": inj}, dob=False)
     return FlightData(t, {"u": trial.applied[:, 0], "y": trial.y_meas[:, 0]}, {"u": "m/s^2", "y": "m"})
 
@@ -103,7 +104,7 @@ def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str
     Parameters
     ----------
     make : callable
-        ``make(name, command_disturbance, wind)``: a fresh vehicle (:data:`MakeVehicle`).
+        ``make(name, command_disturbance, wind, seed)``: a fresh vehicle (:data:`MakeVehicle`).
     names : list of str
         The vehicles.
     controllers, dobs : dict
@@ -147,7 +148,8 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
     fleet : Fleet
         The identified models (:func:`identify_vehicles`), one system per vehicle name.
     make : callable
-        ``make(name, command_disturbance, wind)`` (:data:`MakeVehicle`).
+        ``make(name, command_disturbance, wind, seed)`` (:data:`MakeVehicle`); flight ``k`` of a vehicle
+        in the scenario flies with seed ``1000 sc.id + 10 k`` plus its position in the fleet.
     sc : Scenario
         Reference, disturbance and learning order.
     iterations : int
@@ -183,10 +185,14 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
 
     command, wind = (along_x(1.0), None) if wind_gain is None else (None, along_x(float(wind_gain)))
 
+    flown = {name: 0 for name in order}
+
     def flight(name: str, mode: str, d_f: np.ndarray | None = None) -> Flight:
         loop = fleet.loop(name)
         ff = {"x": a_ref} if loop.spec.controller.acceleration_feedforward else None
-        trial = fly_vehicle(make(name, command, wind), {"x": loop, "y": loop, "z": loop}, {"x": r},
+        seed = 1000 * sc.id + 10 * flown[name] + fleet.names.index(name)
+        flown[name] += 1
+        trial = fly_vehicle(make(name, command, wind, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
                             learning=None if d_f is None else {"x": d_f}, feedforward=ff, dob=mode == "dob")
         y = trial.y_meas[:, 0]
         return Flight(system=name, mode=mode, t=t, r=r, y=y, e=r - y, d=d, d_hat=trial.d_hat[:, 0],
