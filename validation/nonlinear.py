@@ -57,10 +57,10 @@ from typing import Callable
 import numpy as np
 from scipy import signal as sps
 
+from ilcdob.controller import OuterLoopController
 from ilcdob.design.band import check_bandwidth
 from ilcdob.design.flown import model_attitude
 from ilcdob.design.laws import DEFAULT_LAW, check_law
-from ilcdob.controller import OuterLoopController
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.fleet_io import fleet_to_toml
