@@ -143,12 +143,14 @@ def simulate_flight(loop: LoopSystem, r: object, d: object, d_f: object | None =
     xp = np.zeros(ap.shape[0])
     y, e, dh, u2 = (np.zeros(n) for _ in range(4))
     nz = np.zeros(n) if noise is None else noise
+    # Python floats into the per-sample law: NumPy scalar arithmetic there costs more than the products
+    r_l, aff_l, df_l, nz_l, d_l = r.tolist(), aff.tolist(), df.tolist(), nz.tolist(), d.tolist()
     for k in range(n):
-        yk = cp @ xp
-        ymk = yk + nz[k]
-        u2k = ctl.step(r[k], ymk, feedforward=aff[k], learning=df[k])
-        xp = ap @ xp + bp * (u2k + d[k])
-        y[k], e[k], dh[k], u2[k] = yk, r[k] - ymk, ctl.d_hat, u2k
+        yk = float(cp @ xp)
+        ymk = yk + nz_l[k]
+        u2k = ctl.step(r_l[k], ymk, feedforward=aff_l[k], learning=df_l[k])
+        xp = ap @ xp + bp * (u2k + d_l[k])
+        y[k], e[k], dh[k], u2[k] = yk, r_l[k] - ymk, ctl.d_hat, u2k
     t = np.arange(n) * loop.ts
     if noise is None:
         return Flight(system=loop.name, mode=mode, t=t, r=r, y=y, e=e, d=d, d_hat=dh, d_f=df, u2=u2)
