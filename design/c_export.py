@@ -76,7 +76,7 @@ from ilcdob.signals import as_signal
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
 
 __all__ = ["CCode", "c_code", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
-           "float_error", "design_readme", "design_files", "FILTER_KEYS"]
+           "float_error", "design_readme", "design_files", "signal_header", "FILTER_KEYS"]
 
 #: The filters of ``filters.json`` that get C functions, and their lower-case C names.
 FILTER_KEYS = ("L1", "L2")
@@ -376,6 +376,33 @@ def _array_c(ct: _CType, name: str, values: np.ndarray) -> str:
         return f"static const {ct.name} {name}[{values.size}] = {{\n    {body}\n}};\n"
     rows = ",\n    ".join("{" + ", ".join(ct.num(v) for v in row) + "}" for row in values)
     return f"static const {ct.name} {name}[{values.shape[0]}][{values.shape[1]}] = {{\n    {rows}\n}};\n"
+
+
+def signal_header(prefix: str, values: np.ndarray, ts: float) -> str:
+    """A C header holding one learning signal: ``<prefix>df[<PREFIX>DF_SAMPLES]`` (m/s^2) and its sample time.
+
+    Parameters
+    ----------
+    prefix : str
+        Symbol prefix (:func:`check_c_prefix`).
+    values : numpy.ndarray
+        The samples, m/s^2 (at least one).
+    ts : float
+        Sample time, s (``<PREFIX>DF_TS``).
+
+    Returns
+    -------
+    str
+        The header's text; the literals round to exactly the given doubles.
+    """
+    macro = check_c_prefix(prefix).upper()
+    values = np.asarray(values, float).reshape(-1)
+    if not values.size:
+        raise SpecError("`values`: no samples; a learning signal header needs at least one")
+    return (f"/* Learning signal (m/s^2), one sample per {ts:g} s, written by ilcdob learn. */\n"
+            f"#ifndef {macro}DF_H\n#define {macro}DF_H\n#define {macro}DF_SAMPLES {values.size}u\n"
+            f"#define {macro}DF_TS {_DOUBLE.num(ts)}\n"
+            + _array_c(_DOUBLE, f"{prefix}df", values) + "#endif\n")
 
 
 def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 
 import numpy as np
@@ -255,6 +256,15 @@ def test_learn_matches_design_trial_and_refuses_bad_input(fleet, tmp_path, capsy
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.max(np.abs(want)))
     summary = json.loads((tmp_path / "l" / "learning.json").read_text())
     assert summary["trial"]["samples"] == want.size and summary["units"]["learning"] == "m/s^2"
+    cc = shutil.which("cc")
+    if cc is not None:  # the C array holds exactly the binary's doubles
+        (tmp_path / "show.c").write_text('#include <stdio.h>\n#include "learning_signal.h"\nint main(void) {\n'
+                                          "    for (unsigned k = 0; k < ILCDOB_UAV1_UAV2_DF_SAMPLES; ++k)\n"
+                                          '        printf("%.17g\\n", ilcdob_uav1_uav2_df[k]);\n    return 0;\n}\n')
+        subprocess.run([cc, "-std=c99", f"-I{tmp_path / 'l'}", str(tmp_path / "show.c"), "-o", str(tmp_path / "show")],
+                       check=True)
+        shown = subprocess.run([str(tmp_path / "show")], capture_output=True, text=True, check=True).stdout
+        np.testing.assert_array_equal(np.array(shown.split(), float), got)
     capsys.readouterr()
     for args, message in [(["--error", "error", "--reference", "error"], "not both"),
                           ([], "give --error COLUMN"),

@@ -595,7 +595,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     (numpy.ndarray, dict)
         The learning signal (m/s^2) and the ``learning.json`` content.
     """
-    from ilcdob.design.c_export import default_c_prefix
+    from ilcdob.design.c_export import default_c_prefix, signal_header
     from ilcdob.design.export import apply_learning
     from ilcdob.design.limit import enforce_limit
     from ilcdob.signals import FlightData
@@ -647,12 +647,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                                 f"learning signal of {target} from {source}")
     n = d_f.size
     prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target))
-    macro = prefix.upper()
-    values = ",\n".join("    " + ", ".join(f"{v:.17g}" for v in d_f[i:i + 4]) for i in range(0, n, 4))
-    header = (f"/* Learning signal (m/s^2), one sample per {ts:g} s, written by ilcdob learn. */\n"
-              f"#ifndef {macro}DF_H\n#define {macro}DF_H\n#define {macro}DF_SAMPLES {n}u\n"
-              f"#define {macro}DF_TS {ts!r}\n"
-              f"static const double {prefix}df[{macro}DF_SAMPLES] = {{\n{values}\n}};\n#endif\n")
+    header = signal_header(prefix, d_f, ts)
     summary = {"from": source, "to": target, "filters": origin, "method": filters.get("method"), "law": "paper",
                "trial": {"file": Path(trial).name, "samples": n, "sample_time_s": ts,
                          "error": (f"column {columns.error}" if columns.error is not None
