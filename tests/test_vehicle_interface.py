@@ -77,11 +77,10 @@ def test_protocol_errors_name_what_is_wrong():
 # ------------------------------------------------------------------------------------------------ rotorpy
 
 def _rotorpy_loop():
-    """A rough model of a rotorpy vehicle's outer loop: 1/(s^2 (0.1 s + 1)) (its attitude loop lags
-    0.1-0.2 s), a PID and a third-order DOB at 100 Hz."""
-    spec = ilcdob.SystemSpec("rotorpy", ilcdob.PlantSpec((1.0,), (0.1, 1.0, 0.0, 0.0)),
-                             ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05), ilcdob.DOBSpec(3, 0.2))
-    return ilcdob.build_loop(spec, TS_ROTORPY)
+    """A rough model of a rotorpy vehicle's outer loop at 100 Hz (:func:`ilcdob.validation.vehicle_chain.rough_loop`)."""
+    from ilcdob.validation.vehicle_chain import rough_loop
+
+    return rough_loop(TS_ROTORPY)
 
 
 @pytest.mark.parametrize("name", ["crazyflie", "hummingbird", "px4"])

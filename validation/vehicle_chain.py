@@ -28,7 +28,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, fleet_from_systems
-from ilcdob.loop import build_loop
+from ilcdob.loop import LoopSystem, build_loop
 from ilcdob.signals import FlightData
 from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
@@ -38,7 +38,7 @@ from .reproduce import ScenarioResult, SystemResult, learning_chain, pair_design
 from .scenarios import Scenario, check_order
 from .simulate import Flight
 
-__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_scenario", "MakeVehicle"]
+__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_scenario", "rough_loop", "MakeVehicle"]
 
 #: Candidate structures of the x plant, fewest parameters first: one integrator and a drag pole (with one
 #: pole more), and the paper's two integrators and a pole.
@@ -80,14 +80,25 @@ def _label(st: ModelStructure) -> str:
     return f"{st.n_poles}p{st.n_zeros}z{st.n_integrators}i"
 
 
-def _rough_loop(ts: float):
-    """The outer loop the identification flights fly: the PID of a rough model 1/(s^2 (0.1 s + 1))."""
+def rough_loop(ts: float) -> LoopSystem:
+    """The outer loop flown before a vehicle is identified: PID and DOB of a rough model 1/(s^2 (0.1 s + 1))
+    (a multirotor's attitude loop lags 0.1-0.2 s); the identification flights fly its PID alone.
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    LoopSystem
+    """
     spec = SystemSpec("rough", PlantSpec((1.0,), (0.1, 1.0, 0.0, 0.0)), PIDSpec(2.5, 0.3, 2.2, 0.05), DOBSpec(3, 0.2))
     return build_loop(spec, ts)
 
 
 def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: float) -> FlightData:
-    loop = _rough_loop(ts)
+    loop = rough_loop(ts)
     n = int(round(duration / ts))
     t = np.arange(n) * ts
     inj = 0.5 * np.sin(2 * np.pi * (0.1 * t + (3.0 - 0.1) * t**2 / (2 * duration)))  # 0.1 -> 3 Hz
