@@ -158,6 +158,12 @@ def model_attitude(loop: LoopSystem) -> tuple[np.ndarray, np.ndarray, int]:
     return np.atleast_1d(np.squeeze(b)), np.atleast_1d(a), int(round(loop.spec.nominal_plant.delay / loop.ts))
 
 
+#: Smallest drag pole (1/s) of a vehicle learned from in wind (``wind=True``): a time constant beyond 50 s is longer
+#: than identification flights resolve (a pole that slow fits as well as an integrator), and the wind velocity is
+#: reconstructed by dividing by it. Multirotors' drag poles are 0.1-1 1/s.
+MIN_WIND_DRAG = 0.02
+
+
 def airframe_path_filter(source: LoopSystem, target: LoopSystem, wind: bool = False) -> np.ndarray:
     """Discrete ``W = A_hat_{j-1} / A_hat_j`` (Tustin) as second-order sections: the
     airframe-wind correction of the learning filter (module docstring); with ``wind`` times
@@ -192,6 +198,11 @@ def airframe_path_filter(source: LoopSystem, target: LoopSystem, wind: bool = Fa
                 raise SpecError(f"model of {loop.name!r}: two integrators, no drag pole; a wind velocity gives such a "
                                 "model no acceleration. Identify it with one integrator and a drag pole "
                                 "(ilcdob identify --integrators 1), or learn with --disturbance airframe")
+        if rs[1] < MIN_WIND_DRAG:
+            raise SpecError(f"model of {source.name!r}: drag pole {rs[1]:.3g} 1/s (time constant {1 / rs[1]:.0f} s) is "
+                            f"below {MIN_WIND_DRAG:g} 1/s: its trial cannot sense the wind, and dividing by its drag "
+                            f"would amplify the trial {rt[1] / rs[1]:.0f} times. Learn from a vehicle with "
+                            "measurable drag, or with --disturbance airframe")
         gain = float(rt[1] / rs[1])
     ps, pt = source.spec.nominal_plant, target.spec.nominal_plant
     if abs(ps.delay - pt.delay) > 1e-9:

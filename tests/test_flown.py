@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import signal as sps
@@ -130,6 +132,13 @@ def test_wind_path_is_the_airframe_path_times_the_drag_ratio():
     np.testing.assert_allclose(got, want, rtol=1e-9)
     with pytest.raises(SpecError, match="two integrators, no drag pole"):
         airframe_path_filter(flt.loop("D1"), flt.loop("R"), wind=True)
+    # a drag pole too slow to sense the wind (rotorpy's PX4 set without rotor drag identifies at 0.0015 1/s) is
+    # refused as the source, where the wind is reconstructed by dividing by it; as the target it learns little
+    slow = ilcdob.fleet_from_systems([flt.systems[0], replace(flt.systems[1], plant=ilcdob.PlantSpec(
+        (13.0,), tuple(np.polymul([1, 0.0015, 0], [1, 7.0]))))], ts)
+    with pytest.raises(SpecError, match=r"'D2': drag pole 0.0015 1/s \(time constant 667 s\).*267 times"):
+        airframe_path_filter(slow.loop("D2"), slow.loop("D1"), wind=True)
+    airframe_path_filter(slow.loop("D1"), slow.loop("D2"), wind=True)
     from ilcdob.design.pair import design_pair
 
     design = design_pair(flt, "D1", "D2", disturbance="wind")

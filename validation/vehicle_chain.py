@@ -4,7 +4,7 @@ Any vehicle with the protocol of :mod:`ilcdob.vehicles.interface` (rotorpy's mul
 :mod:`ilcdob.vehicles.rotorpy_vehicle`, are the test bed) goes through what a lab does:
 
 1. :func:`identify_vehicles`: per vehicle, closed-loop flights with a rough outer loop (the PID
-   alone, a chirp added to the x command, reference steps), fitted with each candidate model
+   alone, a chirp added to the x command, smoothed reference steps), fitted with each candidate model
    structure (:data:`STRUCTURES`) and held out on a second flight; the structure is chosen from
    the data (the best held-out fit; one with fewer parameters wins unless a larger one fits 1
    point better). The paper assumes ``b0/(s^2 (s + a0))``; a vehicle whose drag damps its
@@ -25,7 +25,9 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
+from scipy import signal as sps
 
+from ilcdob.design.flown import DISTURBANCE_PATHS
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, fleet_from_systems
 from ilcdob.loop import LoopSystem, build_loop
@@ -38,11 +40,12 @@ from .reproduce import ScenarioResult, SystemResult, learning_chain, pair_design
 from .scenarios import Scenario, check_order
 from .simulate import Flight
 
-__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_scenario", "rough_loop", "MakeVehicle"]
+__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_laws", "run_vehicle_scenario", "rough_loop",
+           "dryden_gust", "MakeVehicle", "LawPath"]
 
-#: Candidate structures of the x plant, fewest parameters first: one integrator and a drag pole (with one
-#: pole more), and the paper's two integrators and a pole.
-STRUCTURES = (ModelStructure(n_poles=3, n_integrators=1), ModelStructure(n_poles=3, n_integrators=2),
+#: Candidate structures of the x plant, fewest free parameters first: the paper's two integrators and a pole
+#: (2: gain and pole), one integrator with a drag pole and an attitude pole (3), and with one pole more (4).
+STRUCTURES = (ModelStructure(n_poles=3, n_integrators=2), ModelStructure(n_poles=3, n_integrators=1),
               ModelStructure(n_poles=4, n_integrators=1))
 #: ``make(name, command_disturbance, wind, seed) -> Vehicle``: a fresh vehicle (at rest) with these disturbances,
 #: each a callable of time returning ``(3,)`` (m/s^2 on the command; m/s of wind) or None, and ``seed`` for its
@@ -102,7 +105,10 @@ def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: 
     n = int(round(duration / ts))
     t = np.arange(n) * ts
     inj = 0.5 * np.sin(2 * np.pi * (0.1 * t + (3.0 - 0.1) * t**2 / (2 * duration)))  # 0.1 -> 3 Hz
-    r = 0.05 * np.sign(np.sin(2 * np.pi * t / 10 + seed))
+    # reference steps of 5 cm through a critically damped 0.3 s filter: a raw step kicks the PID's derivative
+    # into multi-g commands that tilt and drop the heavier vehicles (px4: 15 cm in z), far from hover
+    b, a = sps.bilinear([1.0], [0.09, 0.6, 1.0], 1.0 / ts)
+    r = sps.lfilter(b, a, 0.05 * np.sign(np.sin(2 * np.pi * t / 10 + seed)))
     trial = fly_vehicle(make(name, None, None, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
                         feedforward={"x": inj}, dob=False)
     return FlightData(t, {"u": trial.applied[:, 0], "y": trial.y_meas[:, 0]}, {"u": "m/s^2", "y": "m"})
@@ -149,10 +155,50 @@ def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str
     return fleet_from_systems(systems, ts), fits
 
 
-def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
-                         wind_gain: float | None = None, path: str = "command", law: str = "paper",
-                         order: list[str] | None = None, filters: dict | None = None) -> ScenarioResult:
-    """Fly one scenario with every vehicle: no DOB, DOB only and ``iterations`` learning flights each.
+def dryden_gust(duration: float, ts: float, wind_20ft: float = 2.0, altitude: float = 1.0, seed: int = 0,
+                onset: float = 5.0) -> Callable[[float], np.ndarray]:
+    """A repeatable Dryden wind that rises from still air: MIL-F-8785C low-altitude turbulence
+    (:meth:`~ilcdob.vehicles.dryden.DrydenWind.low_altitude`) around a mean wind along x, faded in
+    over ``onset`` s by a raised cosine so that each trial starts hovering in still air.
+
+    Parameters
+    ----------
+    duration, ts : float
+        Length and sample time of the series, s.
+    wind_20ft : float
+        Mean wind at 20 ft, m/s (the model's intensities scale with it).
+    altitude : float
+        Height of the flight, m.
+    seed : int
+        Seed of the turbulence: the same seed is the same wind in every trial.
+    onset : float
+        Fade-in time, s (> 0).
+
+    Returns
+    -------
+    callable
+        ``wind(t) -> (3,)`` m/s, world frame.
+    """
+    from ilcdob.vehicles.dryden import DrydenWind
+
+    if not (np.isfinite(onset) and onset > 0):
+        raise SpecError(f"`onset`: got {onset!r}, expected a fade-in time > 0 s")
+    field = DrydenWind.low_altitude(duration, ts, altitude, wind_20ft, seed=seed)
+    t = np.arange(field.series.shape[0]) * ts
+    field.series *= (0.5 - 0.5 * np.cos(np.pi * np.clip(t / onset, 0.0, 1.0)))[:, None]
+    return field
+
+
+#: A learning law flown by :func:`run_vehicle_laws`: (law, path), ``law`` of :mod:`ilcdob.design.laws`
+#: (paper or exact-reference), ``path`` where it assumes the disturbance acts (:mod:`ilcdob.design.flown`).
+LawPath = tuple[str, str]
+
+
+def run_vehicle_laws(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
+                     laws: list[LawPath] = (("paper", "command"),), wind: float | Callable | None = None,
+                     order: list[str] | None = None, filters: dict | None = None) -> dict[LawPath, ScenarioResult]:
+    """Fly one scenario with every vehicle: no DOB and DOB only once, then ``iterations`` learning
+    flights each with every learning law (module docstring).
 
     Parameters
     ----------
@@ -160,19 +206,19 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
         The identified models (:func:`identify_vehicles`), one system per vehicle name.
     make : callable
         ``make(name, command_disturbance, wind, seed)`` (:data:`MakeVehicle`); flight ``k`` of a vehicle
-        in the scenario flies with seed ``1000 sc.id + 10 k`` plus its position in the fleet.
+        in the scenario flies with seed ``1000 sc.id + 10 k`` plus its position in the fleet (sensor noise:
+        the laws' learning flights meet the same noise).
     sc : Scenario
         Reference, disturbance and learning order.
     iterations : int
-        Learning flights per vehicle (>= 1).
-    wind_gain : float, optional
+        Learning flights per vehicle and law (>= 1).
+    laws : list of (str, str)
+        The (law, path) pairs to fly (:data:`LawPath`).
+    wind : float or callable, optional
         None: the scenario's disturbance is added to every vehicle's command (the paper's). A
-        number: it is a wind velocity instead, ``wind_gain`` m/s per m/s^2 of the scenario's
-        disturbance, acting through each airframe's drag.
-    path : {"command", "airframe", "wind"}
-        Where the learning law assumes the disturbance acts (:mod:`ilcdob.design.flown`).
-    law : str
-        Learning law (paper or exact-reference).
+        number: it is a wind velocity instead, ``wind`` m/s per m/s^2 of the scenario's
+        disturbance, along x. A callable ``t -> (3,)``: this wind velocity (m/s), e.g.
+        :func:`dryden_gust`. Winds act through each airframe's drag.
     order : list of str, optional
         Learning order (default: the scenario's).
     filters : dict, optional
@@ -180,12 +226,18 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
 
     Returns
     -------
-    ScenarioResult
-        Flights of the x axis as :class:`~ilcdob.validation.simulate.Flight` (``d``: the command
-        disturbance, or for wind the scenario's disturbance the wind was made from).
+    dict of (str, str) to ScenarioResult
+        Per law, flights of the x axis as :class:`~ilcdob.validation.simulate.Flight` (``d``: the
+        command disturbance, the scenario's disturbance a scaled wind was made from, or the wind's x
+        component in m/s); the no-DOB and DOB-only flights are shared.
     """
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
         raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    laws = [tuple(lp) for lp in laws]
+    for law, path in laws:
+        if law not in ("paper", "exact-reference") or path not in DISTURBANCE_PATHS:
+            raise SpecError(f"`laws`: got ({law!r}, {path!r}), expected a law 'paper' or 'exact-reference' and a "
+                            f"path of {DISTURBANCE_PATHS}")
     ts = fleet.sample_time
     t = sc.time(ts)
     r, a_ref, d = sc.reference(t), sc.acceleration(t), sc.disturbance(t)
@@ -194,27 +246,63 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
     def along_x(scale: float) -> Callable:
         return lambda tt: np.array([scale * float(sc.disturbance(np.array([tt]))[0]), 0.0, 0.0])
 
-    command, wind = (along_x(1.0), None) if wind_gain is None else (None, along_x(float(wind_gain)))
-
+    if wind is None:
+        command, air = along_x(1.0), None
+    elif callable(wind):
+        command, air = None, wind
+        d = np.array([float(np.asarray(wind(tt), float).reshape(-1)[0]) for tt in t])
+    elif isinstance(wind, (int, float)) and not isinstance(wind, bool) and np.isfinite(wind):
+        command, air = None, along_x(float(wind))
+    else:
+        raise SpecError(f"`wind`: got {wind!r}, expected None, a gain in m/s per m/s^2 or a callable t -> (3,) m/s")
     flown = {name: 0 for name in order}
 
-    def flight(name: str, mode: str, d_f: np.ndarray | None = None) -> Flight:
+    def flight(name: str, mode: str, d_f: np.ndarray | None = None, k: int | None = None) -> Flight:
         loop = fleet.loop(name)
         ff = {"x": a_ref} if loop.spec.controller.acceleration_feedforward else None
-        seed = 1000 * sc.id + 10 * flown[name] + fleet.names.index(name)
-        flown[name] += 1
-        trial = fly_vehicle(make(name, command, wind, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
+        if k is None:
+            k = flown[name]
+            flown[name] += 1
+        seed = 1000 * sc.id + 10 * k + fleet.names.index(name)
+        trial = fly_vehicle(make(name, command, air, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
                             learning=None if d_f is None else {"x": d_f}, feedforward=ff, dob=mode == "dob")
         y = trial.y_meas[:, 0]
         return Flight(system=name, mode=mode, t=t, r=r, y=y, e=r - y, d=d, d_hat=trial.d_hat[:, 0],
                       d_f=trial.d_f[:, 0], u2=trial.command[:, 0])
 
     base = {name: (flight(name, "no_dob"), flight(name, "dob")) for name in order}
-    design = pair_designs(fleet, {} if filters is None else filters, law, r, a_ref, "auto", path)
+    out = {}
+    for law, path in laws:
+        design = pair_designs(fleet, {} if filters is None else filters, law, r, a_ref, "auto", path)
+        count = dict(flown)
 
-    def step(src: str, tgt: str, prev: Flight) -> Flight:
-        return flight(tgt, "dob", design(src, tgt).learning(prev.e, prev.d_f).d_f)
+        def step(src: str, tgt: str, prev: Flight) -> Flight:
+            count[tgt] += 1
+            return flight(tgt, "dob", design(src, tgt).learning(prev.e, prev.d_f).d_f, k=count[tgt] - 1)
 
-    learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
-    systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name])) for name in order}
-    return ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
+        learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
+        systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name])) for name in order}
+        out[(law, path)] = ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
+    return out
+
+
+def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
+                         wind: float | Callable | None = None, path: str = "command", law: str = "paper",
+                         order: list[str] | None = None, filters: dict | None = None) -> ScenarioResult:
+    """Fly one scenario with one learning law: :func:`run_vehicle_laws` with ``laws=[(law, path)]``.
+
+    Parameters
+    ----------
+    fleet, make, sc, iterations, wind, order, filters
+        As in :func:`run_vehicle_laws`.
+    path : {"command", "airframe", "wind"}
+        Where the learning law assumes the disturbance acts (:mod:`ilcdob.design.flown`).
+    law : str
+        Learning law (paper or exact-reference).
+
+    Returns
+    -------
+    ScenarioResult
+    """
+    return run_vehicle_laws(fleet, make, sc, iterations, laws=[(law, path)], wind=wind, order=order,
+                            filters=filters)[(law, path)]

@@ -115,11 +115,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", type=_ids, default=[1, 2, 3, 4], help="comma-separated scenario ids")
     p.add_argument("--iterations", type=_pos, default=3, help="learning iterations")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    p.add_argument("--plant", choices=("linear", "nonlinear"), default="linear",
-                   help="linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    p.add_argument("--plant", choices=("linear", "nonlinear", "rotorpy"), default="linear",
+                   help="linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors; rotorpy: "
+                        "identify and fly rotorpy's multirotors in the paper's disturbance and in wind, every law "
+                        "(needs the [rotorpy] extra)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (rotorpy: of the Dryden turbulence)")
+    p.add_argument("--workers", type=_pos, default=None,
+                   help="processes flying the scenarios, --plant rotorpy only (default 1)")
     p.add_argument("--sensor-noise", type=float, default=None,
-                   help="white position-sensor noise of every flight, m (default: 0 linear, 0.0005 nonlinear)")
+                   help="white position-sensor noise of every flight, m (default: 0 linear, 0.0005 nonlinear and "
+                        "rotorpy)")
     _band_options(p)
     p.add_argument("--order", type=_names, default=None,
                    help="learning order of every scenario, comma-separated system names, each once, at least two "

@@ -77,7 +77,8 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
                         iterations: int = 3, plant: str = "linear", seed: int = 0, law: str = "paper",
                         figures: bool = True, overwrite: bool = False, progress: Progress | None = None,
                         argv: Sequence[str] | None = None, order: Sequence[str] | None = None,
-                        sensor_noise: float | None = None, bandwidth: object = "auto") -> Any:
+                        sensor_noise: float | None = None, bandwidth: object = "auto",
+                        workers: int | None = None) -> Any:
     """Run the paper's scenarios on a fleet and write the reproduction folder (paper Sec. IV).
 
     Parameters
@@ -90,10 +91,12 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         Scenario ids 1-4.
     iterations : int
         Learning iterations.
-    plant : {"linear", "nonlinear"}
-        linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors.
+    plant : {"linear", "nonlinear", "rotorpy"}
+        linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors; rotorpy: identify
+        and fly rotorpy's multirotors in the paper's disturbance and in wind, every law
+        (:mod:`ilcdob.validation.vehicle_reproduction`; no fleet file, law, order or band).
     seed : int
-        Seed of the sensor noise.
+        Seed of the sensor noise (rotorpy: of the Dryden turbulence).
     law : str
         Learning law (:mod:`ilcdob.design.laws`; the nonlinear plant: paper or exact-reference).
     figures : bool
@@ -113,6 +116,8 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         0.5 mm on the nonlinear one).
     bandwidth : "auto", float or None
         The learning band (:mod:`ilcdob.design.band`).
+    workers : int, optional
+        Processes flying the scenarios; the rotorpy plant only (default 1).
 
     Returns
     -------
@@ -122,8 +127,27 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     from ilcdob.validation.scenarios import check_order
 
     law = check_law(law, "--law")
-    if plant not in ("linear", "nonlinear"):
-        raise SpecError(f"`plant`: got {plant!r}, expected 'linear' or 'nonlinear'")
+    if plant not in ("linear", "nonlinear", "rotorpy"):
+        raise SpecError(f"`plant`: got {plant!r}, expected 'linear', 'nonlinear' or 'rotorpy'")
+    if workers is not None and plant != "rotorpy":
+        raise SpecError(f"`--workers`: got {workers}, but only `--plant rotorpy` flies in parallel (plant {plant!r})")
+    if plant == "rotorpy":
+        given = [opt for opt, v in (("--fleet", fleet), ("--order", order),
+                                    ("--law", None if law == "paper" else law),
+                                    ("--bandwidth", None if bandwidth == "auto" else bandwidth)) if v is not None]
+        if given:
+            raise SpecError(f"`--plant rotorpy` takes no {', '.join(given)}: it flies its own vehicles with every law "
+                            "and the band chosen from each trial")
+        check_output_path(out, folder=True, overwrite=overwrite)
+        from ilcdob.validation.vehicle_reproduction import VehicleSettings, reproduce_vehicles
+
+        noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
+        res = reproduce_vehicles(list(scenarios), iterations, VehicleSettings(dryden_seed=seed, workers=workers or 1, **noise),
+                                 progress=progress)
+        _write_folder(out, _provenance("reproduce", argv, None, res.law), res.files(figures=figures),
+                      report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures),
+                      overwrite=overwrite)
+        return res
     if plant == "nonlinear" and law == "multi-source":
         raise SpecError("`--law multi-source` with `--plant nonlinear`: the nonlinear vehicles learn one pair at a time "
                         "(the airframe correction is per pair); use --law paper or exact-reference, or --plant linear")

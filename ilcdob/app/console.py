@@ -130,7 +130,7 @@ def _reproduce(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     res = uc.reproduce_to_folder(a.out, fleet=a.fleet, scenarios=a.scenarios, iterations=a.iterations,
                                  plant=a.plant, seed=a.seed, law=a.law, figures=not a.no_figures,
                                  overwrite=a.overwrite, progress=con.progress, argv=argv, order=a.order,
-                                 sensor_noise=a.sensor_noise, bandwidth=a.bandwidth)
+                                 sensor_noise=a.sensor_noise, bandwidth=a.bandwidth, workers=a.workers)
     con.note(f"wrote {a.out} ({time.perf_counter() - start:.1f} s, law {res.law})")
     for sr in res.scenarios:
         for name in sr.order:
