@@ -38,6 +38,24 @@ written by ``ilcdob identify-fleet``. ``model = { model = "x.json" }`` takes the
 may not also state ``identification``; a plant from a file may not also state ``delay``.
 ``ilcdob fleet add`` (:func:`ilcdob.fleet_io.add_system`) appends such systems to a fleet file.
 
+Three axes. The tables above describe the x axis (the paper's). A system flown on y or z adds
+per-axis sections with the same keys (no ``name``); the axis's ``plant`` is required, the
+plant's companions (``delay``, ``model``, ``identification``, ``uncertainty``) belong to the plant
+they are given with, and ``controller``, ``dob``, ``noise``, ``limits`` and ``sensor`` default to
+the x axis's::
+
+    [[system]]
+    name = "UAV1"
+    plant = { model = "uav1_x.json" }
+    controller = { kp = 3.0, ki = 0.3, kd = 2.4, derivative_filter = 0.05 }
+    dob = { q_order = 3, q_time_constant = 0.15 }
+    [system.z]
+    plant = { model = "uav1_z.json" }
+    controller = { kp = 4.0, ki = 0.4, kd = 2.8, derivative_filter = 0.05 }
+
+``load_fleet(path, axis="z")`` (``--axis z`` on the command line) is the fleet of that axis,
+each axis learned independently; every system then needs a section for it.
+
 Every system's loops are built (and checked for stability) when the fleet is loaded. Any
 problem raises :class:`~ilcdob.errors.FleetError` naming the file, the system and the key.
 """
@@ -57,7 +75,7 @@ from .loop import LoopSystem, build_loop
 from .specs import (DOBSpec, IdentificationSpec, LimitSpec, NoiseSpec, PIDSpec, PlantSpec, SensorSpec, SystemSpec,
                     UncertaintySpec)
 
-__all__ = ["Fleet", "load_fleet", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict",
+__all__ = ["AXES", "Fleet", "load_fleet", "axis_table", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict",
            "fleet_from_systems", "MODEL_FILE_KEY"]
 
 DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_fleet.toml"))
@@ -65,7 +83,11 @@ DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_flee
 _TOP_KEYS = {"sample_time": True, "system": True, "description": False}
 _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
                 "delay": False, "model": False, "noise": False, "identification": False, "uncertainty": False,
-                "limits": False, "sensor": False}
+                "limits": False, "sensor": False, "y": False, "z": False}
+#: The axes a fleet file can describe; x is the top level of each system (module docstring).
+AXES = ("x", "y", "z")
+#: Keys bound to a plant: an axis section that gives its own plant does not inherit them from x.
+_PLANT_KEYS = ("plant", "delay", "model", "identification", "uncertainty")
 _TABLE_KEYS = {
     "plant": {"num": True, "den": True},
     "model": {"num": True, "den": True, "delay": False},
@@ -100,15 +122,19 @@ class Fleet:
         Built, stability-checked loops, one per system.
     source : str
         Where the fleet came from (file path), for messages.
+    axis : {"x", "y", "z"}
+        The axis the systems describe (x: the paper's; module docstring).
     """
 
     sample_time: float
     systems: tuple[SystemSpec, ...]
     loops: tuple[LoopSystem, ...]
     source: str = "<memory>"
+    axis: str = "x"
 
     def __repr__(self) -> str:
-        return (f"<Fleet {', '.join(self.names)}; sample time {self.sample_time:g} s; from {self.source}>")
+        return (f"<Fleet {', '.join(self.names)}; sample time {self.sample_time:g} s; from {self.source}"
+                + ("" if self.axis == "x" else f"; axis {self.axis}") + ">")
 
     def _repr_html_(self) -> str:
         from .display import html_table
@@ -225,12 +251,64 @@ def _system_from_table(src: str, idx: int, table: Any, base_dir: Path | None = N
         raise FleetError(f"{src}: {exc}" if str(exc).startswith("system ") else f"{label}: {exc}") from exc
 
 
+def axis_table(src: str, idx: int, table: Any, axis: str) -> Any:
+    """One ``[[system]]`` table as the flat table of one axis (module docstring): x is the table without its
+    axis sections; y or z is the x table with the plant-bound keys replaced by the axis section's and the
+    other keys it states overriding.
+
+    Parameters
+    ----------
+    src : str
+        The fleet's source, for messages.
+    idx : int
+        The system's position in the file (0-based), for messages.
+    table : dict
+        The parsed ``[[system]]`` table.
+    axis : {"x", "y", "z"}
+        The axis.
+
+    Returns
+    -------
+    dict
+        A table for a single axis (no ``y``/``z`` keys); ``table`` itself when it is not a dict.
+
+    Raises
+    ------
+    FleetError
+        An unknown axis, a system without the axis's section, or a section that is not a table, names a
+        system or lacks its plant.
+    """
+    if axis not in AXES:
+        raise FleetError(f"{src}: axis {axis!r}: expected one of {list(AXES)}")
+    if not isinstance(table, dict):
+        return table
+    flat = {k: v for k, v in table.items() if k not in AXES}
+    if axis == "x":
+        return flat
+    label = f"{src}: system {table.get('name', f'#{idx + 1}')!r}"
+    section = table.get(axis)
+    if section is None:
+        raise FleetError(f"{label}: no [system.{axis}] section; the {axis} axis needs its own plant (and "
+                         f"optionally controller, dob, limits), or fly the x axis")
+    if not isinstance(section, dict):
+        raise FleetError(f"{label}, key `{axis}`: got {section!r}, expected a table of the axis's plant, "
+                         "controller and DOB")
+    for key, what in (("name", "the system's name belongs to the [[system]] table"),
+                      ("y", "axis sections do not nest"), ("z", "axis sections do not nest")):
+        if key in section:
+            raise FleetError(f"{label}, [system.{axis}] key `{key}`: {what}")
+    if "plant" not in section:
+        raise FleetError(f"{label}, [system.{axis}]: missing key `plant` (each axis has its own plant)")
+    return {**{k: v for k, v in flat.items() if k not in _PLANT_KEYS}, **section}
+
+
 def _check_sample_time(source: str, ts: Any) -> None:
     if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not ts > 0 or ts == float("inf"):
         raise FleetError(f"{source}: key `sample_time`: got {ts!r}, expected a number > 0 (s)")
 
 
-def fleet_from_dict(data: dict[str, Any], source: str = "<memory>", base_dir: str | Path | None = None) -> Fleet:
+def fleet_from_dict(data: dict[str, Any], source: str = "<memory>", base_dir: str | Path | None = None,
+                    axis: str = "x") -> Fleet:
     """Validate a parsed fleet table and build its loops (see module docstring).
 
     Parameters
@@ -242,6 +320,8 @@ def fleet_from_dict(data: dict[str, Any], source: str = "<memory>", base_dir: st
     base_dir : str or pathlib.Path, optional
         Folder that relative model-file paths (``plant = { model = "..." }``) are relative to
         (:func:`load_fleet`: the fleet file's folder; default: the working directory).
+    axis : {"x", "y", "z"}
+        The axis whose systems are built (:func:`axis_table`).
 
     Raises
     ------
@@ -255,8 +335,9 @@ def fleet_from_dict(data: dict[str, Any], source: str = "<memory>", base_dir: st
     if not isinstance(tables, list) or not tables:
         raise FleetError(f"{source}: key `system`: expected one or more [[system]] tables")
     base = Path(base_dir) if base_dir is not None else None
-    systems = [_system_from_table(source, i, t, base) for i, t in enumerate(tables)]
-    return fleet_from_systems(systems, float(ts), source)
+    label = source if axis == "x" else f"{source} (axis {axis})"
+    systems = [_system_from_table(label, i, axis_table(source, i, t, axis), base) for i, t in enumerate(tables)]
+    return replace(fleet_from_systems(systems, float(ts), source), axis=axis)
 
 
 def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source: str = "<memory>") -> Fleet:
@@ -305,13 +386,15 @@ def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source
     return Fleet(sample_time=ts, systems=tuple(systems), loops=tuple(loops), source=source)
 
 
-def load_fleet(path: str | Path) -> Fleet:
+def load_fleet(path: str | Path, axis: str = "x") -> Fleet:
     """Load and validate a fleet TOML file.
 
     Parameters
     ----------
     path : str or Path
         The fleet file (schema: module docstring).
+    axis : {"x", "y", "z"}
+        The axis whose fleet is loaded (x: the paper's; y and z from the per-axis sections).
 
     Returns
     -------
@@ -332,7 +415,7 @@ def load_fleet(path: str | Path) -> Fleet:
     """
     path = Path(path)
     _, data = read_fleet_file(path)
-    return fleet_from_dict(data, str(path), base_dir=path.parent)
+    return fleet_from_dict(data, str(path), base_dir=path.parent, axis=axis)
 
 
 def read_fleet_file(path: str | Path) -> tuple[str, dict[str, Any]]:

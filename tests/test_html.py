@@ -141,9 +141,10 @@ def test_sections_render_from_their_inputs(full_report, paper_dir):
     for text in ("closed-form", "robust", "ratio_median", "0.0123", "0.0456", "3 list values not tabulated",
                  "share_improved", "0.985", "1.75", "0.0876"):
         assert text in html, text
-    # only the nonlinear plant has no input here
-    assert html.count('<span class="status-none">') == 1
+    # only the nonlinear and rotorpy plants have no input here
+    assert html.count('<span class="status-none">') == 2
     assert 'results.json with &quot;plant&quot;: &quot;nonlinear&quot;' in html
+    assert 'results.json with &quot;plant&quot;: &quot;rotorpy&quot; from `ilcdob reproduce --plant rotorpy' in html
 
 
 def test_missing_inputs_are_named_and_no_numbers_invented(tmp_path, json_dirs):
@@ -251,7 +252,7 @@ def test_errors_name_the_folder_and_the_expected_files(tmp_path, paper_dir):
     wrong = tmp_path / "wrong"
     wrong.mkdir()
     (wrong / "results.json").write_text(json.dumps({"plant": "hybrid", "scenarios": []}))
-    with pytest.raises(ReportError, match=r"\"plant\" is 'hybrid', expected one of \['linear', 'nonlinear'\]"):
+    with pytest.raises(ReportError, match=r"\"plant\" is 'hybrid', expected one of \['linear', 'nonlinear', 'rotorpy'\]"):
         build_report([wrong])
     with pytest.raises(ReportError, match="got no folder"):
         build_report([])

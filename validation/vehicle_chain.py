@@ -22,7 +22,7 @@ Units: s, m, m/s, m/s^2. The flights are :class:`~ilcdob.validation.simulate.Fli
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 from scipy import signal as sps
@@ -34,13 +34,13 @@ from ilcdob.loop import LoopSystem, build_loop
 from ilcdob.signals import FlightData
 from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
-from ilcdob.vehicles.interface import Vehicle, fly_vehicle
+from ilcdob.vehicles.interface import AXES, Vehicle, fly_vehicle
 
 from .reproduce import ScenarioResult, SystemResult, learning_chain, pair_designs
 from .scenarios import Scenario, check_order
 from .simulate import Flight
 
-__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_laws", "run_vehicle_scenario", "rough_loop",
+__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_axes", "run_vehicle_laws", "run_vehicle_scenario", "rough_loop",
            "dryden_gust", "MakeVehicle", "LawPath"]
 
 #: Candidate structures of the x plant, fewest free parameters first: the paper's two integrators and a pole
@@ -100,7 +100,7 @@ def rough_loop(ts: float) -> LoopSystem:
     return build_loop(spec, ts)
 
 
-def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: float) -> FlightData:
+def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: float, axis: str = "x") -> FlightData:
     loop = rough_loop(ts)
     n = int(round(duration / ts))
     t = np.arange(n) * ts
@@ -109,14 +109,17 @@ def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: 
     # into multi-g commands that tilt and drop the heavier vehicles (px4: 15 cm in z), far from hover
     b, a = sps.bilinear([1.0], [0.09, 0.6, 1.0], 1.0 / ts)
     r = sps.lfilter(b, a, 0.05 * np.sign(np.sin(2 * np.pi * t / 10 + seed)))
-    trial = fly_vehicle(make(name, None, None, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
-                        feedforward={"x": inj}, dob=False)
-    return FlightData(t, {"u": trial.applied[:, 0], "y": trial.y_meas[:, 0]}, {"u": "m/s^2", "y": "m"})
+    trial = fly_vehicle(make(name, None, None, seed), {"x": loop, "y": loop, "z": loop}, {axis: r},
+                        feedforward={axis: inj}, dob=False)
+    i = AXES.index(axis)
+    return FlightData(t, {"u": trial.applied[:, i], "y": trial.y_meas[:, i]}, {"u": "m/s^2", "y": "m"})
 
 
 def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str, PIDSpec],
-                      dobs: dict[str, DOBSpec], ts: float, duration: float = 20.0) -> tuple[Fleet, dict[str, VehicleFit]]:
-    """Identify every vehicle's x plant from its own flights and build the fleet of the fits (module docstring).
+                      dobs: dict[str, DOBSpec], ts: float, duration: float = 20.0,
+                      axis: str = "x") -> tuple[Fleet, dict[str, VehicleFit]]:
+    """Identify every vehicle's plant of one axis from its own flights and build the fleet of the fits (module
+    docstring).
 
     Parameters
     ----------
@@ -131,17 +134,23 @@ def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str
         Sample time, s.
     duration : float
         Length of each identification flight, s (two per vehicle: estimation and held out).
+    axis : {"x", "y", "z"}
+        The axis flown and identified (its chirp and steps; the others hold their start).
 
     Returns
     -------
     (Fleet, dict of str to VehicleFit)
+        The fleet records its ``axis``.
     """
     from ilcdob.identification.tfest import tfest
 
+    if axis not in AXES:
+        raise SpecError(f"`axis`: got {axis!r}, expected one of {list(AXES)}")
+
     systems, fits = [], {}
     for name in names:
-        est = _chirp_flight(make, name, ts, 0, duration)
-        val = _chirp_flight(make, name, ts, 1, duration)
+        est = _chirp_flight(make, name, ts, 0, duration, axis)
+        val = _chirp_flight(make, name, ts, 1, duration, axis)
         results = {}
         for st in STRUCTURES:
             fit = tfest(est, "u", "y", st, validation=val)
@@ -152,7 +161,7 @@ def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str
         relative_degree = chosen[1].n_poles - chosen[1].n_zeros  # M = Q/P_hat must stay proper
         dob = dobs[name] if dobs[name].q_order >= relative_degree else replace(dobs[name], q_order=relative_degree)
         systems.append(SystemSpec(name, chosen[2], controllers[name], dob))
-    return fleet_from_systems(systems, ts), fits
+    return replace(fleet_from_systems(systems, ts), axis=axis), fits
 
 
 def dryden_gust(duration: float, ts: float, wind_20ft: float = 2.0, altitude: float = 1.0, seed: int = 0,
@@ -194,106 +203,147 @@ def dryden_gust(duration: float, ts: float, wind_20ft: float = 2.0, altitude: fl
 LawPath = tuple[str, str]
 
 
-def run_vehicle_laws(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
+def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
                      laws: list[LawPath] = (("paper", "command"),), wind: float | Callable | None = None,
-                     order: list[str] | None = None, filters: dict | None = None) -> dict[LawPath, ScenarioResult]:
-    """Fly one scenario with every vehicle: no DOB and DOB only once, then ``iterations`` learning
-    flights each with every learning law (module docstring).
+                     order: list[str] | None = None) -> dict[LawPath, dict[str, ScenarioResult]]:
+    """Fly one scenario with every vehicle, learning every axis of ``fleets`` independently: no DOB and DOB only
+    once, then ``iterations`` learning flights each with every learning law (module docstring).
+
+    The axes share the flights: each learning flight flies every axis's learning signal, each computed by that
+    axis's pair design from the previous flight's error on the axis. Axes without a fleet hold the start
+    (reference 0) with the PID and DOB of the first fleet's loop and learn nothing.
 
     Parameters
     ----------
-    fleet : Fleet
-        The identified models (:func:`identify_vehicles`), one system per vehicle name.
+    fleets : mapping of str to Fleet
+        Axis (``"x"``, ``"y"``, ``"z"``) -> the identified models of that axis (:func:`identify_vehicles`),
+        the same vehicle names in each.
     make : callable
         ``make(name, command_disturbance, wind, seed)`` (:data:`MakeVehicle`); flight ``k`` of a vehicle
         in the scenario flies with seed ``1000 sc.id + 10 k`` plus its position in the fleet (sensor noise:
         the laws' learning flights meet the same noise).
     sc : Scenario
-        Reference, disturbance and learning order.
+        Reference (x, and y of the lateral paths; z holds the start), disturbance and learning order.
     iterations : int
         Learning flights per vehicle and law (>= 1).
     laws : list of (str, str)
         The (law, path) pairs to fly (:data:`LawPath`).
     wind : float or callable, optional
-        None: the scenario's disturbance is added to every vehicle's command (the paper's). A
-        number: it is a wind velocity instead, ``wind`` m/s per m/s^2 of the scenario's
-        disturbance, along x. A callable ``t -> (3,)``: this wind velocity (m/s), e.g.
-        :func:`dryden_gust`. Winds act through each airframe's drag.
+        None: the scenario's disturbance is added to every vehicle's x command (the paper's). A
+        number: it is a wind velocity along x instead, ``wind`` m/s per m/s^2 of the scenario's
+        disturbance. A callable ``t -> (3,)``: this wind velocity (m/s), e.g. :func:`dryden_gust`.
+        Winds act through each airframe's drag.
     order : list of str, optional
         Learning order (default: the scenario's).
-    filters : dict, optional
-        Cache of closed-form filters per pair.
 
     Returns
     -------
-    dict of (str, str) to ScenarioResult
-        Per law, flights of the x axis as :class:`~ilcdob.validation.simulate.Flight` (``d``: the
-        command disturbance, the scenario's disturbance a scaled wind was made from, or the wind's x
-        component in m/s); the no-DOB and DOB-only flights are shared.
+    dict of (str, str) to dict of str to ScenarioResult
+        Per law and axis, the flights of that axis as :class:`~ilcdob.validation.simulate.Flight` (``d``:
+        the command disturbance, the scenario's disturbance a scaled wind was made from, or the wind's
+        component in m/s); the no-DOB and DOB-only flights are shared by the laws.
     """
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
         raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    axes = [ax for ax in AXES if ax in fleets]
+    if not axes or len(axes) != len(fleets):
+        raise SpecError(f"`fleets`: got axes {list(fleets)}, expected a mapping with keys from {list(AXES)}")
+    first = fleets[axes[0]]
+    if any(fleets[ax].names != first.names or fleets[ax].sample_time != first.sample_time for ax in axes):
+        raise SpecError("`fleets`: every axis needs the same vehicles and sample time")
     laws = [tuple(lp) for lp in laws]
     for law, path in laws:
         if law not in ("paper", "exact-reference") or path not in DISTURBANCE_PATHS:
             raise SpecError(f"`laws`: got ({law!r}, {path!r}), expected a law 'paper' or 'exact-reference' and a "
                             f"path of {DISTURBANCE_PATHS}")
-    ts = fleet.sample_time
+    ts = first.sample_time
     t = sc.time(ts)
-    r, a_ref, d = sc.reference(t), sc.acceleration(t), sc.disturbance(t)
-    order = sc.order(fleet.names) if order is None else check_order(fleet.names, order)
+    pos, acc = sc.trajectory(t)
+    pos[:, 2] = 0.0  # positions are measured from the start, which hovers at the path's altitude
+    for i, ax in enumerate(AXES):
+        if ax not in fleets:  # as the paper's x-only flights: axes not learned hold the start
+            pos[:, i] = acc[:, i] = 0.0
+    order = sc.order(first.names) if order is None else check_order(first.names, order)
+    x_dist = sc.disturbance(t)
 
     def along_x(scale: float) -> Callable:
         return lambda tt: np.array([scale * float(sc.disturbance(np.array([tt]))[0]), 0.0, 0.0])
 
+    d = np.zeros((t.size, 3))
     if wind is None:
         command, air = along_x(1.0), None
+        d[:, 0] = x_dist
     elif callable(wind):
         command, air = None, wind
-        d = np.array([float(np.asarray(wind(tt), float).reshape(-1)[0]) for tt in t])
+        d = np.array([np.asarray(wind(tt), float).reshape(-1)[:3] for tt in t])
     elif isinstance(wind, (int, float)) and not isinstance(wind, bool) and np.isfinite(wind):
         command, air = None, along_x(float(wind))
+        d[:, 0] = x_dist
     else:
         raise SpecError(f"`wind`: got {wind!r}, expected None, a gain in m/s per m/s^2 or a callable t -> (3,) m/s")
     flown = {name: 0 for name in order}
 
-    def flight(name: str, mode: str, d_f: np.ndarray | None = None, k: int | None = None) -> Flight:
-        loop = fleet.loop(name)
-        ff = {"x": a_ref} if loop.spec.controller.acceleration_feedforward else None
+    def flight(name: str, mode: str, d_f: dict | None = None, k: int | None = None) -> dict[str, Flight]:
+        loops = {ax: fleets.get(ax, first).loop(name) for ax in AXES}
+        ff = {ax: acc[:, i] for i, ax in enumerate(AXES) if loops[ax].spec.controller.acceleration_feedforward}
         if k is None:
             k = flown[name]
             flown[name] += 1
-        seed = 1000 * sc.id + 10 * k + fleet.names.index(name)
-        trial = fly_vehicle(make(name, command, air, seed), {"x": loop, "y": loop, "z": loop}, {"x": r},
-                            learning=None if d_f is None else {"x": d_f}, feedforward=ff, dob=mode == "dob")
-        y = trial.y_meas[:, 0]
-        return Flight(system=name, mode=mode, t=t, r=r, y=y, e=r - y, d=d, d_hat=trial.d_hat[:, 0],
-                      d_f=trial.d_f[:, 0], u2=trial.command[:, 0])
+        seed = 1000 * sc.id + 10 * k + first.names.index(name)
+        trial = fly_vehicle(make(name, command, air, seed), loops, pos, learning=d_f, feedforward=ff or None,
+                            dob=mode == "dob")
+        return {ax: Flight(system=name, mode=mode, t=t, r=pos[:, i], y=trial.y_meas[:, i],
+                           e=pos[:, i] - trial.y_meas[:, i], d=d[:, i], d_hat=trial.d_hat[:, i],
+                           d_f=trial.d_f[:, i], u2=trial.command[:, i])
+                for i, ax in enumerate(AXES) if ax in fleets}
 
     base = {name: (flight(name, "no_dob"), flight(name, "dob")) for name in order}
-    out = {}
+    out: dict[LawPath, dict[str, ScenarioResult]] = {}
     for law, path in laws:
-        design = pair_designs(fleet, {} if filters is None else filters, law, r, a_ref, "auto", path)
+        designs = {ax: pair_designs(fleets[ax], {}, law, pos[:, AXES.index(ax)], acc[:, AXES.index(ax)], "auto", path)
+                   for ax in axes}
         count = dict(flown)
 
-        def step(src: str, tgt: str, prev: Flight) -> Flight:
+        def step(src: str, tgt: str, prev: dict[str, Flight]) -> dict[str, Flight]:
             count[tgt] += 1
-            return flight(tgt, "dob", design(src, tgt).learning(prev.e, prev.d_f).d_f, k=count[tgt] - 1)
+            d_f = {ax: designs[ax](src, tgt).learning(prev[ax].e, prev[ax].d_f).d_f for ax in axes}
+            return flight(tgt, "dob", d_f, k=count[tgt] - 1)
 
         learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
-        systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name])) for name in order}
-        out[(law, path)] = ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
+        out[(law, path)] = {ax: ScenarioResult(scenario=sc, order=order, chain=chain, systems={
+            name: SystemResult(base[name][0][ax], base[name][1][ax], tuple(f[ax] for f in learning[name]))
+            for name in order}) for ax in axes}
     return out
+
+
+def run_vehicle_laws(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
+                     laws: list[LawPath] = (("paper", "command"),), wind: float | Callable | None = None,
+                     order: list[str] | None = None) -> dict[LawPath, ScenarioResult]:
+    """One axis's flights of :func:`run_vehicle_axes` (the fleet's ``axis``; the paper's x by default).
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The identified models of one axis.
+    make, sc, iterations, laws, wind, order
+        As in :func:`run_vehicle_axes`.
+
+    Returns
+    -------
+    dict of (str, str) to ScenarioResult
+    """
+    res = run_vehicle_axes({fleet.axis: fleet}, make, sc, iterations, laws=laws, wind=wind, order=order)
+    return {lp: per_axis[fleet.axis] for lp, per_axis in res.items()}
 
 
 def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iterations: int = 3, *,
                          wind: float | Callable | None = None, path: str = "command", law: str = "paper",
-                         order: list[str] | None = None, filters: dict | None = None) -> ScenarioResult:
+                         order: list[str] | None = None) -> ScenarioResult:
     """Fly one scenario with one learning law: :func:`run_vehicle_laws` with ``laws=[(law, path)]``.
 
     Parameters
     ----------
-    fleet, make, sc, iterations, wind, order, filters
+    fleet, make, sc, iterations, wind, order
         As in :func:`run_vehicle_laws`.
     path : {"command", "airframe", "wind"}
         Where the learning law assumes the disturbance acts (:mod:`ilcdob.design.flown`).
@@ -304,5 +354,4 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
     -------
     ScenarioResult
     """
-    return run_vehicle_laws(fleet, make, sc, iterations, laws=[(law, path)], wind=wind, order=order,
-                            filters=filters)[(law, path)]
+    return run_vehicle_laws(fleet, make, sc, iterations, laws=[(law, path)], wind=wind, order=order)[(law, path)]

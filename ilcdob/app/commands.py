@@ -47,15 +47,21 @@ __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_jso
 Progress = Callable[[int, int, str], None]
 
 
-def fleet_and_hash(path: str | Path | None) -> tuple[Fleet, str]:
+def fleet_and_hash(path: str | Path | None, axis: str = "x") -> tuple[Fleet, str]:
     """The fleet of a ``--fleet`` option (None: the built-in fleet) and the SHA-256 of its file.
 
     Parameters
     ----------
     path : str or Path or None
         Fleet TOML file.
+    axis : {"x", "y", "z"}
+        The axis (``--axis``): y and z come from the file's per-axis sections (:mod:`ilcdob.fleet`);
+        the built-in fleet has the x axis only.
     """
-    fleet = load_fleet(path) if path else default_fleet()
+    if axis != "x" and not path:
+        raise SpecError(f"`--axis {axis}`: the built-in fleet describes the x axis only (the paper's); give a "
+                        f"--fleet file with [system.{axis}] sections")
+    fleet = load_fleet(path, axis) if path else default_fleet()
     data = Path(path if path else DEFAULT_FLEET_PATH).read_bytes()
     return fleet, hashlib.sha256(data).hexdigest()
 
@@ -377,7 +383,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                      n: int | None = None, law: str = "paper", trial: str | Path | None = None,
                      c_prefix: str | None = None, c_float: bool = False, bandwidth: object = "auto",
                      disturbance: str = "command", on_limit: str = "clip", overwrite: bool = False,
-                     argv: Sequence[str] | None = None) -> tuple[Any, dict[str, Any]]:
+                     argv: Sequence[str] | None = None, axis: str = "x") -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
     Parameters
@@ -420,12 +426,16 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
 
+    axis : {"x", "y", "z"}
+        The axis designed (the fleet file's section; filters.json records it, and the C prefix of y
+        and z designs ends in the axis).
+
     Returns
     -------
     tuple of (PairDesign, dict)
         The design and the ``filters.json`` content written.
     """
-    from ilcdob.design.c_export import check_c_prefix, design_files
+    from ilcdob.design.c_export import check_c_prefix, default_c_prefix, design_files
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.design.laws import check_law
     from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
@@ -455,7 +465,9 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         raise SpecError("`--method robust`: the robust learning signal is an SOCP solved per trial; give the "
                         "previous system's trial with --trial CSV (columns time, error, learning)")
     check_output_path(out, folder=True, overwrite=overwrite)
-    flt, digest = fleet_and_hash(fleet)
+    flt, digest = fleet_and_hash(fleet, axis)
+    if axis != "x" and c_prefix is None:
+        c_prefix = f"{default_c_prefix(source, target)}{axis}_"
     columns = {"e": "error", "d_f": "learning"}
     if law == "exact-reference":
         columns["r"] = "reference"
@@ -482,7 +494,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
         e_in = design.reference.error_in(data["e"]) if design.reference is not None else data["e"]
         design = design_with_band(design, design.band_for(e_in, data["d_f"]))
-    filters = dict(design.filters)
+    filters = {**design.filters, "axis": axis}
     others: dict[str, Any] = {}
     arrays = design.lifted
     if data is not None:
@@ -575,7 +587,8 @@ class TrialColumns(LogClock):
 def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *, source: str | None = None,
                     target: str | None = None, fleet: str | Path | None = None, design: str | Path | None = None,
                     method: str = "closed-form", bandwidth: object = "auto", on_limit: str = "clip",
-                    overwrite: bool = False, argv: Sequence[str] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+                    overwrite: bool = False, argv: Sequence[str] | None = None,
+                    axis: str | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """The next vehicle's learning signal from a recorded trial of the previous one (the paper's law).
 
     Computed from the filters' coefficients exactly as the emitted C function ``<prefix>learn``
@@ -614,6 +627,9 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
 
+    axis : {"x", "y", "z"}, optional
+        The axis learned (default x; with ``design``: checked against its filters.json).
+
     Returns
     -------
     (numpy.ndarray, dict)
@@ -643,6 +659,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
             if given is not None and given != filters.get(key):
                 raise SpecError(f"`{name}`: got {given!r}, but {path} was designed {filters.get('from')!r} -> "
                                 f"{filters.get('to')!r}")
+        if axis is not None and axis != filters.get("axis", "x"):
+            raise SpecError(f"`--axis`: got {axis!r}, but {path} was designed for axis {filters.get('axis', 'x')!r}")
         source, target = filters.get("from"), filters.get("to")
         origin = f"filters.json of {Path(design).name}"
     else:
@@ -651,13 +669,13 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                             "(or give --design FOLDER)")
         from ilcdob.design.pair import design_pair, design_with_band
 
-        flt, digest = fleet_and_hash(fleet)
+        flt, digest = fleet_and_hash(fleet, axis or "x")
         if abs(data.ts - flt.sample_time) > 1e-9:
             raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
         made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit)
         if made.choose is not None:
             made = design_with_band(made, made.band_for(e, df_prev))
-        filters = dict(made.filters)
+        filters = {**made.filters, "axis": axis or "x"}
         origin = f"designed here ({method})"
     if filters.get("law", "paper") != "paper" or "L1" not in filters or "L2" not in filters:
         raise SpecError(f"the filters ({origin}): method {filters.get('method')!r}, law {filters.get('law')!r}; "
@@ -670,9 +688,11 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     d_f, report = enforce_limit(d_f, None if limit is None else LimitSpec(acceleration=float(limit)), on_limit,
                                 f"learning signal of {target} from {source}")
     n = d_f.size
-    prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target))
+    axis = filters.get("axis", "x")
+    prefix = ((filters.get("c") or {}).get("prefix")
+              or default_c_prefix(str(source), str(target)) + ("" if axis == "x" else f"{axis}_"))
     header = signal_header(prefix, d_f, ts)
-    summary = {"from": source, "to": target, "filters": origin, "method": filters.get("method"), "law": "paper",
+    summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"), "law": "paper",
                "trial": {"file": Path(trial).name, "samples": n, "sample_time_s": ts,
                          "error": (f"column {columns.error}" if columns.error is not None
                                    else f"{columns.reference} - {columns.position}"),
@@ -697,7 +717,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
 
 def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, order: Sequence[str] | None = None,
                   bound: float | None = None, scale: float = 1.0, samples: int = 8, bandwidth: object = "auto",
-                  argv: Sequence[str] | None = None) -> list[Any]:
+                  argv: Sequence[str] | None = None, axis: str = "x") -> list[Any]:
     """Will learning help? Per pair and frequency the exact worst-case error ratio of the law as
     applied (closed-form filters with each pair's learning band) over the Delta set's disc, the
     ratio for a stated plant, and the paper's first-order condition (paper Sec. III), optionally
@@ -723,6 +743,9 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     argv : sequence of str, optional
         Command line, recorded in the file.
 
+    axis : {"x", "y", "z"}
+        The axis checked (the fleet file's section).
+
     Returns
     -------
     list of PairCheck
@@ -732,7 +755,7 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
 
     if out is not None:
         check_output_path(out, folder=False)
-    flt, digest = fleet_and_hash(fleet)
+    flt, digest = fleet_and_hash(fleet, axis)
     order = list(order) if order else flt.names
     for name in order:
         flt.loop(name)  # unknown names: a clear error

@@ -188,7 +188,7 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     design, written = uc.design_to_folder(
         a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho, samples=a.samples, bound=a.bound,
         n=a.n, law=a.law, trial=a.trial, c_prefix=a.c_prefix, c_float=a.c_float, bandwidth=a.bandwidth,
-        disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv)
+        disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv, axis=a.axis)
     band = written.get("band", {})
     cutoff = band.get("cutoff_rad_s")
     con.note(f"ilcdob: learning band {'off' if cutoff is None else f'{cutoff:.4g} rad/s'} ({band.get('reason', '')})")
@@ -207,8 +207,8 @@ def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                               time=a.time, time_unit=a.time_unit, start=a.start, stop=a.stop)
     _, summary = uc.learn_to_folder(a.out, a.trial, columns, source=a.source, target=a.target, fleet=a.fleet,
                                     design=a.design, method=a.method, bandwidth=a.bandwidth, on_limit=a.on_limit,
-                                    overwrite=a.overwrite, argv=argv)
-    print(json.dumps({k: summary[k] for k in ("from", "to", "filters", "trial", "learning_signal", "limit")}))
+                                    overwrite=a.overwrite, argv=argv, axis=a.axis)
+    print(json.dumps({k: summary[k] for k in ("from", "to", "axis", "filters", "trial", "learning_signal", "limit")}))
     con.note(f"wrote {a.out}")
     return 0
 
@@ -220,7 +220,7 @@ def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
     order = [s.strip() for s in a.order.split(",")] if a.order else None
     checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=a.scale,
-                              bandwidth=a.bandwidth, argv=argv)
+                              bandwidth=a.bandwidth, argv=argv, axis=a.axis)
     print(format_theorem_table(checks))
     disagree = [f"{c.source} -> {c.target}" for c in checks if not c.agrees]
     if disagree:

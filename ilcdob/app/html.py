@@ -10,7 +10,7 @@ files name.
 Inputs, detected by file name in each folder
 --------------------------------------------
 ``results.json`` (``ilcdob reproduce``, see :meth:`ReproductionResult.to_dict`)
-    ``{"plant": "linear" | "nonlinear", "law": LAW, "fleet": PATH, "sample_time": s, "iterations": n,
+    ``{"plant": "linear" | "nonlinear" | "rotorpy", "law": LAW, "fleet": PATH, "sample_time": s, "iterations": n,
     "scenarios": [{"id", "title", "order": [names], "systems": {name: {"rmse_no_dob",
     "rmse_dob", "rmse_learning": [n], "rmse_dhat_dob", "rmse_dhat_learning": [n]}}}]}``,
     RMSE in m and m/s^2 (``law``: the learning law of :mod:`ilcdob.design.laws`, shown with
@@ -76,13 +76,14 @@ THEOREM_SAMPLES = 8
 
 #: File name -> the command that writes it.
 KNOWN_FILES: dict[str, str] = {
-    "results.json": "ilcdob reproduce [--plant linear|nonlinear] --out DIR",
+    "results.json": "ilcdob reproduce [--plant linear|nonlinear|rotorpy] --out DIR",
     "compare.json": "ilcdob compare --out DIR",
     "campaign.json": "ilcdob campaign --samples N --out DIR",
 }
-PLANTS = ("linear", "nonlinear")
+PLANTS = ("linear", "nonlinear", "rotorpy")
 _PLANT_TITLE = {"linear": "Linear plant (exact models, simulation)",
-                "nonlinear": "Nonlinear plant (6-DOF quadrotors flown with identified models)"}
+                "nonlinear": "Nonlinear plant (6-DOF quadrotors flown with identified models)",
+                "rotorpy": "Rotorpy plant (a third-party multirotor simulator flown with identified models)"}
 _LABEL_KEYS = ("method", "name", "label", "id", "key")
 _PAIR_KEYS = (("source", "target"), ("from", "to"))
 _MAX_TEXT = 60
@@ -819,7 +820,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
         sections.append(_Section(plant, _PLANT_TITLE[plant], "\n".join(_plant_section(r) for r in mine),
                                  [str(r.path) for r in mine],
                                  f"results.json with \"plant\": \"{plant}\" from `ilcdob reproduce"
-                                 + (" --plant nonlinear" if plant == "nonlinear" else "") + " --out DIR`"))
+                                 + ("" if plant == "linear" else f" --plant {plant}") + " --out DIR`"))
 
     # Theorem check
     body, srcs = [], []
