@@ -427,7 +427,7 @@ class NonlinearReproduction(ReproductionResult):
 
     Attributes
     ----------
-    fleet, scenarios, iterations, filters, elapsed_s, law, sensor_noise_std, bandwidth
+    fleet, scenarios, iterations, filters, elapsed_s, law, sensor_noise_std, bandwidth, identified_toml
         As in :class:`~ilcdob.validation.reproduce.ReproductionResult`; ``fleet`` holds the
         models flown, ``law`` is ``"paper"`` or ``"exact-reference"`` (the sensor noise and
         band of the run are in ``settings``).
@@ -438,37 +438,11 @@ class NonlinearReproduction(ReproductionResult):
     identification : dict
         Fleet name -> :class:`~ilcdob.identification.fleet_id.VehicleIdentification`
         (empty when ``settings.identify`` is False).
-    identified_toml : str
-        The fleet file of the models (TOML text; the reports store it as
-        ``identified_fleet.toml``).
     """
 
     settings: NonlinearSettings = field(default_factory=NonlinearSettings)
     vehicles: dict = field(default_factory=dict)
     identification: dict = field(default_factory=dict)
-    identified_toml: str = ""
-
-    def files(self, figures: bool = True) -> dict[str, object]:
-        """The report of :meth:`ReproductionResult.files` with ``identified_fleet.toml``.
-
-        Parameters
-        ----------
-        figures : bool
-            Include the figures.
-
-        Returns
-        -------
-        dict of str to object
-            File name -> content, nothing written: the reproduction's report with
-            ``identified_fleet.toml`` (str, :attr:`identified_toml`, the fleet file of the
-            models) inserted before ``results.json``, which stays last.
-        """
-        out = dict(super().files(figures=figures))
-        results = out.pop("results.json", None)
-        out["identified_fleet.toml"] = self.identified_toml
-        if results is not None:
-            out["results.json"] = results
-        return out
 
     def to_dict(self) -> dict[str, object]:
         """The schema of :meth:`ReproductionResult.to_dict` with ``"plant": "nonlinear"``."""

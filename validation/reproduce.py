@@ -165,6 +165,9 @@ class ReproductionResult:
         Position-sensor noise of every flight, m (0: exact sensors).
     bandwidth : "auto", float or None
         The learning band asked for (:mod:`ilcdob.design.band`).
+    identified_toml : str
+        The fleet file of models identified by the run (TOML text, written as
+        ``identified_fleet.toml``); empty when the models were given.
     """
 
     fleet: Fleet
@@ -175,6 +178,7 @@ class ReproductionResult:
     law: str = DEFAULT_LAW
     sensor_noise_std: float = 0.0
     bandwidth: object = "auto"
+    identified_toml: str = ""
 
     def _ratios(self) -> list[tuple[int, str, dict[str, float]]]:
         return [(sr.scenario.id, name, sr.systems[name].metrics()) for sr in self.scenarios for name in sr.order]
@@ -231,7 +235,8 @@ class ReproductionResult:
         dict of str to object
             The figures (``matplotlib.figure.Figure``, PNG at
             :data:`ilcdob.validation.figures.FIGURE_DPI`) when ``figures``, then ``README.md``
-            (str, :func:`markdown_index`), then ``results.json`` (a JSON document,
+            (str, :func:`markdown_index`), ``identified_fleet.toml`` when the run identified its
+            models (:attr:`identified_toml`), then ``results.json`` (a JSON document,
             :meth:`to_dict` with non-finite numbers as null). ``results.json`` comes last: written
             in this order, its presence means the files beside it are complete.
         """
@@ -241,6 +246,8 @@ class ReproductionResult:
 
             out.update(reproduction_figures(self))
         out["README.md"] = markdown_index(self, list(out))
+        if self.identified_toml:
+            out["identified_fleet.toml"] = self.identified_toml
         out["results.json"] = json_document(self.to_dict())
         return out
 

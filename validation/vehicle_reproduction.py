@@ -61,7 +61,7 @@ DISTURBANCES: dict[str, tuple[LawPath, ...]] = {
 }
 #: What each disturbance is, for the report.
 DISTURBANCE_TEXT = {
-    "paper": "the scenario's disturbance added to the acceleration command (the paper's)",
+    "paper": "the scenario's disturbance added to the acceleration command, as in the paper",
     "wind": "the scenario's disturbance as a wind velocity through each airframe's drag",
     "dryden": "Dryden turbulence (MIL-F-8785C, low altitude) around a mean wind through each airframe's drag",
 }
@@ -173,39 +173,18 @@ class VehicleReproduction(ReproductionResult):
 
     Attributes
     ----------
-    fleet, scenarios, iterations, filters, elapsed_s, law, sensor_noise_std, bandwidth
+    fleet, scenarios, iterations, filters, elapsed_s, law, sensor_noise_std, bandwidth, identified_toml
         As in :class:`~ilcdob.validation.reproduce.ReproductionResult`.
     settings : VehicleSettings
     fits : dict of str to VehicleFit
         Each vehicle's identification.
     runs : dict
         Disturbance -> law label -> list of ScenarioResult (one per scenario).
-    identified_toml : str
-        The fleet file of the identified models.
     """
 
     settings: VehicleSettings = field(default_factory=VehicleSettings)
     fits: dict[str, VehicleFit] = field(default_factory=dict)
     runs: dict[str, dict[str, list[ScenarioResult]]] = field(default_factory=dict)
-    identified_toml: str = ""
-
-    def files(self, figures: bool = True) -> dict[str, object]:
-        """The report (:meth:`ReproductionResult.files`) with ``identified_fleet.toml`` before ``results.json``.
-
-        Parameters
-        ----------
-        figures : bool
-            Include the figures.
-
-        Returns
-        -------
-        dict of str to object
-        """
-        out = dict(super().files(figures=figures))
-        results = out.pop("results.json")
-        out["identified_fleet.toml"] = self.identified_toml
-        out["results.json"] = results
-        return out
 
     def acceptance(self) -> list[dict[str, object]]:
         """Each acceptance figure of the run: what, the value measured, its limit and whether it is met.
@@ -265,14 +244,22 @@ class VehicleReproduction(ReproductionResult):
         s = self.settings
         lines = [
             f"**Plant: rotorpy.** rotorpy's multirotors ({', '.join(s.vehicles)}; its rotor aerodynamics, motors "
-            f"and geometric attitude control, nothing of ilcdob's vehicle models) fly every trial; ilcdob's outer "
+            f"and geometric attitude control, nothing of ilcdob's vehicle models"
+            + "".join(f"; {name} with {', '.join(f'{k} = {v:g}' for k, v in p.items())}"
+                      for name, p in s.params.items() if name in s.vehicles and p)
+            + ") fly every trial; ilcdob's outer "
             f"loop (PID + DOB + learning signal, x axis; y and z held by their PIDs) runs at {s.ts} s with "
             f"{1e3 * s.sensor_noise_std:g} mm of white position-sensor noise. Models identified from still-air "
             "flights with the structure chosen from the data (`identified_fleet.toml`); closed-form filters "
             "from the models; each learning signal is what `ilcdob design --trial` computes from the previous "
             f"flight; {self.iterations} learning iterations. Winds: {s.wind_gain:g} m/s per m/s^2 of the "
             f"scenario's disturbance; Dryden around a {s.dryden_wind_20ft:g} m/s mean wind at 20 ft, faded in "
-            "over 5 s. The table below and the figures are the paper's disturbance with the paper's law; the "
+            "over 5 s. "
+            + ("rotorpy's PX4 parameter set has no rotor drag (k_d = 0), so its flights in still air show no drag "
+               "and the wind law cannot learn from it; it is given rotor drag as every real rotor has "
+               "(`PX4_ROTOR_DRAG` in `ilcdob.validation.vehicle_reproduction`). "
+               if "px4" in s.vehicles and s.params.get("px4") == PX4_ROTOR_DRAG else "")
+            + "The table below and the figures are the paper's disturbance with the paper's law; the "
             "full tables follow. Regenerate with `ilcdob reproduce --plant rotorpy --out <dir>` (needs "
             "`pip install 'ilcdob[rotorpy]'`).",
             "", "### Identification (held-out fit, %)", "",
