@@ -86,6 +86,9 @@ def test_rotorpy_takes_no_fleet_law_or_band(tmp_path):
     for extra in (["--law", "exact-reference"], ["--bandwidth", "3"], ["--order", "a,b"]):
         assert main(["reproduce", "--plant", "rotorpy", "--out", str(tmp_path / "r"), *extra]) == 2
         assert not (tmp_path / "r").exists()
+    # and only the rotorpy plant flies in parallel
+    assert main(["reproduce", "--workers", "2", "--out", str(tmp_path / "r")]) == 2
+    assert not (tmp_path / "r").exists()
     from ilcdob.validation.vehicle_reproduction import VehicleSettings
 
     for bad in ({"vehicles": ("crazyflie",)}, {"vehicles": ("crazyflie", "nope")}, {"disturbances": ("gale",)},
