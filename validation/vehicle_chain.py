@@ -3,20 +3,22 @@
 Any vehicle with the protocol of :mod:`ilcdob.vehicles.interface` (rotorpy's multirotors,
 :mod:`ilcdob.vehicles.rotorpy_vehicle`, are the test bed) goes through what a lab does:
 
-1. :func:`identify_vehicles`: per vehicle, closed-loop flights with a rough outer loop (the PID
-   alone, a chirp added to the x command, smoothed reference steps), fitted with each candidate model
-   structure (:data:`STRUCTURES`) and held out on a second flight; the structure is chosen from
-   the data (the best held-out fit; one with fewer parameters wins unless a larger one fits 1
-   point better). The paper assumes ``b0/(s^2 (s + a0))``; a vehicle whose drag damps its
-   velocity needs one integrator and a drag pole.
-2. :func:`run_vehicle_scenario`: a scenario flown with every vehicle, no DOB, DOB only and the
-   cyclic learning chain of :mod:`ilcdob.validation.reproduce`, each learning signal computed from
-   the previous flight's measured error as ``ilcdob design --trial`` does; the disturbance is the
-   scenario's, either added to the command (the paper's) or as a wind velocity through each
-   airframe's drag (``wind_gain`` m/s per m/s^2 of the scenario's disturbance).
+1. :func:`identify_vehicles`: per vehicle and axis, closed-loop flights with a rough outer loop (the
+   PID alone, a chirp added to the axis's command, smoothed reference steps), fitted with each
+   candidate model structure (:data:`STRUCTURES`) and held out on a second flight; the structure
+   is chosen from the data (the best held-out fit; one with fewer parameters wins unless a larger
+   one fits 1 point better). The paper assumes ``b0/(s^2 (s + a0))``; a vehicle whose drag damps
+   its velocity needs one integrator and a drag pole.
+2. :func:`run_vehicle_axes` (one axis: :func:`run_vehicle_laws`, one law: :func:`run_vehicle_scenario`):
+   a scenario flown with every vehicle, no DOB, DOB only and the cyclic learning chain of
+   :mod:`ilcdob.validation.reproduce` for every learning law, each learning signal computed from
+   the previous flight's measured error as ``ilcdob design --trial`` does, every axis by its own
+   models; the disturbance is the scenario's, either added to the command (the paper's) or a
+   wind velocity through each airframe's drag (the scenario's signal scaled, or any wind such as
+   :func:`dryden_gust`).
 
-Units: s, m, m/s, m/s^2. The flights are :class:`~ilcdob.validation.simulate.Flight` records
-(x axis), so results, tables and figures are those of the other reproductions.
+Units: s, m, m/s, m/s^2. The flights are :class:`~ilcdob.validation.simulate.Flight` records per
+axis, so results, tables and figures are those of the other reproductions.
 """
 
 from __future__ import annotations
@@ -40,10 +42,10 @@ from .reproduce import ScenarioResult, SystemResult, learning_chain, pair_design
 from .scenarios import Scenario, check_order
 from .simulate import Flight
 
-__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_axes", "run_vehicle_laws", "run_vehicle_scenario", "rough_loop",
-           "dryden_gust", "MakeVehicle", "LawPath"]
+__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_axes", "run_vehicle_laws",
+           "run_vehicle_scenario", "rough_loop", "dryden_gust", "MakeVehicle", "LawPath"]
 
-#: Candidate structures of the x plant, fewest free parameters first: the paper's two integrators and a pole
+#: Candidate structures of an axis's plant, fewest free parameters first: the paper's two integrators and a pole
 #: (2: gain and pole), one integrator with a drag pole and an attitude pole (3), and with one pole more (4).
 STRUCTURES = (ModelStructure(n_poles=3, n_integrators=2), ModelStructure(n_poles=3, n_integrators=1),
               ModelStructure(n_poles=4, n_integrators=1))
@@ -146,7 +148,6 @@ def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str
 
     if axis not in AXES:
         raise SpecError(f"`axis`: got {axis!r}, expected one of {list(AXES)}")
-
     systems, fits = [], {}
     for name in names:
         est = _chirp_flight(make, name, ts, 0, duration, axis)
