@@ -70,7 +70,8 @@ from ilcdob.signals import as_signal
 from ilcdob.specs import check_noise_std
 from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
 
-from .reproduce import ReproductionResult, ScenarioResult, SystemResult, learning_chain, pair_designs
+from .reproduce import (ReproductionResult, ScenarioResult, SystemResult, check_iterations, learning_chain,
+                        pair_designs)
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, rmse
 
@@ -379,8 +380,7 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
     ScenarioResult
         Every system's no-DOB, DOB-only and learning flights (:class:`NonlinearFlight`).
     """
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    check_iterations(iterations)
     if not isinstance(sc, Scenario):
         raise SpecError(f"`sc`: got {type(sc).__name__}, expected a Scenario")
     settings = settings if settings is not None else NonlinearSettings()
@@ -556,8 +556,7 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     settings = settings if settings is not None else NonlinearSettings()
     if not isinstance(settings, NonlinearSettings):
         raise SpecError(f"`settings`: got {type(settings).__name__}, expected a NonlinearSettings")
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    check_iterations(iterations)
     base = fleet if fleet is not None else default_fleet()
     if not isinstance(base, Fleet):
         raise SpecError(f"`fleet`: got {type(base).__name__}, expected a Fleet or None")

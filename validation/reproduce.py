@@ -58,9 +58,9 @@ from ilcdob.display import html_table
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, simulate_flight
 
-__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "learning_chain", "law_delta_sets", "pair_designs",
-           "run_scenario",
-           "reproduce", "markdown_index", "json_document", "FIGURE_TEXT"]
+__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "check_iterations", "learning_chain",
+           "law_delta_sets", "pair_designs", "run_scenario", "reproduce", "markdown_index", "json_document",
+           "FIGURE_TEXT"]
 
 #: Caption of each figure in the report's README.md (``error_s<N>`` and ``disturbance_s<N>``
 #: are captioned per scenario by :func:`markdown_index`).
@@ -348,6 +348,23 @@ def _filters_for(fleet: Fleet, cache: dict, src: str, tgt: str) -> LearningFilte
     return cache[(src, tgt)]
 
 
+def check_iterations(iterations: object) -> int:
+    """``iterations`` if it is a number of learning iterations (an integer >= 1), else :class:`SpecError`.
+
+    Parameters
+    ----------
+    iterations : object
+        The value given.
+
+    Returns
+    -------
+    int
+    """
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    return iterations
+
+
 def learning_chain(order: list[str], iterations: int, first: Flight,
                    step: Callable[[str, str, Flight], Flight]) -> tuple[dict[str, list[Flight]], list[tuple[str, str]]]:
     """Pass learning around ``order`` cyclically (module docstring), starting from ``first``.
@@ -480,8 +497,7 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
     SpecError
         ``iterations``, ``law``, ``sensor_noise_std`` or ``order`` invalid.
     """
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    check_iterations(iterations)
     law = check_law(law)
     noise_std = check_noise_std(sensor_noise_std, "sensor_noise_std")
     filters = {} if filters is None else filters

@@ -38,7 +38,7 @@ from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.interface import AXES, Vehicle, fly_vehicle
 
-from .reproduce import ScenarioResult, SystemResult, learning_chain, pair_designs
+from .reproduce import ScenarioResult, SystemResult, check_iterations, learning_chain, pair_designs
 from .scenarios import Scenario, check_order
 from .simulate import Flight
 
@@ -244,8 +244,7 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
         the command disturbance, the scenario's disturbance a scaled wind was made from, or the wind's
         component in m/s); the no-DOB and DOB-only flights are shared by the laws.
     """
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    check_iterations(iterations)
     axes = [ax for ax in AXES if ax in fleets]
     if not axes or len(axes) != len(fleets):
         raise SpecError(f"`fleets`: got axes {list(fleets)}, expected a mapping with keys from {list(AXES)}")

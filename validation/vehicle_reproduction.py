@@ -38,7 +38,7 @@ from ilcdob.fleet import fleet_from_systems
 from ilcdob.fleet_io import fleet_to_toml
 from ilcdob.specs import DOBSpec, PIDSpec, check_noise_std
 
-from .reproduce import ReproductionResult, ScenarioResult
+from .reproduce import ReproductionResult, ScenarioResult, check_iterations
 from .scenarios import Scenario, scenario
 from .vehicle_chain import LawPath, VehicleFit, dryden_gust, identify_vehicles, run_vehicle_laws
 
@@ -323,8 +323,7 @@ def reproduce_vehicles(scenario_ids: list[int] = (1, 2, 3, 4), iterations: int =
     settings = settings if settings is not None else VehicleSettings()
     if not isinstance(settings, VehicleSettings):
         raise SpecError(f"`settings`: got {type(settings).__name__}, expected a VehicleSettings")
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise SpecError(f"`iterations`: got {iterations!r}, expected an integer >= 1")
+    check_iterations(iterations)
     scs = list(scenarios) if scenarios is not None else [scenario(sid) for sid in scenario_ids]
     jobs = [(sc, dist) for dist in settings.disturbances for sc in scs]
     total = 1 + len(jobs)
