@@ -92,7 +92,7 @@ def test_rotorpy_takes_no_fleet_law_or_band(tmp_path):
     from ilcdob.validation.vehicle_reproduction import VehicleSettings
 
     for bad in ({"vehicles": ("crazyflie",)}, {"vehicles": ("crazyflie", "nope")}, {"disturbances": ("gale",)},
-                {"wind_gain": -1.0}, {"workers": 0}):
+                {"wind_gain": -1.0}, {"workers": 0}, {"params": {"px4": 3}}):
         with pytest.raises(SpecError, match=next(iter(bad))):
             VehicleSettings(**bad)
 
@@ -108,3 +108,12 @@ def test_full_reproduction_meets_its_acceptance(tmp_path):
     data = json.loads((tmp_path / "r" / "results.json").read_text())
     failed = [r for r in data["acceptance"] if not r["passed"]]
     assert not failed, failed
+
+
+def test_unknown_rotorpy_parameters_are_refused():
+    """A parameter rotorpy's set does not have would be ignored by rotorpy: refused, naming it."""
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
+
+    with pytest.raises(SpecError, match=r"\['k_drag'\] are not parameters of rotorpy's 'px4' set"):
+        RotorpyVehicle("px4", params={"k_drag": 1e-4})
+    assert RotorpyVehicle("px4", params={"k_d": 1e-4, "kp_att": 300.0}).params["k_d"] == 1e-4

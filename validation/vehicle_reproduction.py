@@ -126,10 +126,13 @@ class VehicleSettings:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > lo):
                 raise SpecError(f"`{name}`: got {v!r}, expected a number > {lo:g}")
-        for name in ("dryden_seed", "workers"):
+        for name, lo in (("dryden_seed", 0), ("workers", 1)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < (name == "workers"):
-                raise SpecError(f"`{name}`: got {v!r}, expected an integer >= {int(name == 'workers')}")
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise SpecError(f"`{name}`: got {v!r}, expected an integer >= {lo}")
+        if not isinstance(self.params, dict) or not all(isinstance(v, dict) for v in self.params.values()):
+            raise SpecError(f"`params`: got {self.params!r}, expected a dict of vehicle name -> dict of rotorpy "
+                            "parameters")
 
     def make(self, name: str, command: Callable | None, wind: Callable | None, seed: int):
         """A fresh rotorpy vehicle (:data:`~ilcdob.validation.vehicle_chain.MakeVehicle`).

@@ -89,6 +89,10 @@ class RotorpyVehicle:
                 raise SpecError(f"`{what}`: got {type(fn).__name__}, expected a callable of time (s) returning (3,)")
         multirotor, se3 = _rotorpy()
         base = importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params
+        unknown = sorted(set(params or {}) - set(base) - {"kp_att", "kd_att"})  # SE3Control reads these two too
+        if unknown:
+            raise SpecError(f"`params`: {unknown} are not parameters of rotorpy's {name!r} set (it has "
+                            f"{sorted(base)})")
         self.params = {**base, **(params or {})}
         self.name, self.ts, self.altitude = name, float(ts), float(altitude)
         self.command_disturbance, self.wind = command_disturbance, wind
