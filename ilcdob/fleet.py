@@ -75,8 +75,8 @@ from .loop import LoopSystem, build_loop
 from .specs import (DOBSpec, IdentificationSpec, LimitSpec, NoiseSpec, PIDSpec, PlantSpec, SensorSpec, SystemSpec,
                     UncertaintySpec)
 
-__all__ = ["AXES", "Fleet", "load_fleet", "axis_table", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH", "fleet_from_dict",
-           "fleet_from_systems", "MODEL_FILE_KEY"]
+__all__ = ["AXES", "Fleet", "load_fleet", "axis_table", "read_fleet_file", "default_fleet", "DEFAULT_FLEET_PATH",
+           "fleet_from_dict", "fleet_from_systems", "MODEL_FILE_KEY"]
 
 DEFAULT_FLEET_PATH = Path(str(resources.files("ilcdob") / "data" / "default_fleet.toml"))
 

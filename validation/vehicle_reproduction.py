@@ -223,7 +223,8 @@ class VehicleReproduction(ReproductionResult):
                 for name in sr.order:
                     best = min((max(ratios(dist, lab, sr.scenario.id, name)), lab) for lab in labels)
                     rows.append({"what": f"{dist}, scenario {sr.scenario.id}, {name}: worst iteration / DOB "
-                                         f"({best[1]})", "value": best[0], "limit": 0.5, "passed": bool(best[0] <= 0.5)})
+                                         f"({best[1]})", "value": best[0], "limit": 0.5,
+                                 "passed": bool(best[0] <= 0.5)})
         return rows
 
     def to_dict(self) -> dict[str, object]:

@@ -176,7 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                            "the emitted C code computes it; writes it as CSV, binary and a C array")
     _common(p, "output folder (written as a unit)")
     p.add_argument("--axis", choices=("x", "y", "z"), default=None,
-                   help="axis (default x, or the --design's): x (the paper's), or y / z from the fleet file's [system.y] / [system.z] sections")
+                   help="axis (default x, or the --design's): x (the paper's), or y / z from the fleet file's "
+                        "[system.y] / [system.z] sections")
     p.add_argument("trial", help="the recorded trial of --from: .csv, .parquet, .ulg or .bin")
     p.add_argument("--from", dest="source", default=None, help="system learned from (j-1); read from --design if given")
     p.add_argument("--to", dest="target", default=None, help="system that learns (j); read from --design if given")

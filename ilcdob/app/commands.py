@@ -148,8 +148,8 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         from ilcdob.validation.vehicle_reproduction import VehicleSettings, reproduce_vehicles
 
         noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
-        res = reproduce_vehicles(list(scenarios), iterations, VehicleSettings(dryden_seed=seed, workers=workers or 1, **noise),
-                                 progress=progress)
+        settings = VehicleSettings(dryden_seed=seed, workers=workers or 1, **noise)
+        res = reproduce_vehicles(list(scenarios), iterations, settings, progress=progress)
         _write_folder(out, _provenance("reproduce", argv, None, res.law), res.files(figures=figures),
                       report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures),
                       overwrite=overwrite)
@@ -425,7 +425,6 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         Replace a non-empty folder that ilcdob did not write.
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
-
     axis : {"x", "y", "z"}
         The axis designed (the fleet file's section; filters.json records it, and the C prefix of y
         and z designs ends in the axis).
@@ -626,7 +625,6 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         Replace a non-empty folder that ilcdob did not write.
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
-
     axis : {"x", "y", "z"}, optional
         The axis learned (default x; with ``design``: checked against its filters.json).
 
@@ -692,7 +690,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     prefix = ((filters.get("c") or {}).get("prefix")
               or default_c_prefix(str(source), str(target)) + ("" if axis == "x" else f"{axis}_"))
     header = signal_header(prefix, d_f, ts)
-    summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"), "law": "paper",
+    summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"),
+               "law": "paper",
                "trial": {"file": Path(trial).name, "samples": n, "sample_time_s": ts,
                          "error": (f"column {columns.error}" if columns.error is not None
                                    else f"{columns.reference} - {columns.position}"),
@@ -742,7 +741,6 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
         the fleet's sensor noise, limits and the same Delta sets).
     argv : sequence of str, optional
         Command line, recorded in the file.
-
     axis : {"x", "y", "z"}
         The axis checked (the fleet file's section).
 
