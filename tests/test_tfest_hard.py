@@ -329,3 +329,40 @@ def test_no_response_and_absurd_orders_are_clear_errors():
         tfest(_flight(u, np.full(1000, 2.5)), "u", "y", structure, **QUIET)
     with pytest.raises(SpecError, match=r"`n_poles`: got 30, expected 1 to 12"):
         ModelStructure(30, 0, 0)
+
+
+def _three_mass():
+    """Force on the first of three masses in a chain (springs 40 and 25 N/m, light damping) -> a mix of
+    positions and velocities: 6 poles, 5 zeros, resonances at 1.28, 6.0 and 12.9 rad/s with damping ratios
+    0.12, 0.034 and 0.014 (built here with python-control from the mass, spring and damper matrices)."""
+    import control as ct
+
+    m, k, c = np.diag([1.0, 0.5, 0.8]), np.array([[44.0, -40.0, 0.0], [-40.0, 65.0, -25.0], [0.0, -25.0, 25.0]]), \
+        np.array([[0.85, -0.05, 0.0], [-0.05, 0.09, -0.04], [0.0, -0.04, 0.04]])
+    a = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.linalg.solve(m, k), -np.linalg.solve(m, c)]])
+    b = np.concatenate([np.zeros(3), np.linalg.solve(m, [1.0, 0.0, 0.0])])[:, None]
+    tf = ct.tf(ct.ss(a, b, [[1.0, 0.5, 0.3, 0.2, 0.1, 0.05]], 0.0))
+    num, den = np.real(tf.num[0][0]), np.real(tf.den[0][0])
+    structure = ModelStructure(6, 5, 0)
+    return structure, structure.join(num / den[0], den / den[0])
+
+
+@pytest.mark.parametrize("delay", [0.0, "auto"])
+def test_lightly_damped_flexible_system(delay):
+    """Three sharp resonances a pole grid cannot place at once. Measured held-out fit (the true plant's 98.0 %):
+    started from the grid and SRIVC alone, 56.5 % (delay 0) / 57.3 % (delay searched over [0, 0.5] s), both
+    "converged"; with the frequency-domain start (Sanathanan-Koerner on the empirical response) 96.7 %, its
+    12.9 rad/s mode (damping 0.014) converged at 11.6 rad/s; with the lightly damped pairs retuned in frequency
+    after convergence, 97.99 % / 97.96 %."""
+    structure, theta = _three_mass()
+    flights = []
+    for seed in (0, 1):
+        rng = np.random.default_rng(seed)
+        n = 6000
+        u = np.repeat(rng.standard_normal(n // 20 + 1), 20)[:n]   # random steps held 0.2 s
+        y0 = simulate_zoh(structure, theta, u, TS)
+        flights.append(_flight(u, y0 + 0.02 * np.std(y0) * rng.standard_normal(n)))
+    opts = FitOptions(delay=delay, max_delay=0.5)
+    est = tfest(flights[0], "u", "y", structure, opts, **QUIET)
+    fit_model, fit_truth = _check(est, structure, theta, 0.0, flights[1:])
+    assert fit_truth > 95.0

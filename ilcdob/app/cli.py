@@ -142,6 +142,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-delay", type=float, default=0.3, help="upper bound of the delay search, s")
     p.add_argument("--trend", default="0", help="per-file output trend: 'none' or a polynomial degree 0-5")
     p.add_argument("--time-limit", type=float, default=None, help="wall-time limit of the fit, s (none)")
+    p.add_argument("--starts", type=_pos, default=2,
+                   help="initial estimates (SRIVC, pole grid, frequency-domain fit) the search runs from; with "
+                        "--delay auto each also profiles the delay")
+    p.add_argument("--max-iter", type=_pos, default=100, help="Levenberg-Marquardt iteration limit per start")
+    p.add_argument("--allow-unstable", action="store_true",
+                   help="let free poles enter the right half plane (an open-loop unstable plant; default: such "
+                        "models are rejected during the fit)")
     p.add_argument("--min-fit", type=float, default=None, help="exit 1 when the held-out fit (%%) is below this")
     p.add_argument("--validate", nargs="*", default=[], help="held-out data files")
     p.add_argument("--segment", type=float, default=None, metavar="SECONDS",

@@ -156,7 +156,8 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     delay = _number(a.delay, "--delay", "'auto' or a number of seconds >= 0", ("auto",), float)
     trend = _number(a.trend, "--trend", "'none' or a polynomial degree 0-5", ("none",), int)
     structure = ModelStructure(a.poles, a.zeros, a.integrators)
-    options = FitOptions(delay=delay, max_delay=a.max_delay, trend=trend, time_limit=a.time_limit)
+    options = FitOptions(delay=delay, max_delay=a.max_delay, trend=trend, time_limit=a.time_limit, starts=a.starts,
+                         max_iter=a.max_iter, stable=not a.allow_unstable)
     inputs = uc.IdentifyInputs(a.input, a.output, a.segment, time=a.time, time_unit=a.time_unit, start=a.start,
                                stop=a.stop)
     est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out, validate=a.validate,
@@ -173,7 +174,11 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                      "initial condition: " + ", ".join(f"{lo:.6g} to {hi:.6g} s" for lo, hi in gaps))
     print(est.summary())
     if est.solver.get("status") != "converged":
-        con.note(f"note: the fit stopped at its {est.solver.get('status')}; {a.out} holds the best model found "
+        why = {"max_iter": "at its iteration limit (--max-iter)", "time_limit": "at its time limit (--time-limit)",
+               "numerical": "where its sensitivities overflowed (a model the constraints cannot fit well: for an "
+                            "open-loop unstable plant try --allow-unstable; else fewer poles)"}
+        status = est.solver.get("status")
+        con.note(f"note: the fit stopped {why.get(status, status)}; {a.out} holds the best model found "
                  "(solver.status)")
     con.note(f"wrote {a.out}" + (f" and {a.plot}" if a.plot else ""))
     if a.min_fit is not None:
