@@ -143,6 +143,11 @@ class TFEstimate:
     trend : int or None
         Degree of the per-experiment output trend that was estimated (None: none), also
         estimated in :meth:`predict` with ``y`` and in the validation fit.
+    file_fits : list of float
+        Fit % of each estimation experiment on its own.
+    diagnostics : list of str
+        What a careful engineer would want to know about the fit (:func:`fit_diagnostics`);
+        empty when nothing stands out.
     """
 
     structure: ModelStructure
@@ -162,6 +167,8 @@ class TFEstimate:
     output: str = "y"
     solver: dict = field(default_factory=dict)
     trend: int | None = None
+    file_fits: list = field(default_factory=list)
+    diagnostics: list = field(default_factory=list)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -226,11 +233,14 @@ class TFEstimate:
                 yv.append(fd[output])
                 yhv.append(compare(structure, theta, delay, fd.ts, u, fd[output], trend))
             fit_val = fit_percent(np.concatenate(yv), np.concatenate(yhv))
-        return cls(structure=structure, theta=np.asarray(theta, float), num=num, den=den, delay=float(delay),
-                   covariance=np.asarray(covariance, float), delay_estimated=bool(delay_estimated),
-                   sigma2=float(sigma2), ts=float(ts), fit_estimation=fit_percent(y_all, yh_all),
-                   fit_validation=fit_val, whiteness=white, input_correlation=xcor, input=input,
-                   output=output, solver=dict(solver), trend=trend)
+        file_fits = [fit_percent(y, yh) for y, yh in zip(ys, yhats)]
+        est = cls(structure=structure, theta=np.asarray(theta, float), num=num, den=den, delay=float(delay),
+                  covariance=np.asarray(covariance, float), delay_estimated=bool(delay_estimated),
+                  sigma2=float(sigma2), ts=float(ts), fit_estimation=fit_percent(y_all, yh_all),
+                  fit_validation=fit_val, whiteness=white, input_correlation=xcor, input=input,
+                  output=output, solver=dict(solver), trend=trend, file_fits=file_fits)
+        est.diagnostics.extend(fit_diagnostics(est, solver.get("max_delay")))
+        return est
 
     # ------------------------------------------------------------------ use
     @property
@@ -355,6 +365,8 @@ class TFEstimate:
             "signals": {"input": self.input, "output": self.output},
             "solver": self.solver,
             "trend": self.trend,
+            "file_fits_percent": [float(v) for v in self.file_fits],
+            "diagnostics": list(self.diagnostics),
         }
 
     def __repr__(self) -> str:
@@ -390,7 +402,64 @@ class TFEstimate:
                      + (f", validation {self.fit_validation:.2f} %" if self.fit_validation is not None else ""))
         lines.append(f"residuals: whiteness {100 * self.whiteness.share_inside:.0f} % of lags inside the 99 % band, "
                      f"input correlation {100 * self.input_correlation.share_inside:.0f} %")
+        lines += [f"note: {d}" for d in self.diagnostics]
         return "\n".join(lines)
+
+
+#: A file whose own fit is this many points below the median file's is flagged (:func:`fit_diagnostics`).
+FILE_FIT_GAP = 20.0
+
+
+def fit_diagnostics(est: TFEstimate, max_delay: float | None = None) -> list[str]:
+    """What a fit's numbers say beyond its fit %: each an English sentence with its consequence.
+
+    * the estimated delay on a bound of its search (0, or ``max_delay``);
+    * a pole or zero beyond the Nyquist frequency (the data cannot show it: fewer poles/zeros);
+    * residuals not white (fewer than half the lags inside the 99 % band: coloured noise or
+      missing dynamics, and the covariance-based Delta set understates the model error);
+    * residuals correlated with the input (fewer than 80 % of lags inside: missing dynamics);
+    * an estimation file fitting :data:`FILE_FIT_GAP` points or more below the median file.
+
+    Parameters
+    ----------
+    est : TFEstimate
+        The fit.
+    max_delay : float, optional
+        Upper bound of the delay search, s (checked when the delay was estimated).
+
+    Returns
+    -------
+    list of str
+        Empty when nothing stands out.
+    """
+    out = []
+    if est.delay_estimated:
+        if est.delay <= 1e-9:
+            out.append("the delay ended on its lower bound 0 s: the output may lead the input (a log whose input "
+                       "is recorded late, or a non-causal filter in the log); check the time stamps of the signals")
+        elif max_delay is not None and est.delay >= max_delay * (1 - 1e-6):
+            out.append(f"the delay ended on its upper bound {max_delay:g} s: raise --max-delay (FitOptions.max_delay)")
+    nyquist = np.pi / est.ts
+    for what, poly in (("pole", est.den), ("zero", est.num)):
+        roots = np.roots(poly) if np.size(poly) > 1 else np.zeros(0)
+        far = roots[np.abs(roots) > nyquist]
+        if far.size:
+            out.append(f"{what}(s) at {', '.join(f'{r:.4g}' for r in far)} rad/s lie beyond the Nyquist frequency "
+                       f"{nyquist:.4g} rad/s: the data cannot show them; try fewer {what}s")
+    if est.whiteness.share_inside < 0.5:
+        out.append(f"the residuals are not white ({100 * est.whiteness.share_inside:.0f} % of lags inside the 99 % "
+                   "band): coloured noise or missing dynamics; the Delta set from the covariance then understates "
+                   "the model error (state a bound, fleet `uncertainty`)")
+    if est.input_correlation.share_inside < 0.8:
+        out.append(f"the residuals correlate with the input ({100 * est.input_correlation.share_inside:.0f} % of "
+                   "lags inside the 99 % band): dynamics the structure misses; compare other orders")
+    if len(est.file_fits) >= 3:
+        median = float(np.median(est.file_fits))
+        for i, f in enumerate(est.file_fits):
+            if f < median - FILE_FIT_GAP:
+                out.append(f"estimation file {i + 1} fits {f:.1f} %, the median file {median:.1f} %: check it for "
+                           "corrupt samples, a different configuration or a wrong signal")
+    return out
 
 
 def _poly(c: np.ndarray) -> str:

@@ -927,6 +927,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                               input=input, output=output, trend=opts.trend, fitted=fitted,
                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
                                       "status": best.status, "iterations": best.iterations, "starts": runs,
+                                      **({"max_delay": opts.max_delay} if estimate_delay else {}),
                                       "seconds": time.perf_counter() - t_start})
     if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:
         raise SignalError(f"{exps[0].source}: output `{output}` shows no response to input `{input}`: the best "

@@ -366,3 +366,42 @@ def test_lightly_damped_flexible_system(delay):
     est = tfest(flights[0], "u", "y", structure, opts, **QUIET)
     fit_model, fit_truth = _check(est, structure, theta, 0.0, flights[1:])
     assert fit_truth > 95.0
+
+
+def test_diagnostics_fire_where_they_should_and_stay_silent_on_clean_data():
+    """Clean data: no note. The delay on either bound, a corrupt file among good ones (a 16 m jump over its
+    last second), coloured residuals and a pole beyond Nyquist: each its note, in model.json and the summary."""
+    from dataclasses import replace
+
+    from ilcdob.identification.results import fit_diagnostics
+
+    structure, theta = _truth(STABLE)
+    rng = np.random.default_rng(21)
+
+    def flights(delay=0.0, noise=None, n=3000, count=1):
+        out = []
+        for seed in range(count):
+            u = _excite(n, seed)
+            y = simulate_zoh(structure, theta, u, TS, delay)
+            out.append(_flight(u, y + (0.02 * rng.standard_normal(n) if noise is None else noise(n)), f"f{seed}"))
+        return out
+
+    clean = tfest(flights(), "u", "y", structure, **QUIET)
+    assert clean.diagnostics == [], clean.diagnostics
+    late = tfest(flights(delay=0.08), "u", "y", structure, FitOptions(delay="auto", max_delay=0.05), **QUIET)
+    assert any("upper bound 0.05 s" in d for d in late.diagnostics), late.diagnostics
+    lead = flights()[0]
+    early = _flight(lead["u"][:-5], lead["y"][5:])           # the input logged 5 samples late
+    first = tfest(early, "u", "y", structure, FitOptions(delay="auto", max_delay=0.05), **QUIET)
+    assert any("lower bound 0 s" in d for d in first.diagnostics), first.diagnostics
+    files = flights(count=4)
+    bad = files[2]["y"].copy()
+    bad[-100:] += 16.0
+    files[2] = _flight(files[2]["u"], bad, "corrupt")
+    est = tfest(files, "u", "y", structure, **QUIET)
+    assert any(d.startswith("estimation file 3 fits") for d in est.diagnostics), (est.file_fits, est.diagnostics)
+    coloured = tfest(flights(noise=lambda n: _ar1(n, 0.99, 0.2, rng)), "u", "y", structure, **QUIET)
+    assert any("not white" in d for d in coloured.diagnostics), coloured.diagnostics
+    fast = replace(clean, den=np.polymul(clean.den, [1.0, 1000.0]))
+    assert any("beyond the Nyquist frequency 314.2 rad/s" in d for d in fit_diagnostics(fast))
+    assert clean.to_dict()["diagnostics"] == [] and "note: " in est.summary()

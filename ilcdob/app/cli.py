@@ -131,6 +131,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: scenario 4 flies the 1st, 3rd, 2nd system of a three-system fleet, the others "
                         "the file order)")
     p = _sub(sub, "identify", "fit a continuous-time transfer function to flight data; write model.json")
+    p.description += (". Diagnostics (printed as notes, and in model.json's `diagnostics`): the estimated delay on a "
+                      "bound of its search, poles or zeros beyond the Nyquist frequency, residuals that are not "
+                      "white or that correlate with the input, an estimation file fitting far worse than the others "
+                      "(per-file fits: `file_fits_percent`)")
     p.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
     p.add_argument("--input", required=True, help="input signal: COLUMN, TOPIC.FIELD (ULog) or MESSAGE.FIELD")
     p.add_argument("--output", required=True, help="output signal, same forms as --input")
