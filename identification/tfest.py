@@ -41,6 +41,7 @@ in calm air with a strong external excitation and check ``input_correlation``.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -99,9 +100,11 @@ class FitOptions:
     ----------
     delay : float or "auto"
         Input delay in s (fixed), or ``"auto"`` to estimate it in ``[0, max_delay]``.
-    max_delay : float
-        Upper bound of the delay search, s (default 0.3). Must be below half the shortest
-        experiment's duration.
+    max_delay : float or None
+        Upper bound of the delay search, s. Must be below half the shortest experiment's
+        duration. None (default): :data:`DEFAULT_DELAY_SHARE` of the shortest experiment, so
+        that a slow process sampled every few seconds is searched as far as a fast vehicle's
+        log is, relative to its record.
     estimate_x0 : bool
         Estimate each experiment's initial condition (else: the system starts at rest).
     trend : int or None
@@ -131,7 +134,7 @@ class FitOptions:
     """
 
     delay: float | str = 0.0
-    max_delay: float = 0.3
+    max_delay: float | None = None
     estimate_x0: bool = True
     trend: int | None = 0
     stable: bool = True
@@ -148,8 +151,9 @@ class FitOptions:
                 raise SpecError(f"`delay`: got {self.delay!r}, expected a number of seconds >= 0 or 'auto'")
         elif not (isinstance(self.delay, (int, float)) and math.isfinite(self.delay) and self.delay >= 0):
             raise SpecError(f"`delay`: got {self.delay!r}, expected a number of seconds >= 0 or 'auto'")
-        if not (math.isfinite(self.max_delay) and self.max_delay >= 0):
-            raise SpecError(f"`max_delay`: got {self.max_delay!r}, expected a number >= 0 (s)")
+        if self.max_delay is not None and not (isinstance(self.max_delay, (int, float)) and not isinstance(
+                self.max_delay, bool) and math.isfinite(self.max_delay) and self.max_delay >= 0):
+            raise SpecError(f"`max_delay`: got {self.max_delay!r}, expected None or a number >= 0 (s)")
         if self.trend is not None and (isinstance(self.trend, bool) or self.trend not in range(6)):
             raise SpecError(f"`trend`: got {self.trend!r}, expected None (no trend) or a polynomial degree 0-5 "
                             "(0: offset, 1: offset + slope)")
@@ -435,7 +439,8 @@ class _LMResult:
 def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts: FitOptions, deadline: float,
                          say: Progress, max_iter: int | None = None) -> _LMResult:
     """LM (Nielsen's damping update) in the nonlinear parameters on Jacobi-scaled normal
-    equations, the denominator in second-order sections from three free poles on (:class:`_Sections`); the delay, when estimated, is kept in ``[0, max_delay]`` by holding it while it
+    equations, the denominator in second-order sections from three free poles on
+    (:class:`_Sections`); the delay, when estimated, is kept in ``[0, max_delay]`` by holding it while it
     sits on a bound that the step pushes against."""
     p = start
     if model.n_alpha == 0:
@@ -608,6 +613,8 @@ def _sanathanan_koerner(w: np.ndarray, h: np.ndarray, nf: int, nz: int, k: int, 
 #: spaced chunks (each with its own initial condition), which keeps the start-up cost of a
 #: fit on a long log bounded while every part of the record has a say.
 RANKING_SAMPLES = 100_000
+#: Default upper bound of the delay search as a share of the shortest experiment's duration.
+DEFAULT_DELAY_SHARE = 0.1
 #: Delays visited by the profile sweep of ``delay="auto"`` (evenly spaced over
 #: ``[0, max_delay]``, at most one per sample); the LM refines the delay continuously from
 #: the best of them.
@@ -774,7 +781,9 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
             exps.append(_Exp(u, y, _trend_basis(u.size, structure, opts), piece.source))
     if not exps:
         raise SignalError(f"`data`: no piece of at least {need} samples between the gaps of the logs")
-    if opts.delay == "auto" or opts.delay > 0:
+    if opts.delay == "auto" and opts.max_delay is None:
+        pass  # DEFAULT_DELAY_SHARE of the shortest experiment (:func:`_tfest`): within half of it
+    elif opts.delay == "auto" or opts.delay > 0:
         shortest = min(e.n for e in exps) * ts
         limit = opts.max_delay if opts.delay == "auto" else float(opts.delay)
         if limit >= 0.5 * shortest:
@@ -857,6 +866,8 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     t_start = time.perf_counter()
     deadline = t_start + (opts.time_limit if opts.time_limit is not None else math.inf)
     exps, ts = _experiments(data, input, output, structure, opts, say)
+    if opts.max_delay is None:
+        opts = dataclasses.replace(opts, max_delay=DEFAULT_DELAY_SHARE * min(e.n for e in exps) * ts)
     estimate_delay = opts.delay == "auto"
     model = _Model(structure, exps, ts, opts, estimate_delay)
     delay0 = 0.0 if estimate_delay else float(opts.delay)

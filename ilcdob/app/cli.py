@@ -143,7 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--zeros", type=int, default=0, help="number of zeros")
     p.add_argument("--integrators", type=int, default=0, help="poles fixed at s = 0")
     p.add_argument("--delay", default="0", help="input delay in s, or 'auto' to estimate it")
-    p.add_argument("--max-delay", type=float, default=0.3, help="upper bound of the delay search, s")
+    p.add_argument("--max-delay", type=float, default=None,
+                   help="upper bound of the delay search, s (default: a tenth of the shortest file)")
     p.add_argument("--trend", default="0", help="per-file output trend: 'none' or a polynomial degree 0-5")
     p.add_argument("--time-limit", type=float, default=None, help="wall-time limit of the fit, s (none)")
     p.add_argument("--starts", type=_pos, default=2,
