@@ -191,3 +191,26 @@ def test_an_unstable_plant_needs_allow_unstable(tmp_path, capsys):
     assert fits["stable"]["fit_percent"]["validation"] < fits["unstable"]["fit_percent"]["validation"] - 5.0
     assert fits["stable"]["solver"]["status"] == "numerical"
     assert len(fits["unstable"]["solver"]["starts"]) >= 1
+
+
+def test_pole_range_compares_orders_and_writes_the_chosen_one(tmp_path, capsys):
+    """``--poles 2..5`` on data of 1/(s^2 (s/7 + 1)) with a 0.04 s delay (2 integrators): every order is fitted;
+    the true order 3 fits as well as the larger ones (within 0.5 points held out) with fewer parameters and is
+    written; the table and model.json's order_comparison agree with a separate fit of each order."""
+    est, val = tmp_path / "chirp.csv", tmp_path / "val.csv"
+    _flight(est, 0, 4.0)
+    _flight(val, 1, 3.0)
+    common = [str(est), "--input", "acc_cmd", "--output", "x", "--integrators", "2", "--delay", "0.04",
+              "--validate", str(val), "--quiet"]
+    assert main(["identify", *common, "--poles", "3..5", "--out", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    model = json.loads((tmp_path / "m.json").read_text())
+    rows = model["solver"]["order_comparison"]
+    assert [r["poles"] for r in rows] == [3, 4, 5] and [r["chosen"] for r in rows] == [True, False, False]
+    assert model["structure"]["poles"] == 3 and "<- chosen" in out
+    for r in rows:
+        assert main(["identify", *common, "--poles", str(r["poles"]), "--out", str(tmp_path / "one.json")]) == 0
+        one = json.loads((tmp_path / "one.json").read_text())
+        assert one["fit_percent"]["validation"] == pytest.approx(r["fit_validation"], abs=1e-9)
+    assert max(r["fit_validation"] for r in rows) - rows[0]["fit_validation"] <= 0.5
+    assert main(["identify", *common, "--poles", "5..2", "--out", str(tmp_path / "x.json")]) == 2

@@ -155,7 +155,7 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
     delay = _number(a.delay, "--delay", "'auto' or a number of seconds >= 0", ("auto",), float)
     trend = _number(a.trend, "--trend", "'none' or a polynomial degree 0-5", ("none",), int)
-    structure = ModelStructure(a.poles, a.zeros, a.integrators)
+    structure = [ModelStructure(n, a.zeros, a.integrators) for n in a.poles]
     options = FitOptions(delay=delay, max_delay=a.max_delay, trend=trend, time_limit=a.time_limit, starts=a.starts,
                          max_iter=a.max_iter, stable=not a.allow_unstable)
     inputs = uc.IdentifyInputs(a.input, a.output, a.segment, time=a.time, time_unit=a.time_unit, start=a.start,
@@ -172,6 +172,12 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
             noted.add(fd.source)
             con.note(f"{fd.source}: {len(gaps)} dropout(s) in the time stamps, each piece fitted with its own "
                      "initial condition: " + ", ".join(f"{lo:.6g} to {hi:.6g} s" for lo, hi in gaps))
+    if len(a.poles) > 1:
+        print("order comparison (fit %, AIC = N ln(sigma^2) + 2 k):")
+        for row in est.solver["order_comparison"]:
+            print(f"  {row['poles']} poles: estimation {row['fit_estimation']:.2f}, held-out "
+                  + ("-" if row["fit_validation"] is None else f"{row['fit_validation']:.2f}")
+                  + f", AIC {row['aic']:.1f}" + ("  <- chosen" if row["chosen"] else ""))
     print(est.summary())
     if est.solver.get("status") != "converged":
         why = {"max_iter": "at its iteration limit (--max-iter)", "time_limit": "at its time limit (--time-limit)",
