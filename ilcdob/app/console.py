@@ -160,8 +160,11 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                          max_iter=a.max_iter, stable=not a.allow_unstable)
     inputs = uc.IdentifyInputs(a.input, a.output, a.segment, time=a.time, time_unit=a.time_unit, start=a.start,
                                stop=a.stop)
-    est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out, validate=a.validate,
-                                                  plot=a.plot, progress=con.progress, argv=argv)
+    with warnings.catch_warnings():  # the note below states a fit stopped short, with the options that help
+        warnings.filterwarnings("ignore", message="tfest stopped", category=RuntimeWarning)
+        est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out,
+                                                      validate=a.validate, plot=a.plot, progress=con.progress,
+                                                      argv=argv)
     if a.segment is not None:
         con.note(f"--segment {a.segment:g} s: {len(est_data)} estimation and {len(val_data)} held-out windows, "
                  "each fitted with its own initial condition")
