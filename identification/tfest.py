@@ -452,7 +452,8 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
         return np.concatenate([sec.from_alpha(q.alpha[:nf]), q.alpha[nf:]]) if sec else q.alpha
 
     def normal(q: _Point, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        hq, gq = model.reduced_normal(q)
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow ends the search as "numerical"
+            hq, gq = model.reduced_normal(q)
         if sec is None:
             return hq, gq
         t = np.eye(hq.shape[0])
@@ -941,7 +942,8 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     p = best.point
     theta, delay = p.theta, p.delay
     n_obs = sum(e.n for e in exps)
-    h = model.full_normal(p)
+    with np.errstate(over="ignore", invalid="ignore"):  # a diverging model's covariance is inf, not a warning
+        h = model.full_normal(p)
     sigma2 = p.sse / max(n_obs - h.shape[0], 1)
     n_global = structure.n_params + (1 if estimate_delay else 0)
     cov = sigma2 * _scaled_pinv(h)[:n_global, :n_global]
