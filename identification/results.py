@@ -406,6 +406,9 @@ class TFEstimate:
         return "\n".join(lines)
 
 
+#: A delay on its lower bound 0 is noted when moving it below 0 would lower the criterion by at least this many
+#: residual variances (first-order prediction; 3.84 is the 95 % point of chi-square with one degree of freedom).
+DELAY_BOUND_GAIN = 4.0
 #: A file whose own fit is this many points below the median file's is flagged (:func:`fit_diagnostics`).
 FILE_FIT_GAP = 20.0
 
@@ -413,7 +416,8 @@ FILE_FIT_GAP = 20.0
 def fit_diagnostics(est: TFEstimate, max_delay: float | None = None) -> list[str]:
     """What a fit's numbers say beyond its fit %: each an English sentence with its consequence.
 
-    * the estimated delay on a bound of its search (0, or ``max_delay``);
+    * the estimated delay on a bound of its search: ``max_delay``, or 0 when a negative delay
+      would fit significantly better (:data:`DELAY_BOUND_GAIN`, from ``solver["delay_lower_bound_gain"]``);
     * a pole or zero beyond the Nyquist frequency (the data cannot show it: fewer poles/zeros);
     * residuals not white (fewer than half the lags inside the 99 % band: coloured noise or
       missing dynamics, and the covariance-based Delta set understates the model error);
@@ -434,9 +438,12 @@ def fit_diagnostics(est: TFEstimate, max_delay: float | None = None) -> list[str
     """
     out = []
     if est.delay_estimated:
-        if est.delay <= 1e-9:
-            out.append("the delay ended on its lower bound 0 s: the output may lead the input (a log whose input "
-                       "is recorded late, or a non-causal filter in the log); check the time stamps of the signals")
+        gain = est.solver.get("delay_lower_bound_gain", 0.0)
+        if est.delay <= 1e-9 and gain >= DELAY_BOUND_GAIN:
+            out.append(f"the delay ended on its lower bound 0 s and a negative one would lower the criterion by "
+                       f"{gain:.3g} times the residual variance: the output leads the input (a log whose input is "
+                       "recorded late, a non-causal filter in the log), or the model lacks the phase lead of a "
+                       "zero; check the time stamps of the signals, or fit one zero more")
         elif max_delay is not None and est.delay >= max_delay * (1 - 1e-6):
             out.append(f"the delay ended on its upper bound {max_delay:g} s: raise --max-delay (FitOptions.max_delay)")
     nyquist = np.pi / est.ts

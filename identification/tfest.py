@@ -941,6 +941,12 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                       f"{best.point.sse:.6g}); {advice}", RuntimeWarning, stacklevel=3)
     p = best.point
     theta, delay = p.theta, p.delay
+    pull = {}
+    if estimate_delay and delay <= 1e-12:  # would a negative delay fit better? (the diagnostics' evidence)
+        with np.errstate(over="ignore", invalid="ignore"):
+            h_r, g_r = model.reduced_normal(p)
+        gain = g_r[-1] ** 2 / h_r[-1, -1] if g_r[-1] < 0 and h_r[-1, -1] > 0 else 0.0
+        pull = {"delay_lower_bound_gain": float(gain / max(p.sse / sum(e.n for e in exps), 1e-300))}
     n_obs = sum(e.n for e in exps)
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging model's covariance is inf, not a warning
         h = model.full_normal(p)
@@ -954,7 +960,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                               input=input, output=output, trend=opts.trend, fitted=fitted,
                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
                                       "status": best.status, "iterations": best.iterations, "starts": runs,
-                                      **({"max_delay": opts.max_delay} if estimate_delay else {}),
+                                      **({"max_delay": opts.max_delay} if estimate_delay else {}), **pull,
                                       "seconds": time.perf_counter() - t_start})
     if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:
         raise SignalError(f"{exps[0].source}: output `{output}` shows no response to input `{input}`: the best "
