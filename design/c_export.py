@@ -92,7 +92,7 @@ _REFERENCE_TEXT = ("sin(0.5 t) + 0.3 sin(2.3 t + 0.4) + 0.05 sin(11 t + 1.1), t 
 # --------------------------------------------------------------------------- names
 
 
-def default_c_prefix(source: str, target: str) -> str:
+def default_c_prefix(source: str, target: str, axis: str = "x") -> str:
     """The default prefix of a pair's C functions.
 
     Parameters
@@ -101,14 +101,18 @@ def default_c_prefix(source: str, target: str) -> str:
         Name of the system learned from.
     target : str
         Name of the learning system.
+    axis : str
+        The axis the filters are for (``filters.json``'s ``axis``): the paper's x adds nothing, y
+        and z end the prefix in ``<axis>_`` so that a vehicle's three axes can share firmware.
 
     Returns
     -------
     str
-        ``ilcdob_<source>_<target>_`` in lower case, every character other than
-        ``[a-z0-9_]`` replaced by ``_``.
+        ``ilcdob_<source>_<target>_`` (then ``<axis>_``) in lower case, every character other
+        than ``[a-z0-9_]`` replaced by ``_``.
     """
-    return re.sub(r"[^a-z0-9_]", "_", f"ilcdob_{source}_{target}_".lower())
+    tail = "" if axis == "x" else f"{axis}_"
+    return re.sub(r"[^a-z0-9_]", "_", f"ilcdob_{source}_{target}_{tail}".lower())
 
 
 def check_c_prefix(prefix: str) -> str:
@@ -875,8 +879,8 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
     if missing:
         raise SpecError(f"filters: missing key(s) {missing} for the C code; method "
                         f"{filters.get('method')!r} has no L1/L2 filters (only closed-form and fir do)")
-    prefix = check_c_prefix(default_c_prefix(str(filters["from"]), str(filters["to"])) if prefix is None
-                            else prefix)
+    prefix = check_c_prefix(default_c_prefix(str(filters["from"]), str(filters["to"]), str(filters.get("axis", "x")))
+                            if prefix is None else prefix)
     lp = _learning_parts(filters)
     macro = prefix.upper()
     guard = f"{macro}FILTERS_H"

@@ -99,6 +99,12 @@ def _poles(text: str) -> list[int]:
     return list(range(first, last + 1))
 
 
+def _axis_option(p: argparse.ArgumentParser, design: bool = False) -> None:
+    p.add_argument("--axis", choices=("x", "y", "z"), default=None if design else "x",
+                   help="axis" + (" (default x, or the --design's)" if design else "") + ": x (the paper's), or "
+                        "y / z from the fleet file's [system.y] / [system.z] sections")
+
+
 def _ids(text: str) -> list[int]:
     from ilcdob.validation.scenarios import parse_scenarios
 
@@ -179,8 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", default=None, help="folder for the compare/residual/Bode figures")
     p = _sub(sub, "design", "design the learning filters of one system from another; write filters and C code")
     _common(p, "output folder (written as a unit)", law=True)
-    p.add_argument("--axis", choices=("x", "y", "z"), default="x",
-                   help="axis: x (the paper's), or y / z from the fleet file's [system.y] / [system.z] sections")
+    _axis_option(p)
     p.add_argument("--from", dest="source", required=True, help="system learned from (j-1)")
     p.add_argument("--to", dest="target", required=True, help="system that learns (j)")
     p.add_argument("--method", default="closed-form", help="closed-form, fir, norm-optimal, robust or robust-set")
@@ -189,7 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bound", type=float, default=None, help="multiplicative uncertainty bound (default: identified)")
     p.add_argument("--n", type=_pos, default=None, help="trial length in samples (default: the trial's, else 500)")
     p.add_argument("--trial", default=None, help="CSV of the source's trial: time (s), error (m), learning (m/s^2)")
-    p.add_argument("--c-prefix", default=None, help="prefix of the C symbols (default: ilcdob_<from>_<to>_)")
+    p.add_argument("--c-prefix", default=None,
+                   help="prefix of the C symbols (default: ilcdob_<from>_<to>_, then <axis>_ for y and z)")
     p.add_argument("--c-float", action="store_true", help="also emit float C functions, with their measured error")
     _band_options(p)
     p.add_argument("--disturbance", choices=("command", "airframe", "wind"), default="command",
@@ -202,9 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _sub(sub, "learn", "the next vehicle's learning signal from a recorded trial of the previous one, computed as "
                            "the emitted C code computes it; writes it as CSV, binary and a C array")
     _common(p, "output folder (written as a unit)")
-    p.add_argument("--axis", choices=("x", "y", "z"), default=None,
-                   help="axis (default x, or the --design's): x (the paper's), or y / z from the fleet file's "
-                        "[system.y] / [system.z] sections")
+    _axis_option(p, design=True)
     p.add_argument("trial", help="the recorded trial of --from: .csv, .parquet, .ulg or .bin")
     p.add_argument("--from", dest="source", default=None, help="system learned from (j-1); read from --design if given")
     p.add_argument("--to", dest="target", default=None, help="system that learns (j); read from --design if given")
@@ -226,8 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "ratio for a stated plant, and the paper's first-order condition |Delta| < |1 + P C|/2 "
                            "beside it (exit 1: improvement not guaranteed, the exact worst case exceeds 1.01)")
     _common(p, None)
-    p.add_argument("--axis", choices=("x", "y", "z"), default="x",
-                   help="axis: x (the paper's), or y / z from the fleet file's [system.y] / [system.z] sections")
+    _axis_option(p)
     p.add_argument("--order", default=None, help="learning order, comma-separated names (default: file order)")
     p.add_argument("--bound", type=float, default=None, help="multiplicative uncertainty bound (default: identified)")
     p.add_argument("--scale", type=float, default=1.0, help="scale of the identified standard deviations")

@@ -39,8 +39,8 @@ from ilcdob.fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
 from .html import build_report, report_files
 from .output import OutputFolder, Provenance, check_output_path, write_file
 
-__all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "compare_orders", "identify_fleet_to_folder",
-           "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
+__all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "compare_orders",
+           "identify_fleet_to_folder", "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
            "add_to_fleet", "report_to_html", "LogClock", "IdentifyInputs", "learn_to_folder", "TrialColumns"]
 
 #: ``progress(done, total, what)``: called as long work advances.
@@ -473,15 +473,15 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
     axis : {"x", "y", "z"}
-        The axis designed (the fleet file's section; filters.json records it, and the C prefix of y
-        and z designs ends in the axis).
+        The axis designed (the fleet file's section; filters.json records it, and so the default C
+        prefix of y and z designs ends in the axis, :func:`ilcdob.design.c_export.default_c_prefix`).
 
     Returns
     -------
     tuple of (PairDesign, dict)
         The design and the ``filters.json`` content written.
     """
-    from ilcdob.design.c_export import check_c_prefix, default_c_prefix, design_files
+    from ilcdob.design.c_export import check_c_prefix, design_files
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.design.laws import check_law
     from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
@@ -512,8 +512,6 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                         "previous system's trial with --trial CSV (columns time, error, learning)")
     check_output_path(out, folder=True, overwrite=overwrite)
     flt, digest = fleet_and_hash(fleet, axis)
-    if axis != "x" and c_prefix is None:
-        c_prefix = f"{default_c_prefix(source, target)}{axis}_"
     columns = {"e": "error", "d_f": "learning"}
     if law == "exact-reference":
         columns["r"] = "reference"
@@ -734,8 +732,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                                 f"learning signal of {target} from {source}")
     n = d_f.size
     axis = filters.get("axis", "x")
-    prefix = ((filters.get("c") or {}).get("prefix")
-              or default_c_prefix(str(source), str(target)) + ("" if axis == "x" else f"{axis}_"))
+    prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target), axis)
     header = signal_header(prefix, d_f, ts)
     summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"),
                "law": "paper",
