@@ -239,7 +239,7 @@ class TFEstimate:
                   sigma2=float(sigma2), ts=float(ts), fit_estimation=fit_percent(y_all, yh_all),
                   fit_validation=fit_val, whiteness=white, input_correlation=xcor, input=input,
                   output=output, solver=dict(solver), trend=trend, file_fits=file_fits)
-        est.diagnostics.extend(fit_diagnostics(est, solver.get("max_delay")))
+        est.diagnostics.extend(fit_diagnostics(est))
         return est
 
     # ------------------------------------------------------------------ use
@@ -413,7 +413,7 @@ DELAY_BOUND_GAIN = 4.0
 FILE_FIT_GAP = 20.0
 
 
-def fit_diagnostics(est: TFEstimate, max_delay: float | None = None) -> list[str]:
+def fit_diagnostics(est: TFEstimate) -> list[str]:
     """What a fit's numbers say beyond its fit %: each an English sentence with its consequence.
 
     * the estimated delay on a bound of its search: ``max_delay``, or 0 when a negative delay
@@ -427,9 +427,7 @@ def fit_diagnostics(est: TFEstimate, max_delay: float | None = None) -> list[str
     Parameters
     ----------
     est : TFEstimate
-        The fit.
-    max_delay : float, optional
-        Upper bound of the delay search, s (checked when the delay was estimated).
+        The fit; an estimated delay is checked against ``solver["max_delay"]``, the bound of its search.
 
     Returns
     -------
@@ -444,7 +442,7 @@ def fit_diagnostics(est: TFEstimate, max_delay: float | None = None) -> list[str
                        f"{gain:.3g} times the residual variance: the output leads the input (a log whose input is "
                        "recorded late, a non-causal filter in the log), or the model lacks the phase lead of a "
                        "zero; check the time stamps of the signals, or fit one zero more")
-        elif max_delay is not None and est.delay >= max_delay * (1 - 1e-6):
+        elif (max_delay := est.solver.get("max_delay")) is not None and est.delay >= max_delay * (1 - 1e-6):
             out.append(f"the delay ended on its upper bound {max_delay:g} s: raise --max-delay (FitOptions.max_delay)")
     nyquist = np.pi / est.ts
     for what, poly in (("pole", est.den), ("zero", est.num)):

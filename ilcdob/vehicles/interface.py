@@ -21,12 +21,10 @@ import numpy as np
 
 from ilcdob.controller import OuterLoopController
 from ilcdob.errors import SpecError
+from ilcdob.fleet import AXES  # the fleet file's axes, in the order of the command and position vectors
 from ilcdob.loop import LoopSystem
 
 __all__ = ["Vehicle", "VehicleTrial", "fly_vehicle", "AXES"]
-
-#: Axis names, in the order of the command and position vectors.
-AXES = ("x", "y", "z")
 
 
 @runtime_checkable
