@@ -696,6 +696,15 @@ def _retune_resonances(model: _Model, p: _Point, delay_fixed: float) -> _Point:
     roots = np.roots(np.concatenate([[1.0], p.alpha[:nf]])) if nf >= 2 else np.zeros(0)
     pairs = [r for r in roots if r.imag > 0 and -r.real / abs(r) < RESONANCE_DAMPING]
     best = p
+
+    def scan(rest: np.ndarray, pairs_wz) -> None:
+        nonlocal best
+        for w, z in pairs_wz:
+            trial = model.evaluate(np.concatenate([np.polymul(rest, [1.0, 2 * z * w, w * w])[1:], best.alpha[nf:]]),
+                                   delay_fixed)
+            if trial.sse < best.sse:
+                best = trial
+
     for r in pairs:
         others = [q for q in np.roots(np.concatenate([[1.0], best.alpha[:nf]]))
                   if abs(q - r) > 1e-9 * abs(r) and abs(q - np.conj(r)) > 1e-9 * abs(r)]
@@ -703,16 +712,9 @@ def _retune_resonances(model: _Model, p: _Point, delay_fixed: float) -> _Point:
             continue  # the pair moved or merged in an earlier retune
         rest = np.real(np.poly(others)) if others else np.array([1.0])
         wn, zeta = abs(r), -r.real / abs(r)
-        grid = [(f * wn, zeta) for f in np.linspace(0.8, 1.2, 41)]
-        for stage in (grid, None):  # the frequency, then the damping at the best frequency
-            if stage is None:
-                w_best = wn if best is p else _pair_frequency(best.alpha[:nf], r, wn)
-                stage = [(w_best, g * zeta) for g in np.geomspace(0.25, 4.0, 17) if g * zeta < 1.0]
-            for w, z in stage:
-                a = np.polymul(rest, [1.0, 2 * z * w, w * w])[1:]
-                trial = model.evaluate(np.concatenate([a, best.alpha[nf:]]), delay_fixed)
-                if trial.sse < best.sse:
-                    best = trial
+        scan(rest, ((f * wn, zeta) for f in np.linspace(0.8, 1.2, 41)))             # the frequency, then
+        w_best = _pair_frequency(best.alpha[:nf], r, wn)                             # the damping there
+        scan(rest, ((w_best, g * zeta) for g in np.geomspace(0.25, 4.0, 17) if g * zeta < 1.0))
     return best
 
 
@@ -901,14 +903,16 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     if not cands:
         raise IlcdobError("no initial estimate could be formed (every candidate model diverged); check that "
                           "the input excites the system and that the structure suits the data")
+    def competitive(points: list[_Point]) -> list[_Point]:
+        # a start whose criterion is several times the best start's lies in a region the first run never
+        # needed to search
+        return [p0 for p0 in points if p0.sse <= SECONDARY_START_RATIO * points[0].sse]
+
     starts = _distinct(cands, opts.starts)
     if estimate_delay:  # every competitive start profiles the delay: the best denominator at delay 0 need not be
-        swept = [q for p0 in starts if p0.sse <= SECONDARY_START_RATIO * starts[0].sse
-                 for q in _delay_sweep(structure, exps, ts, opts, p0, deadline, say)]
+        swept = [q for p0 in competitive(starts) for q in _delay_sweep(structure, exps, ts, opts, p0, deadline, say)]
         starts = _distinct(sorted(swept, key=lambda q: q.sse), opts.starts)
-    # further starts only where they compete: a start whose criterion is several times the
-    # best start's lies in a region the first run never needed to search
-    runs_from = [p0 for p0 in starts if p0.sse <= SECONDARY_START_RATIO * starts[0].sse]
+    runs_from = competitive(starts)
     say(0, len(runs_from), "initial estimate(s): " + ", ".join(
         f"SSE {p.sse:.6g}" + (f" at delay {p.delay:.4g} s" if estimate_delay else "") for p in starts))
     best: _LMResult | None = None
