@@ -555,8 +555,10 @@ def _empirical_response(exps: list[_Exp], ts: float, nper: int) -> tuple[np.ndar
     if nper < 64:
         return None
     f, puu = sps.welch(e.u, fs=1.0 / ts, nperseg=nper)
+    _, pyy = sps.welch(e.y, fs=1.0 / ts, nperseg=nper)
     _, pyu = sps.csd(e.u, e.y, fs=1.0 / ts, nperseg=nper)
-    _, coh = sps.coherence(e.u, e.y, fs=1.0 / ts, nperseg=nper)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        coh = np.abs(pyu) ** 2 / (puu * pyy)  # scipy.signal.coherence's own formula, on spectra already at hand
     ok = (puu > 1e-2 * puu.max()) & (f > 0) & (f < 0.25 / ts) & (coh > 0.8)
     if ok.sum() < 8:
         return None
@@ -572,10 +574,9 @@ def _frequency_domain_denominators(structure: ModelStructure, exps: list[_Exp], 
     the coefficients, each weighted by ``1/(|A_prev| sqrt|H|)`` (half-way to a relative error: the
     resonances far below the response's peak count too, while the noisy bins where ``|H|`` is tiny
     do not take over), on a frequency axis scaled to the data's band; unstable roots reflected into
-    the left half plane. A pole grid cannot place
-    several sharp resonances at once, and a least-squares fit started away from them stays in a
-    local minimum between them (a three-mass flexible system, 6 poles and 5 zeros, fitted 57 %
-    held out from the grid).
+    the left half plane. A pole grid cannot place several sharp resonances at once, and a
+    least-squares fit started away from them stays in a local minimum between them (a three-mass
+    flexible system, 6 poles and 5 zeros, fitted 57 % held out from the grid).
     """
     nf, nz, k = structure.n_free_poles, structure.n_zeros, structure.n_integrators
     if nf < 4:  # one pair the grid and the retune after convergence place (:func:`_retune_resonances`)
