@@ -264,31 +264,26 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
         if ax not in fleets:  # as the paper's x-only flights: axes not learned hold the start
             pos[:, i] = acc[:, i] = 0.0
     order = sc.order(first.names) if order is None else check_order(first.names, order)
-    x_dist = sc.disturbance(t)
 
     def along_x(scale: float) -> Callable:
         return lambda tt: np.array([scale * float(sc.disturbance(np.array([tt]))[0]), 0.0, 0.0])
 
     d = np.zeros((t.size, 3))
+    d[:, 0] = sc.disturbance(t)  # the command disturbance, or the signal a scaled wind is made from
     if wind is None:
         command, air = along_x(1.0), None
-        d[:, 0] = x_dist
     elif callable(wind):
         command, air = None, wind
         d = np.array([np.asarray(wind(tt), float).reshape(-1)[:3] for tt in t])
     elif isinstance(wind, (int, float)) and not isinstance(wind, bool) and np.isfinite(wind):
         command, air = None, along_x(float(wind))
-        d[:, 0] = x_dist
     else:
         raise SpecError(f"`wind`: got {wind!r}, expected None, a gain in m/s per m/s^2 or a callable t -> (3,) m/s")
-    flown = {name: 0 for name in order}
 
-    def flight(name: str, mode: str, d_f: dict | None = None, k: int | None = None) -> dict[str, Flight]:
+    def flight(name: str, mode: str, k: int, d_f: dict | None = None) -> dict[str, Flight]:
+        """Flight ``k`` of a vehicle in the scenario (its seed; the laws' learning flights share them)."""
         loops = {ax: fleets.get(ax, first).loop(name) for ax in AXES}
         ff = {ax: acc[:, i] for i, ax in enumerate(AXES) if loops[ax].spec.controller.acceleration_feedforward}
-        if k is None:
-            k = flown[name]
-            flown[name] += 1
         seed = 1000 * sc.id + 10 * k + first.names.index(name)
         trial = fly_vehicle(make(name, command, air, seed), loops, pos, learning=d_f, feedforward=ff or None,
                             dob=mode == "dob")
@@ -297,17 +292,17 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
                            d_f=trial.d_f[:, i], u2=trial.command[:, i])
                 for i, ax in enumerate(AXES) if ax in fleets}
 
-    base = {name: (flight(name, "no_dob"), flight(name, "dob")) for name in order}
+    base = {name: (flight(name, "no_dob", 0), flight(name, "dob", 1)) for name in order}
     out: dict[LawPath, dict[str, ScenarioResult]] = {}
     for law, path in laws:
         designs = {ax: pair_designs(fleets[ax], {}, law, pos[:, AXES.index(ax)], acc[:, AXES.index(ax)], "auto", path)
                    for ax in axes}
-        count = dict(flown)
+        count = {name: 2 for name in order}  # after the two baseline flights
 
         def step(src: str, tgt: str, prev: dict[str, Flight]) -> dict[str, Flight]:
             count[tgt] += 1
             d_f = {ax: designs[ax](src, tgt).learning(prev[ax].e, prev[ax].d_f).d_f for ax in axes}
-            return flight(tgt, "dob", d_f, k=count[tgt] - 1)
+            return flight(tgt, "dob", count[tgt] - 1, d_f)
 
         learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
         out[(law, path)] = {ax: ScenarioResult(scenario=sc, order=order, chain=chain, systems={
