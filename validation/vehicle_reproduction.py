@@ -197,6 +197,9 @@ class VehicleReproduction(ReproductionResult):
         * paper's disturbance, every scenario: the better law's learning 1 / DOB-only <= 0.02 per vehicle;
         * every wind: the wind law (the better of its two) at every iteration <= 0.5 of DOB-only per vehicle.
         """
+        def row(what: str, value: float, limit: float) -> dict[str, object]:  # a ratio at most its limit
+            return {"what": what, "value": value, "limit": limit, "passed": bool(value <= limit)}
+
         rows = [{"what": f"held-out fit, {name} ({_structure(f)})", "value": f.fit, "limit": 95.0,
                  "passed": bool(f.fit >= 95.0)} for name, f in self.fits.items()]
 
@@ -208,13 +211,11 @@ class VehicleReproduction(ReproductionResult):
         for sr in self.runs.get("paper", {}).get("paper", []):
             for name in sr.order:
                 if sr.scenario.id == 1:
-                    v = ratios("paper", "paper", 1, name)[0]
-                    rows.append({"what": f"paper's disturbance, scenario 1, {name}: learning 1 / DOB (paper law)",
-                                 "value": v, "limit": 0.01, "passed": bool(v <= 0.01)})
+                    rows.append(row(f"paper's disturbance, scenario 1, {name}: learning 1 / DOB (paper law)",
+                                    ratios("paper", "paper", 1, name)[0], 0.01))
                 best = min((ratios("paper", lab, sr.scenario.id, name)[0], lab) for lab in self.runs["paper"])
-                rows.append({"what": f"paper's disturbance, scenario {sr.scenario.id}, {name}: learning 1 / DOB "
-                                     f"({best[1]} law, the better)", "value": best[0], "limit": 0.02,
-                             "passed": bool(best[0] <= 0.02)})
+                rows.append(row(f"paper's disturbance, scenario {sr.scenario.id}, {name}: learning 1 / DOB "
+                                f"({best[1]} law, the better)", best[0], 0.02))
         for dist in self.runs:
             labels = [_label(lp) for lp in DISTURBANCES[dist] if lp[1] == "wind"]
             if dist == "paper" or not labels:
@@ -222,9 +223,8 @@ class VehicleReproduction(ReproductionResult):
             for sr in self.runs[dist][labels[0]]:
                 for name in sr.order:
                     best = min((max(ratios(dist, lab, sr.scenario.id, name)), lab) for lab in labels)
-                    rows.append({"what": f"{dist}, scenario {sr.scenario.id}, {name}: worst iteration / DOB "
-                                         f"({best[1]})", "value": best[0], "limit": 0.5,
-                                 "passed": bool(best[0] <= 0.5)})
+                    rows.append(row(f"{dist}, scenario {sr.scenario.id}, {name}: worst iteration / DOB ({best[1]})",
+                                    best[0], 0.5))
         return rows
 
     def to_dict(self) -> dict[str, object]:
