@@ -422,7 +422,9 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
     * residuals not white (fewer than half the lags inside the 99 % band: coloured noise or
       missing dynamics, and the covariance-based Delta set understates the model error);
     * residuals correlated with the input (fewer than 80 % of lags inside: missing dynamics);
-    * an estimation file fitting :data:`FILE_FIT_GAP` points or more below the median file.
+    * an estimation file fitting :data:`FILE_FIT_GAP` points or more below the median file;
+    * samples left out of the fit as gross errors (``solver["gross_errors"]``, see
+      ``FitOptions.outlier_sigmas``), named by file and sample.
 
     Parameters
     ----------
@@ -458,6 +460,11 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
     if est.input_correlation.share_inside < 0.8:
         out.append(f"the residuals correlate with the input ({100 * est.input_correlation.share_inside:.0f} % of "
                    "lags inside the 99 % band): dynamics the structure misses; compare other orders")
+    for d in est.solver.get("gross_errors", []):
+        out.append(f"{d['samples']} samples of {d['source']} (samples {d['first']}-{d['last']}) lay far off the "
+                   "model (gross errors: a glitch or corrupt samples in the log) and were left out of the fit, the "
+                   "record cut there; check that file, or keep them with --keep-outliers "
+                   "(FitOptions(outlier_sigmas=None))")
     if len(est.file_fits) >= 3:
         median = float(np.median(est.file_fits))
         for i, f in enumerate(est.file_fits):

@@ -123,6 +123,15 @@ class FitOptions:
         Wall-time limit of the whole fit, s; the best iterate so far is returned.
     tol : float
         Relative tolerance on the predicted decrease of the criterion and on the step.
+    outlier_sigmas : float or None
+        Gross-error threshold: after the fit, samples whose residual lies more than this many
+        robust standard deviations (1.4826 x the median absolute deviation of all residuals)
+        off the model, and by more than :data:`GROSS_ERROR_FLOOR` of the output's standard
+        deviation, are left out, the record cut there into pieces with their own initial
+        conditions, and the fit rerun (at most :data:`OUTLIER_ROUNDS` times, and only while the
+        samples left out stay below :data:`MAX_OUTLIER_SHARE` of the data); every sample left
+        out is named in the diagnostics. Default 10 (Gaussian noise exceeds it with probability
+        about 1e-23). None keeps every sample.
     initial : array or None
         An initial model ``theta`` (the parameter order of :class:`ModelStructure`), e.g. the
         vehicle's previous identification: the LM starts from its denominator (numerator,
@@ -142,6 +151,7 @@ class FitOptions:
     max_iter: int = 100
     time_limit: float | None = None
     tol: float = 1e-8
+    outlier_sigmas: float | None = 10.0
     initial: tuple[float, ...] | None = None
     verbose: bool = False
 
@@ -163,6 +173,11 @@ class FitOptions:
                 raise SpecError(f"`{name}`: got {v!r}, expected an integer >= 1")
         if self.time_limit is not None and not (math.isfinite(self.time_limit) and self.time_limit > 0):
             raise SpecError(f"`time_limit`: got {self.time_limit!r}, expected None or a number of seconds > 0")
+        if self.outlier_sigmas is not None and not (
+                isinstance(self.outlier_sigmas, (int, float)) and not isinstance(self.outlier_sigmas, bool)
+                and math.isfinite(self.outlier_sigmas) and self.outlier_sigmas >= 3):
+            raise SpecError(f"`outlier_sigmas`: got {self.outlier_sigmas!r}, expected None (keep every sample) or "
+                            "a number >= 3 (robust standard deviations)")
         if not (math.isfinite(self.tol) and 0 < self.tol < 1):
             raise SpecError(f"`tol`: got {self.tol!r}, expected a number in (0, 1)")
         if self.initial is not None:
@@ -719,6 +734,62 @@ def _retune_resonances(model: _Model, p: _Point, delay_fixed: float) -> _Point:
     return best
 
 
+#: At most this many refits after leaving gross errors out (:attr:`FitOptions.outlier_sigmas`).
+OUTLIER_ROUNDS = 3
+#: Gross errors are left out only while they stay below this share of the samples: beyond it the residuals
+#: are heavy-tailed (a structure that misses dynamics, a disturbance), not a few corrupt samples.
+MAX_OUTLIER_SHARE = 0.02
+#: ... and only residuals beyond this share of the output's standard deviation count (nearly noise-free data have
+#: a tiny robust scale, against which rounding structure would stand out).
+GROSS_ERROR_FLOOR = 0.05
+
+
+def _fitted(model: _Model, p: _Point) -> list[np.ndarray]:
+    """The model output per experiment at ``p`` (forced response, free response and trend)."""
+    return [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p), p.locals_)]
+
+
+def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list[_Exp], list[dict]]:
+    """The experiments cut around samples whose residual at ``p`` lies more than ``sigmas`` robust
+    standard deviations off, and what was left out (``source``, ``first``/``last`` sample of the
+    experiment, ``samples``); unchanged experiments and no record when none is found or when the
+    outliers exceed :data:`MAX_OUTLIER_SHARE`. Residuals below :data:`GROSS_ERROR_FLOOR` of the output's
+    standard deviation never count, nor below half the largest one (each round takes the worst cluster: the
+    smaller errors a glitch spreads through a distorted fit go with the refit). Each flagged sample is widened by the model order on
+    both sides (the samples around a glitch carry its transient); good runs shorter than
+    :func:`min_samples` are left out with it."""
+    resid = [e.y - f for e, f in zip(model.exps, _fitted(model, p))]
+    flat = np.concatenate(resid)
+    centre = float(np.median(flat))
+    scale = 1.4826 * float(np.median(np.abs(flat - centre)))
+    spread = float(np.sqrt(np.mean([np.var(e.y) for e in model.exps])))
+    worst = float(np.max(np.abs(flat - centre)))
+    # the worst cluster first: a fit distorted by a glitch spreads smaller errors that the refit removes
+    limit = max(sigmas * scale, GROSS_ERROR_FLOOR * spread, 0.5 * worst)
+    flags = [np.abs(r - centre) > limit for r in resid]
+    if not any(f.any() for f in flags):
+        return model.exps, []
+    need, guard = min_samples(model.s), model.n
+    pieces, left = [], []
+    for e, f in zip(model.exps, flags):
+        if not f.any():
+            pieces.append(e)
+            continue
+        bad = np.convolve(f, np.ones(2 * guard + 1), mode="same") > 0
+        edges = np.flatnonzero(np.diff(np.concatenate([[True], bad, [True]]).astype(int)))
+        keep = [(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= need]
+        dropped = np.ones(e.n, bool)
+        for a, b in keep:
+            dropped[a:b] = False
+            pieces.append(_Exp(e.u[a:b], e.y[a:b], _trend_basis(b - a, model.s, model.opts),
+                               e.source if (a, b) == (0, e.n) else f"{e.source} [{a}:{b}]"))
+        idx = np.flatnonzero(dropped)
+        left.append({"source": e.source, "first": int(idx[0]), "last": int(idx[-1]), "samples": int(idx.size)})
+    if sum(d["samples"] for d in left) > MAX_OUTLIER_SHARE * flat.size or not pieces:
+        return model.exps, []
+    return pieces, left
+
+
 def _pair_frequency(a: np.ndarray, near: complex, default: float) -> float:
     """Natural frequency of the pole pair of ``[1, a]`` nearest to ``near``."""
     roots = [q for q in np.roots(np.concatenate([[1.0], a])) if q.imag > 0]
@@ -936,6 +1007,20 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                          "iterations": res.iterations, "start": "resonances retuned"})
             if res.point.sse < best.point.sse:
                 best = res
+    left_out: list[dict] = []
+    for _ in range(OUTLIER_ROUNDS if opts.outlier_sigmas is not None and best.status == "converged" else 0):
+        pieces, left = _without_gross_errors(model, best.point, opts.outlier_sigmas)
+        cut = _Model(structure, pieces, ts, opts, estimate_delay) if left else None
+        p0 = cut.evaluate(best.point.alpha, delay0) if cut is not None else None
+        if p0 is None or not math.isfinite(p0.sse):
+            break
+        res = _levenberg_marquardt(cut, p0, delay0, opts, deadline, say)
+        runs.append({"start_sse": p0.sse, "sse": res.point.sse, "status": res.status, "iterations": res.iterations,
+                     "start": f"{sum(d['samples'] for d in left)} gross-error samples left out"})
+        model, exps, best = cut, pieces, res
+        left_out += left
+        say(0, 0, f"gross errors: {sum(d['samples'] for d in left)} samples left out, LM {res.status}, "
+                  f"SSE {res.point.sse:.6g}")
     why = {"max_iter": "at its iteration limit", "time_limit": "at its time limit",
            "numerical": "where the sensitivities overflowed (the model order may exceed what the data support)"}
     if best.status != "converged":
@@ -958,7 +1043,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     sigma2 = p.sse / max(n_obs - h.shape[0], 1)
     n_global = structure.n_params + (1 if estimate_delay else 0)
     cov = sigma2 * _scaled_pinv(h)[:n_global, :n_global]
-    fitted = [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p), p.locals_)]
+    fitted = _fitted(model, p)
     est = TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
                               delay_estimated=estimate_delay, sigma2=sigma2,
                               experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
@@ -966,6 +1051,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
                                       "status": best.status, "iterations": best.iterations, "starts": runs,
                                       **({"max_delay": opts.max_delay} if estimate_delay else {}), **pull,
+                                      **({"gross_errors": left_out} if left_out else {}),
                                       "seconds": time.perf_counter() - t_start})
     if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:
         raise SignalError(f"{exps[0].source}: output `{output}` shows no response to input `{input}`: the best "

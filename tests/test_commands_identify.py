@@ -18,13 +18,14 @@ STRUCTURE = ModelStructure(3, 0, 2)
 TRUE = STRUCTURE.join([7.0], [1.0, 7.0, 0.0, 0.0])  # 1/(s^2 (s/7 + 1)), 0.04 s delay
 
 
-def _flight(path, seed, f1):
+def _flight(path, seed, f1, glitch=0.0):
     rng = np.random.default_rng(seed)
     t = np.arange(2500) * TS
     phase = 2 * np.pi * (0.2 * t + (f1 - 0.2) * t**2 / (2 * t[-1]))
     u = 0.8 * np.cos(phase)
     y = simulate_zoh(STRUCTURE, TRUE, u, TS, delay=0.04)
     y = y + 0.002 * rng.standard_normal(t.size)
+    y[1200:1210] += glitch       # a logger glitch (m)
     FlightData(t, {"acc_cmd": u, "x": y}, {"acc_cmd": "m/s^2", "x": "m"}, source=str(path)).to_csv(path)
 
 
@@ -219,3 +220,27 @@ def test_pole_range_compares_orders_and_writes_the_chosen_one(tmp_path, capsys):
         assert one["fit_percent"]["validation"] == pytest.approx(r["fit_validation"], abs=1e-9)
     assert max(r["fit_validation"] for r in rows) - rows[0]["fit_validation"] <= 0.5
     assert main(["identify", *common, "--poles", "5..2", "--out", str(tmp_path / "x.json")]) == 2
+
+
+def test_a_glitch_is_left_out_and_named_unless_kept(tmp_path, capsys):
+    """A 40 m spike over 0.2 s in one estimation file: left out (named in a note and in model.json, the
+    held-out fit within 0.5 points of the clean files' fit: measured 99.85 % both); --keep-outliers keeps it and
+    the fit drops (measured 94.94 %)."""
+    for i, f1 in enumerate((2.0, 2.5, 3.0)):
+        _flight(tmp_path / f"f{i}.csv", i, f1, glitch=40.0 if i == 1 else 0.0)
+    _flight(tmp_path / "val.csv", 9, 2.2)
+    base = ["identify", *(str(tmp_path / f"f{i}.csv") for i in range(3)), "--input", "acc_cmd", "--output", "x",
+            "--poles", "3", "--integrators", "2", "--delay", "0.04", "--validate", str(tmp_path / "val.csv")]
+    fits = {}
+    for name, extra in (("cut", []), ("kept", ["--keep-outliers"]), ("clean", None)):
+        files = base if extra is not None else [a for a in base if not a.endswith("f1.csv")]
+        assert main([*files, *(extra or []), "--out", str(tmp_path / f"{name}.json")]) == 0
+        fits[name] = json.loads((tmp_path / f"{name}.json").read_text())
+        out = capsys.readouterr().out      # the summary, its notes included
+        if name == "cut":
+            assert "note: 16 samples of " in out and "f1" in out and "--keep-outliers" in out, out
+    left = fits["cut"]["solver"]["gross_errors"]
+    assert len(left) == 1 and left[0]["first"] <= 1200 and left[0]["last"] >= 1209, left
+    assert "gross_errors" not in fits["kept"]["solver"]
+    val = {k: v["fit_percent"]["validation"] for k, v in fits.items()}
+    assert val["cut"] >= val["clean"] - 0.5 and val["kept"] < val["clean"] - 3.0, val

@@ -152,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.description += (". Diagnostics (printed as notes, and in model.json's `diagnostics`): the estimated delay on a "
                       "bound of its search, poles or zeros beyond the Nyquist frequency, residuals that are not "
                       "white or that correlate with the input, an estimation file fitting far worse than the others "
-                      "(per-file fits: `file_fits_percent`)")
+                      "(per-file fits: `file_fits_percent`), samples left out as gross errors (--keep-outliers)")
     p.add_argument("files", nargs="+", help="estimation data: .csv, .parquet, .ulg or .bin")
     p.add_argument("--input", required=True, help="input signal: COLUMN, TOPIC.FIELD (ULog) or MESSAGE.FIELD")
     p.add_argument("--output", required=True, help="output signal, same forms as --input")
@@ -175,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--allow-unstable", action="store_true",
                    help="let free poles enter the right half plane (an open-loop unstable plant; default: such "
                         "models are rejected during the fit)")
+    p.add_argument("--keep-outliers", action="store_true",
+                   help="keep every sample (default: samples more than 10 robust standard deviations off the first "
+                        "fit, a glitch in a log, are left out, the record cut there, and named in the notes)")
     p.add_argument("--min-fit", type=float, default=None, help="exit 1 when the held-out fit (%%) is below this")
     p.add_argument("--validate", nargs="*", default=[], help="held-out data files")
     p.add_argument("--segment", type=float, default=None, metavar="SECONDS",

@@ -157,7 +157,8 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     trend = _number(a.trend, "--trend", "'none' or a polynomial degree 0-5", ("none",), int)
     structure = [ModelStructure(n, a.zeros, a.integrators) for n in a.poles]
     options = FitOptions(delay=delay, max_delay=a.max_delay, trend=trend, time_limit=a.time_limit, starts=a.starts,
-                         max_iter=a.max_iter, stable=not a.allow_unstable)
+                         max_iter=a.max_iter, stable=not a.allow_unstable,
+                         outlier_sigmas=None if a.keep_outliers else FitOptions.outlier_sigmas)
     inputs = uc.IdentifyInputs(a.input, a.output, a.segment, time=a.time, time_unit=a.time_unit, start=a.start,
                                stop=a.stop)
     with warnings.catch_warnings():  # the note below states a fit stopped short, with the options that help
