@@ -82,7 +82,7 @@ from ilcdob.signals import as_signal
 
 __all__ = ["LearningBand", "NoiseEstimate", "estimate_noise", "choose_band", "check_bandwidth", "learning_horizon",
            "fold_start", "fade_out", "END_FIT_S", "FILTER_ORDER", "SNR_MIN", "NOISE_RESOLUTION", "NOISE_SHARE",
-           "AMPLIFICATION_TOL", "OFF_FRACTION", "PAD_PERIODS"]
+           "AMPLIFICATION_TOL", "OFF_FRACTION", "PAD_PERIODS", "MAX_PAD_SAMPLES"]
 
 #: Length of the trial end fitted by the line that extends it (:func:`learning_horizon`), s.
 END_FIT_S = 0.25
@@ -106,6 +106,8 @@ OFF_FRACTION = 0.5
 #: Samples added at each end of the trial: this many periods of the corner frequency, where
 #: F's impulse response has decayed.
 PAD_PERIODS = 6
+#: Most samples added at each end of a trial: the lowest corner is the one whose padding this is.
+MAX_PAD_SAMPLES = 1_000_000
 
 _LOWEST = 1e-3   # lowest corner, as a share of the Nyquist frequency
 
@@ -207,7 +209,11 @@ def fade_out(m: int) -> np.ndarray:
 
 
 def check_bandwidth(value: object, ts: float | None, what: str = "--bandwidth") -> float | str | None:
-    """A bandwidth request: ``"auto"``, ``None``/``"off"`` or a corner in (0, Nyquist) rad/s.
+    """A bandwidth request: ``"auto"``, ``None``/``"off"`` or a corner in [lowest, Nyquist) rad/s.
+
+    The lowest corner pads each end of a trial by :data:`MAX_PAD_SAMPLES` (the filter is padded
+    by :data:`PAD_PERIODS` periods of its corner): a corner of 1e-6 rad/s at 50 Hz would pad by
+    10^9 samples, more memory than there is.
 
     Parameters
     ----------
@@ -232,8 +238,11 @@ def check_bandwidth(value: object, ts: float | None, what: str = "--bandwidth") 
         wc = float(value) if not isinstance(value, bool) else float("nan")  # type: ignore[arg-type]
     except (TypeError, ValueError):
         wc = float("nan")
-    if not (math.isfinite(wc) and 0.0 < wc < nyq):
-        where = f"(0, {nyq:.4g}) rad/s (the Nyquist frequency at Ts = {ts:g} s)" if ts is not None else "rad/s > 0"
+    lowest = PAD_PERIODS * 2 * math.pi / (MAX_PAD_SAMPLES * ts) if ts is not None else 0.0
+    if not (math.isfinite(wc) and 0.0 < wc < nyq and wc >= lowest):
+        where = (f"(0, {nyq:.4g}) rad/s (the Nyquist frequency at Ts = {ts:g} s), at least {lowest:.4g} rad/s (a "
+                 f"lower corner pads each trial end by more than {MAX_PAD_SAMPLES:,} samples)" if ts is not None
+                 else "rad/s > 0")
         raise SpecError(f"`{what}`: got {value!r}, expected 'auto', 'off' or a corner frequency in {where}")
     return wc
 

@@ -71,6 +71,7 @@ import numpy as np
 from scipy import signal
 
 from ilcdob.errors import SpecError
+from ilcdob.names import c_comment, c_identifier
 from ilcdob.signals import as_signal
 
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
@@ -112,7 +113,7 @@ def default_c_prefix(source: str, target: str, axis: str = "x") -> str:
         than ``[a-z0-9_]`` replaced by ``_``.
     """
     tail = "" if axis == "x" else f"{axis}_"
-    return re.sub(r"[^a-z0-9_]", "_", f"ilcdob_{source}_{target}_{tail}".lower())
+    return c_identifier(f"ilcdob_{source}_{target}_{tail}".lower())
 
 
 def check_c_prefix(prefix: str) -> str:
@@ -768,11 +769,6 @@ static void {prefix}w_pass(double *x, size_t n)
     return "".join(out)
 
 
-def _comment(text: str) -> str:
-    """``text`` safe inside a C block comment."""
-    return str(text).replace("*/", "* /")
-
-
 @dataclass(frozen=True)
 class CCode:
     """The C files of one design.
@@ -884,7 +880,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
     lp = _learning_parts(filters)
     macro = prefix.upper()
     guard = f"{macro}FILTERS_H"
-    pair = _comment(f"{filters['from']} -> {filters['to']}")
+    pair = c_comment(f"{filters['from']} -> {filters['to']}")
     ts = float(filters["sample_time"])
     types = [_DOUBLE, _FLOAT] if float_variant else [_DOUBLE]
     errors = {k: float_error(filters[k], ts) for k in FILTER_KEYS} if float_variant else {}
@@ -923,7 +919,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
                        "recorded */\n"
                        f"#define {macro}PAD 0 /* no band: nothing added to the trial */\n")
     header = f"""\
-/* Learning filters {pair} (method {_comment(filters['method'])}), written by `ilcdob design`.
+/* Learning filters {pair} (method {c_comment(filters['method'])}), written by `ilcdob design`.
  *
  * Between two flights, the learning signal d_next of the next vehicle is computed from the
  * previous vehicle's recorded trial, its tracking error e (m) and the learning signal it

@@ -31,7 +31,8 @@ from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 
-__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "disturbance_peak", "dense_grid", "MAX_DELTA_SAMPLES"]
+__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "check_scale", "disturbance_peak", "dense_grid",
+           "MAX_DELTA_SAMPLES"]
 
 #: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
 TAU_RANGE = (0.01, 1.0)
@@ -150,7 +151,8 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
     ------
     SpecError
         ``k`` outside 1 to :data:`MAX_DELTA_SAMPLES`, no uncertainty to sample from (neither a bound nor an identification), a
-        bound outside (0, 1), a margin outside [0, 1), or too many rejected samples.
+        bound outside (0, 1), a bad ``scale`` (:func:`check_scale`), a margin outside [0, 1), or too many rejected
+        samples.
     """
     if k < 1 or k > MAX_DELTA_SAMPLES:
         raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}: every sample is "
@@ -251,6 +253,30 @@ def disturbance_peak(loop: LoopSystem, nominal: LoopSystem) -> float:
     return _PeakMeter(nominal)(loop)
 
 
+def check_scale(scale: object, bound: float | None = None) -> float:
+    """``scale`` if it is a factor of the identified standard deviations that applies, else :class:`SpecError`.
+
+    Parameters
+    ----------
+    scale : object
+        The value given: a finite number > 0 (1: the identified uncertainty).
+    bound : float, optional
+        A common bound given with it: it replaces the identified uncertainty, so ``scale`` must be 1.
+
+    Returns
+    -------
+    float
+    """
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(scale) and scale > 0):
+        raise SpecError(f"`scale`: got {scale!r}, expected a factor > 0 of the identified standard deviations "
+                        "(1: as identified, 2: twice as wide)")
+    if bound is not None and scale != 1:
+        raise SpecError(f"`scale`: got {scale!r} with `bound` {bound!r}: the bound replaces the identified uncertainty "
+                        "that scale multiplies; give one of them")
+    return float(scale)
+
+
 def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale: float = 1.0,
                 bound: float | None = None) -> tuple[np.ndarray, np.ndarray, str] | None:
     """The frequency-wise bound ``|Delta(jw)|`` of a system's Delta set, without sampling plants.
@@ -266,7 +292,8 @@ def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale:
     w : array, optional
         Frequencies, rad/s (default: 200 log-spaced points from 0.01 rad/s to Nyquist).
     scale : float
-        Multiplier of the identified standard deviations.
+        Multiplier (> 0) of the identified standard deviations; 1 with a given ``bound``, which
+        replaces the identified uncertainty it would multiply.
     bound : float, optional
         A common multiplicative bound in (0, 1).
 
@@ -275,7 +302,14 @@ def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale:
     (w, bound, source) or None
         Frequencies, the bound on them and ``"fleet bound"`` or ``"identification"``; None
         when the system has neither a bound nor an identification.
+
+    Raises
+    ------
+    SpecError
+        ``scale`` not a finite number > 0, or other than 1 with a given ``bound``; ``bound``
+        outside (0, 1).
     """
+    check_scale(scale, bound)
     w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
     if bound is None and spec.uncertainty is not None:
         bound = spec.uncertainty.bound

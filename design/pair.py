@@ -411,8 +411,8 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     acceleration : array, m/s^2, optional
         ``exact-reference``: reference acceleration, for controllers that feed it forward.
     robust_set : RobustSetOptions, optional
-        Options of the robust-set design (default: ``rho`` of ``robust``, capped at 1, else 0.95);
-        its bound is ``deltas[source].bound``.
+        Options of the robust-set design (default: ``rho`` of ``robust``, which must then lie in
+        (0, 1], else 0.95); its bound is ``deltas[source].bound``.
     bandwidth : "auto", float or None
         The learning band's corner (:mod:`.band`): ``"auto"`` (default) chooses it per trial
         from the trial's error and the fleet (sensor noise, the target's acceleration limit, the
@@ -499,7 +499,7 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
                    "units": {"L1": "(m/s^2)/m", "L2": "1"}}
         return PairDesign(method, filters, lf.apply)
     if method == "robust-set":
-        rs_opts = robust_set or RobustSetOptions(rho=min(1.0, robust.rho) if robust is not None else 0.95)
+        rs_opts = robust_set or RobustSetOptions(rho=robust.rho if robust is not None else 0.95)
         s_spec = next(s for s in fleet.systems if s.name == source)
         ds = deltas[source]
         rs = design_robust_set(src, tgt, ds.w, ds.bound, rs_opts,

@@ -30,6 +30,7 @@ from typing import Callable
 from ilcdob.errors import FleetError
 from ilcdob.fleet import Fleet
 from ilcdob.fleet_io import fleet_to_toml
+from ilcdob.names import file_name
 from ilcdob.signals import FlightData, segments
 from ilcdob.specs import IdentificationSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
@@ -222,16 +223,17 @@ class FleetIdentification:
         """
         out: dict[str, object] = {}
         for name, vid in self.results.items():
+            folder = file_name(name)  # a system name is data, never a path (the name rule makes this the name)
             for fd in vid.estimation + vid.validation:
-                stem = fd.metadata.get("experiment", "flight")
-                out[f"{name}/{stem}.csv"] = fd.to_csv
-                out[f"{name}/{stem}.parquet"] = fd.to_parquet
-            out[f"{name}/model.json"] = vid.estimate.to_dict()
+                stem = file_name(fd.metadata.get("experiment", "flight"))
+                out[f"{folder}/{stem}.csv"] = fd.to_csv
+                out[f"{folder}/{stem}.parquet"] = fd.to_parquet
+            out[f"{folder}/model.json"] = vid.estimate.to_dict()
             if figures:
                 from .plots import fit_figures
 
                 for fig_name, fig in fit_figures(vid.estimate, list(vid.estimation), list(vid.validation)).items():
-                    out[f"{name}/{fig_name}"] = fig
+                    out[f"{folder}/{fig_name}"] = fig
         out["identified_fleet.toml"] = self.identified_toml
         return out
 

@@ -1,20 +1,146 @@
 """Atomic file output: write to a temporary file in the target folder, then rename.
 
 A crash or an exception mid-write leaves the previous file (or none), never a half-written
-one: ``os.replace`` is atomic on POSIX and Windows within one file system. A temporary left by
-a killed writer (``.NAME.tmp-<pid>-...``) is removed by the next write of the same file.
+one: ``os.replace`` is atomic on POSIX and Windows within one file system. Folders created for
+the file are removed again when the write fails, so a failure leaves the previous state. A
+temporary left by a killed writer (``.NAME.tmp-<pid>-...``) is removed by the next write of the
+same file.
+
+A read-modify-write of a file that several processes may edit at once (a fleet file that two
+``ilcdob fleet add`` extend) takes :func:`locked` around the read and the write: an exclusive
+advisory lock (``fcntl.flock``) on the file's folder, so the second process reads the file only
+after the first has replaced it, and no edit is lost. The lock is on the folder, not on the
+file, because the atomic write replaces the file (a lock on the old file would not exclude a
+process that opens the new one); it leaves nothing behind and is released by the system when the
+process ends, however it ends.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import tempfile
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "current_umask", "stale_entries"]
+from .errors import IlcdobError
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks (see locked)
+    fcntl = None  # type: ignore[assignment]
+
+__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "current_umask", "stale_entries",
+           "make_folders", "remove_folders", "locked", "LockTimeoutError", "LOCK_TIMEOUT_S"]
+
+#: How long :func:`locked` waits for another process's lock, s.
+LOCK_TIMEOUT_S = 60.0
+
+
+class LockTimeoutError(IlcdobError, TimeoutError):
+    """Another process held the lock of :func:`locked` for longer than the timeout."""
+
+
+def make_folders(folder: str | Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; returns the folders created, outermost first.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The folder to exist afterwards.
+
+    Returns
+    -------
+    list of Path
+        The folders this call created (empty when ``folder`` existed), for
+        :func:`remove_folders` when the work they were made for fails.
+    """
+    folder = Path(folder).absolute()
+    missing = []
+    p = folder
+    while not p.exists() and p.parent != p:
+        missing.append(p)
+        p = p.parent
+    created = []
+    for p in reversed(missing):
+        try:
+            p.mkdir()
+        except FileExistsError:  # made by another process meanwhile: not ours to remove
+            continue
+        created.append(p)
+    return created
+
+
+def remove_folders(created: list[Path]) -> None:
+    """Remove folders made by :func:`make_folders`, innermost first, each only while it is empty.
+
+    Parameters
+    ----------
+    created : list of Path
+        What :func:`make_folders` returned.
+    """
+    for p in reversed(created):
+        try:
+            p.rmdir()
+        except OSError:
+            break  # not empty (something else was written there meanwhile) or gone: keep the rest
+
+
+@contextmanager
+def locked(path: str | Path, *, timeout: float = LOCK_TIMEOUT_S) -> Iterator[None]:
+    """Context manager: an exclusive advisory lock for a read-modify-write of ``path``.
+
+    The lock is ``fcntl.flock`` on ``path``'s folder (see the module docstring), which must
+    exist. Every writer that edits ``path`` through this lock waits for the others; readers
+    are not blocked (the file is replaced atomically). Without ``fcntl`` (Windows) there is no
+    lock. A file system whose folders cannot be locked (some network file systems) is locked
+    through a file ``.<name>.lock`` beside ``path`` instead, which then stays.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file about to be read, changed and written.
+    timeout : float
+        How long to wait for another process's lock, s.
+
+    Raises
+    ------
+    LockTimeoutError
+        Another process held the lock for longer than ``timeout``.
+    """
+    if fcntl is None:
+        yield
+        return
+    path = Path(path)
+    folder = path.absolute().parent
+    fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)  # can folders be locked here at all?
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        except OSError as exc:
+            if exc.errno not in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):
+                os.close(fd)
+                fd = os.open(folder / f".{path.name}.lock", os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0),
+                             0o666)
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except OSError as exc:
+                if exc.errno not in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):
+                    raise
+            if time.monotonic() >= deadline:
+                raise LockTimeoutError(f"{path}: another process has been editing this file for {timeout:g} s (its "
+                                       "folder is locked); try again when it has finished")
+            time.sleep(0.02)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def current_umask() -> int:
@@ -62,23 +188,30 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     Path
         A temporary file in the same folder (same suffix) to write to. When the ``with``
         block ends normally it replaces ``path`` (with the usual file mode); when it raises,
-        the temporary file is removed and ``path`` is left as it was.
+        the temporary file and the folders created for it are removed and ``path`` is left
+        as it was.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    prefix = f".{path.name}.tmp-"
-    for stale in stale_entries(path.parent, prefix):
-        stale.unlink(missing_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f"{prefix}{os.getpid()}-", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    created = make_folders(path.parent)
+    done = False
     try:
-        yield tmp_path
-        os.chmod(tmp_path, 0o666 & ~current_umask())  # mkstemp makes 0600; give the file the usual mode
-        os.replace(tmp_path, path)
+        prefix = f".{path.name}.tmp-"
+        for stale in stale_entries(path.parent, prefix):
+            stale.unlink(missing_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f"{prefix}{os.getpid()}-", suffix=path.suffix, dir=path.parent)
+        os.close(fd)
+        tmp_path = Path(tmp)
+        try:
+            yield tmp_path
+            os.chmod(tmp_path, 0o666 & ~current_umask())  # mkstemp makes 0600; give the file the usual mode
+            os.replace(tmp_path, path)
+            done = True
+        finally:
+            if tmp_path.exists():
+                tmp_path.unlink()
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        if not done:
+            remove_folders(created)
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:

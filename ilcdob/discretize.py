@@ -67,7 +67,8 @@ from .errors import SpecError
 from .specs import DOBSpec, PIDSpec, PlantSpec
 
 __all__ = ["zoh_with_delay", "discretize_plant", "discretize_pid", "q_filter", "discretize_q", "discretize_m",
-           "DiscreteBlock", "plant_block", "pid_block", "q_block", "m_block", "tustin_map", "rhp_zeros", "cancel_roots"]
+           "DiscreteBlock", "plant_block", "pid_block", "q_block", "m_block", "tustin_map", "rhp_zeros", "cancel_roots",
+           "MAX_DELAY_SAMPLES"]
 
 
 @dataclass(frozen=True)
@@ -162,11 +163,20 @@ def _split_delay(delay: float, ts: float) -> tuple[int, float]:
     return n_del, frac
 
 
+#: Most whole samples of input delay: each is a state of the discretised loop (measured: a fleet check with
+#: 1000 takes 2 s and 340 MB; with 5000, 2 min and 4 GB).
+MAX_DELAY_SAMPLES = 1000
+
+
 def _check_ts_delay(ts: float, delay: float) -> None:
     if not (math.isfinite(ts) and ts > 0):
         raise SpecError(f"`sample_time`: got {ts!r}, expected a finite number > 0 (s)")
     if not (math.isfinite(delay) and delay >= 0):
         raise SpecError(f"`delay`: got {delay!r}, expected a finite number >= 0 (s)")
+    if delay / ts > MAX_DELAY_SAMPLES:
+        raise SpecError(f"`delay`: got {delay:g} s, {delay / ts:.4g} samples of {ts:g} s; expected at most "
+                        f"{MAX_DELAY_SAMPLES} samples ({MAX_DELAY_SAMPLES * ts:g} s): every sample of delay is a "
+                        "state of the discretised loop (a plant input delay is milliseconds; check its unit)")
 
 
 def _augment_delay(phi: np.ndarray, phi_m1: np.ndarray, g0: np.ndarray, g1: np.ndarray, c: np.ndarray,

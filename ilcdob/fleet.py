@@ -56,6 +56,10 @@ the x axis's::
 ``load_fleet(path, axis="z")`` (``--axis z`` on the command line) is the fleet of that axis,
 each axis learned independently; every system then needs a section for it.
 
+A system's ``name`` follows one rule (:func:`ilcdob.names.check_name`): 1 to 64 ASCII
+letters, digits, spaces and ``_ - . +``, starting with a letter or a digit and not ending
+with a space or ``.``; names end up in C symbols, file names and reports, and are data there.
+
 Every system's loops are built (and checked for stability) when the fleet is loaded. Any
 problem raises :class:`~ilcdob.errors.FleetError` naming the file, the system and the key.
 """
@@ -63,7 +67,6 @@ problem raises :class:`~ilcdob.errors.FleetError` naming the file, the system an
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -71,7 +74,9 @@ from typing import Any, Sequence
 
 from .errors import FleetError, ModelFileError, SpecError, UnstableLoopError
 from .identified import IdentifiedModel, load_model
+from .inputs import parse_toml, read_text
 from .loop import LoopSystem, build_loop
+from .names import check_name, quoted
 from .specs import (DOBSpec, IdentificationSpec, LimitSpec, NoiseSpec, PIDSpec, PlantSpec, SensorSpec, SystemSpec,
                     UncertaintySpec)
 
@@ -213,8 +218,12 @@ def _model_file(label: str, key: str, sub: dict[str, Any], base_dir: Path | None
 def _system_from_table(src: str, idx: int, table: Any, base_dir: Path | None = None) -> SystemSpec:
     label = f"{src}: system #{idx + 1}"
     if isinstance(table, dict) and isinstance(table.get("name"), str):
-        label = f"{src}: system {table['name']!r}"
+        label = f"{src}: system {quoted(table['name'])}"
     _check_keys(label, table, _SYSTEM_KEYS)
+    try:
+        check_name(table["name"])
+    except SpecError as exc:  # before anything else of the system is read: a name is never a path or code
+        raise FleetError(f"{src}: system #{idx + 1}: {exc}") from exc
     files = {key: _model_file(label, key, table[key], base_dir) for key in ("plant", "model")
              if isinstance(table.get(key), dict) and MODEL_FILE_KEY in table[key]}
     if "plant" in files and "delay" in table:
@@ -285,7 +294,7 @@ def axis_table(src: str, idx: int, table: Any, axis: str) -> Any:
     flat = {k: v for k, v in table.items() if k not in AXES}
     if axis == "x":
         return flat
-    label = f"{src}: system {table.get('name', f'#{idx + 1}')!r}"
+    label = f"{src}: system {quoted(table.get('name', f'#{idx + 1}'))}"
     section = table.get(axis)
     if section is None:
         raise FleetError(f"{label}: no [system.{axis}] section; the {axis} axis needs its own plant (and "
@@ -436,20 +445,14 @@ def read_fleet_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     Raises
     ------
     FleetError
-        Unreadable file, not UTF-8 text, or TOML syntax error, naming the file.
+        Unreadable file, not a regular file (a FIFO, a device), larger than
+        :data:`ilcdob.inputs.MAX_DOCUMENT_BYTES`, not UTF-8 text, TOML syntax error, a number
+        beyond float range or nesting deeper than :data:`ilcdob.inputs.MAX_NESTING`, naming the
+        file.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FleetError(f"{path}: cannot read fleet file ({exc.strerror})") from exc
-    except UnicodeDecodeError as exc:
-        raise FleetError(f"{path}: not a UTF-8 text file (byte {exc.object[exc.start]:#04x} at offset "
-                         f"{exc.start}); a fleet file is TOML text (schema: ilcdob.fleet)") from exc
-    try:
-        return text, tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FleetError(f"{path}: not valid TOML: {exc}") from exc
+    text = read_text(path, "fleet file", error=FleetError, hint="a fleet file is TOML text (schema: ilcdob.fleet)")
+    return text, parse_toml(text, path, "fleet file", error=FleetError)
 
 
 #: How results name the built-in fleet (package-relative: no machine path in any output).

@@ -6,24 +6,26 @@
 ``ilcdob fleet add``) creates a fleet file or appends one ``[[system]]`` table to it, keeping
 the rest of the file (comments included) byte for byte, after validating the whole resulting
 fleet (keys, values, model file, stable loops); the file is written atomically, so a refused
-system leaves it unchanged.
+system leaves it unchanged. The read, the validation and the write happen under an advisory
+lock (:func:`ilcdob.atomic.locked`): two ``fleet add`` into one file at the same time both
+land, one after the other.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .atomic import write_text_atomic
+from .atomic import locked, make_folders, remove_folders, write_text_atomic
 from .errors import FleetError
 from .fleet import MODEL_FILE_KEY, Fleet, fleet_from_dict, read_fleet_file
 from .identified import load_model
+from .inputs import parse_toml
 from .specs import DOBSpec, NoiseSpec, PIDSpec, SystemSpec, UncertaintySpec
 
 __all__ = ["fleet_to_toml", "system_table", "system_to_toml", "toml_value", "add_system", "model_reference"]
@@ -232,12 +234,17 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
     num/den/delay and its identification (the Delta set's covariance) come from the model
     file. The whole resulting fleet is validated (keys, values, model file, stable loops)
     before anything is written; the file is then written atomically. An existing file keeps
-    its text: the new ``[[system]]`` table is appended.
+    its text: the new ``[[system]]`` table is appended. The file is read, validated and
+    written under an exclusive lock on its folder (:func:`ilcdob.atomic.locked`), so
+    concurrent calls on one file are applied one after the other and none is lost; a folder
+    created for a new file is removed again when the system is refused.
 
     Parameters
     ----------
     path : str or pathlib.Path
-        The fleet TOML file (created when it does not exist).
+        The fleet TOML file (created when it does not exist). A symbolic link is followed: the
+        file it points to is edited (the link stays), and the model's path is written relative
+        to that file's folder.
     name : str
         Name of the new system; must not be in the fleet yet.
     model : str or pathlib.Path
@@ -265,8 +272,13 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         is invalid, or a loop of the resulting fleet is unstable; nothing is written then.
     ModelFileError
         The model file cannot be read or is malformed.
+    ilcdob.atomic.LockTimeoutError
+        Another process kept the fleet file's folder locked for
+        :data:`ilcdob.atomic.LOCK_TIMEOUT_S`.
     """
     path = Path(path)
+    if path.is_symlink():  # edit the file the link points to (the link stays); model paths are relative to it
+        path = path.resolve()
     if not isinstance(name, str) or not name.strip():
         raise FleetError(f"{path}: `name`: got {name!r}, expected a non-empty string")
     identified = load_model(model)
@@ -281,6 +293,17 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
     if uncertainty is not None:
         table["uncertainty"] = {"bound": uncertainty.bound}
     block = _table_to_toml(table)
+    created = make_folders(path.absolute().parent)  # the lock is on the folder: it must exist
+    try:
+        with locked(path):  # read, validate and write as one step: a concurrent add waits for this one
+            return _append(path, name, block, identified.sample_time, sample_time)
+    except BaseException:
+        remove_folders(created)
+        raise
+
+
+def _append(path: Path, name: str, block: str, model_ts: float, sample_time: float | None) -> Fleet:
+    """Append ``block`` to the fleet file (created when missing), validated, written atomically."""
     if path.exists():
         text, data = read_fleet_file(path)
         existing = data.get("system", [])
@@ -295,14 +318,12 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         new_text = text + ("" if text.endswith("\n") or not text else "\n") + "\n" + block
     else:
         # a sample time measured from time stamps carries float roundoff (0.019999999999999997)
-        ts = float(f"{identified.sample_time:.12g}") if sample_time is None else sample_time
+        ts = float(f"{model_ts:.12g}") if sample_time is None else sample_time
         new_text = (f"# Fleet file (schema: ilcdob.fleet); systems added with `ilcdob fleet add`\n"
                     f"sample_time = {toml_value(float(ts))}   # s\n\n" + block)
-    try:
-        data = tomllib.loads(new_text)
-    except tomllib.TOMLDecodeError as exc:  # only if the existing file ends inside a multi-line construct
-        raise FleetError(f"{path}: appending system {name!r} gives invalid TOML ({exc}); fix the end of the file") \
-            from exc
+    data = parse_toml(new_text, path, "fleet file", error=FleetError,
+                      hint=f"appending system {name!r} gave this (the file ends inside a multi-line construct?); "
+                           "fix the end of the file")
     fleet = fleet_from_dict(data, str(path), base_dir=path.parent)
     write_text_atomic(path, new_text)
     return fleet

@@ -16,7 +16,6 @@ more information load unchanged.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +25,7 @@ import control as ct
 import numpy as np
 
 from .errors import ModelFileError, SpecError
+from .inputs import read_json
 from .uncertainty import ModelStructure
 from .specs import (DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec,
                     as_polynomial, check_covariance)
@@ -309,18 +309,13 @@ def load_model(path: str | Path) -> IdentifiedModel:
     Raises
     ------
     ModelFileError
-        The file cannot be read, is not JSON, misses a key of :data:`REQUIRED_KEYS`, or holds
-        an invalid value; the message names the file, the key and the value.
+        The file cannot be read, is not a regular file (a FIFO, a device), is larger than
+        :data:`ilcdob.inputs.MAX_DOCUMENT_BYTES`, is not JSON (or holds a number beyond float
+        range or a nesting deeper than :data:`ilcdob.inputs.MAX_NESTING`), misses a key of
+        :data:`REQUIRED_KEYS`, or holds an invalid value; the message names the file, the key
+        and the value.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot read model file ({exc.strerror})") from exc
-    except UnicodeDecodeError as exc:
-        raise ModelFileError(f"{path}: not a UTF-8 text file ({exc})") from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ModelFileError(f"{path}: not valid JSON: {exc}") from exc
+    data = read_json(path, "model file", error=ModelFileError,
+                     hint="a model file is the model.json of `ilcdob identify`")
     return model_from_dict(data, str(path))

@@ -16,6 +16,7 @@ import numpy as np
 
 from .atomic import atomic_path
 from .errors import SignalError, SpecError
+from .names import csv_field
 
 __all__ = ["FlightData", "as_signal", "check_time", "check_signal", "extend_smoothly", "resample_onto",
            "segments", "MIN_WINDOW_SAMPLES"]
@@ -372,7 +373,7 @@ class FlightData:
         units = ", ".join(["time=s"] + [f"{n}={self.units.get(n, '')}" for n in names])
         data = np.column_stack([self.t] + [self.signals[n] for n in names])
         with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(f"# units: {units}\n" + ",".join(["time"] + names) + "\n")
+            fh.write(f"# units: {units}\n" + ",".join(csv_field(n) for n in ["time", *names]) + "\n")
             np.savetxt(fh, data, delimiter=",", fmt="%.10g")
 
     def to_parquet(self, path: str) -> None:

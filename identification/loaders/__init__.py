@@ -18,6 +18,9 @@ Modules
 * :mod:`.dataflash` -- :func:`load_dataflash`;
 * :mod:`.common` -- what they share: signal selection, argument, time-stamp and value
   checks, and the common grid of signals logged at different rates.
+* :mod:`.guard` -- the bounds on the third-party log parsers: a read budget that ends the
+  parse of a damaged ULog file in time proportional to its size, and the capture of what
+  pyulog and pymavlink print.
 
 Conventions
 -----------

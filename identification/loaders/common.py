@@ -26,6 +26,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ilcdob.errors import SignalError
+from ilcdob.inputs import MAX_LOG_BYTES, check_input
 from ilcdob.signals import FlightData
 
 
@@ -92,7 +93,9 @@ def source_of(path: str | os.PathLike) -> str:
 
 
 def check_file(source: str) -> None:
-    """Check that a file exists, is a regular file and is not empty.
+    """Check that a file exists, is a regular file of at most :data:`ilcdob.inputs.MAX_LOG_BYTES`
+    and is not empty (:func:`ilcdob.inputs.check_input`: a FIFO or a device is refused before it
+    is opened, so no reader blocks on it).
 
     Parameters
     ----------
@@ -102,13 +105,11 @@ def check_file(source: str) -> None:
     Raises
     ------
     SignalError
-        Missing file, not a regular file, or 0 bytes.
+        Missing file, not a regular file, larger than the limit, or 0 bytes.
     """
     if not os.path.exists(source):
         raise SignalError(f"{source}: file not found")
-    if not os.path.isfile(source):
-        raise SignalError(f"{source}: not a regular file")
-    if os.path.getsize(source) == 0:
+    if check_input(source, "flight log", limit=MAX_LOG_BYTES, error=SignalError) == 0:
         raise SignalError(f"{source}: the file is empty (0 bytes)")
 
 

@@ -7,8 +7,11 @@ shifted to start at zero, so ``start`` and ``stop`` are read on that same clock.
 types logged at different rates are linearly interpolated onto one grid whose step is the
 finest median step among them (or ``ts`` when given) and which spans the time all of them
 overlap; with ``start`` the grid starts exactly there when every selected signal has data
-at that time (``t = start + k ts``). What DFReader prints about skipped bytes is swallowed
-and counted in ``metadata["skipped_reports"]``.
+at that time (``t = start + k ts``). What DFReader prints about skipped bytes is kept off the
+console (:func:`~.guard.captured_output`): its Python lines are counted in
+``metadata["skipped_reports"]``, its compiled indexer's (a line per damaged byte, straight to
+file descriptor 2) discarded; ``metadata["damaged_bytes"]`` counts the bytes of a binary log in
+no message. Reading is linear in the file's size, damaged or not (a 1 MiB damaged tail: about a second).
 
 Every error is a :class:`~ilcdob.errors.SignalError` whose message names the file, the
 signal and its message type and field, the value received and what is valid.
@@ -17,10 +20,9 @@ signal and its message type and field, the value received and what is valid.
 from __future__ import annotations
 
 import contextlib
-import io
 import os
 import re
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -29,36 +31,12 @@ from ilcdob.signals import FlightData
 
 from .common import (check_file, check_ts, check_units, check_window, from_series, listing, signal_mapping,
                      source_of)
+from .guard import captured_output
 
 
 __all__ = ["load_dataflash"]
 
 _DF_SPEC = re.compile(r"^([A-Za-z0-9_]+)(?:\[(\w+)\]|:(\w+))?\.([A-Za-z0-9_]+)$")
-
-
-class _Sink(io.TextIOBase):
-    """Swallows what DFReader prints about skipped bytes, counting the lines."""
-
-    def __init__(self) -> None:
-        self.lines = 0
-        self.first: str | None = None
-
-    def writable(self) -> bool:
-        return True
-
-    def write(self, s: str) -> int:
-        if s.strip():
-            self.lines += s.count("\n") or 1
-            if self.first is None:
-                self.first = s.strip()
-        return len(s)
-
-
-@contextlib.contextmanager
-def _quiet() -> Iterator[_Sink]:
-    sink = _Sink()
-    with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-        yield sink
 
 
 def _open_dataflash(source: str) -> Any:
@@ -95,6 +73,15 @@ def _df_catalogue(reader: Any) -> tuple[dict[str, Any], dict[str, int]]:
     return fmts, counts
 
 
+def _damaged_bytes(reader: Any) -> int | None:
+    """Bytes of a binary log in no message the index found (damage, or a cut last message); None for text logs."""
+    if isinstance(reader.counts, dict) or not hasattr(reader, "data_len"):
+        return None
+    covered = sum(int(reader.counts[t]) * int(fmt.len) for t, fmt in reader.formats.items()
+                  if isinstance(t, int) and 0 <= t < len(reader.counts))
+    return max(0, int(reader.data_len) - covered)
+
+
 def load_dataflash(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str],
                    units: Mapping[str, str] | None = None, ts: float | None = None,
                    start: float | None = None, stop: float | None = None) -> FlightData:
@@ -122,8 +109,9 @@ def load_dataflash(path: str | os.PathLike, fields: Mapping[str, str] | Sequence
     FlightData
         Time from each message's ``TimeUS`` (µs / 1e6; ``TimeMS`` / 1e3 in old logs).
         Values are as pymavlink scales them (e.g. ``Lat`` in degrees). ``metadata`` holds
-        ``format``, ``fields``, ``message_counts`` and ``skipped_reports`` (lines DFReader
-        printed about bytes it skipped).
+        ``format``, ``fields``, ``message_counts``, ``skipped_reports`` (lines DFReader
+        printed from Python about bytes it skipped) and ``damaged_bytes`` (binary logs: bytes in
+        no message of the index, damage or a cut last message; None for text logs).
 
     Raises
     ------
@@ -146,7 +134,7 @@ def load_dataflash(path: str | os.PathLike, fields: Mapping[str, str] | Sequence
     start, stop = check_window(start, stop, source)
     check_file(source)
 
-    with _quiet() as sink:
+    with captured_output() as sink:
         try:
             reader = _open_dataflash(source)
         except SignalError:
@@ -155,6 +143,7 @@ def load_dataflash(path: str | os.PathLike, fields: Mapping[str, str] | Sequence
             raise SignalError(f"{source}: cannot read as a DataFlash log ({type(exc).__name__}: {exc})") from None
         try:
             fmts, counts = _df_catalogue(reader)
+            damaged = _damaged_bytes(reader)
             present = sorted(n for n, c in counts.items() if c > 0 and n != "FMT")
             if not present:
                 raise SignalError(f"{source}: no data messages in the DataFlash log (only format definitions); "
@@ -234,5 +223,5 @@ def load_dataflash(path: str | os.PathLike, fields: Mapping[str, str] | Sequence
         sig_units[name] = units_arg.get(name, declared or "")
     meta = {"format": "dataflash", "fields": dict(spec),
             "message_counts": {mtype: counts.get(mtype, 0) for mtype in wanted},
-            "skipped_reports": sink.lines}
+            "skipped_reports": sink.lines, "damaged_bytes": damaged}
     return from_series(series, what, sig_units, meta, ts, start, stop, source)

@@ -36,6 +36,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ilcdob.errors import SignalError
+from ilcdob.inputs import MAX_LOG_BYTES, read_text
 from ilcdob.signals import FlightData
 
 from .common import (check_file, check_stamps, check_ts, check_units, check_values, check_window,
@@ -220,13 +221,7 @@ def load_csv(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[str]
     """
     source, cols, units_arg, ts, start, stop = _tabular_arguments(path, columns, time, units, ts, start, stop)
 
-    try:
-        with open(source, encoding="utf-8", newline="") as fh:
-            text = fh.read()
-    except UnicodeDecodeError as exc:
-        raise SignalError(f"{source}: not a UTF-8 text file ({exc}); expected CSV text") from None
-    except OSError as exc:
-        raise SignalError(f"{source}: cannot read the file ({exc})") from None
+    text = read_text(source, "flight log", limit=MAX_LOG_BYTES, error=SignalError, hint="expected CSV text")
     fast = _fast_csv(text, time, cols)
     if fast is not None:
         t, values, file_units, data_lines = fast

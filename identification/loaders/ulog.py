@@ -9,6 +9,10 @@ all of them overlap; with ``start`` the grid starts exactly there when every sel
 signal has data at that time (``t = start + k ts``). Units come from a small table of
 common PX4 fields, as ULog files carry none of their own.
 
+A damaged file ends in bounded time: pyulog reads it through a byte budget
+(:class:`~.guard.BudgetedFile`, about 16 times the file's size), and what it prints about
+damaged messages is swallowed and counted (``metadata["parser_reports"]``).
+
 Every error is a :class:`~ilcdob.errors.SignalError` whose message names the file, the
 signal and its topic and field, the value received and what is valid.
 """
@@ -17,7 +21,7 @@ from __future__ import annotations
 
 import os
 import re
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -26,6 +30,7 @@ from ilcdob.signals import FlightData
 
 from .common import (check_file, check_ts, check_units, check_window, from_series, listing, signal_mapping,
                      source_of)
+from .guard import BudgetedFile, CapturedOutput, ReadBudgetExceeded, captured_output
 
 
 __all__ = ["load_ulog"]
@@ -66,13 +71,37 @@ def _parse_ulog_spec(spec: str, name: str, source: str) -> tuple[str, int, str]:
     return m.group(1), int(m.group(2) or 0), m.group(3)
 
 
-def _ulog_topics(source: str) -> list[str]:
-    """Every topic (with instance when > 0) that has data in the file; for error messages."""
+def _parse(source: str, topics: list[str] | None) -> tuple[Any, CapturedOutput]:
+    """pyulog's parse of ``source`` (only ``topics``; None: all), within the read budget and quiet;
+    returns the ULog object and what pyulog printed.
+
+    Raises
+    ------
+    SignalError
+        The file is not a ULog file, or its message stream is damaged beyond the read budget.
+    """
     from pyulog import ULog
 
+    with captured_output() as printed, BudgetedFile(source) as fh:
+        try:
+            ulog = ULog(fh, topics, disable_str_exceptions=True)
+        except ReadBudgetExceeded as exc:
+            raise SignalError(
+                f"{source}: the ULog message stream is damaged: parsing read {exc.read / 2**20:.0f} MiB of this "
+                f"{exc.size / 2**20:.3g} MiB file and was still resynchronising at byte {exc.position} (a valid "
+                f"log is read about once): the file is damaged at or before that byte. Next step: copy the log "
+                f"from the vehicle again; a copy cut where the damage starts loads the part before it"
+            ) from None
+        except Exception as exc:  # pyulog raises ULogException, struct.error, ... on a bad file
+            raise SignalError(f"{source}: cannot read as a PX4 ULog file ({type(exc).__name__}: {exc})") from None
+    return ulog, printed
+
+
+def _ulog_topics(source: str) -> list[str]:
+    """Every topic (with instance when > 0) that has data in the file; for error messages."""
     try:
-        ulog = ULog(source)
-    except Exception:
+        ulog, _ = _parse(source, None)
+    except SignalError:
         return []
     return sorted({d.name if d.multi_id == 0 else f"{d.name}:{d.multi_id}" for d in ulog.data_list})
 
@@ -109,17 +138,17 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
     FlightData
         Time in s since boot (``timestamp`` in µs / 1e6). ``metadata`` holds ``format``,
         ``fields``, the original topic rates, the vehicle/software info strings, the
-        ``dropouts`` (count, total ms) and pyulog's ``file_corruption`` flag.
+        ``dropouts`` (count, total ms), pyulog's ``file_corruption`` flag and ``parser_reports``
+        (lines pyulog printed about damaged messages, swallowed).
 
     Raises
     ------
     SignalError
-        Missing or unreadable file, a topic, instance or field not in the log (the message
+        Missing or unreadable file, a message stream damaged beyond the read budget
+        (:func:`~.guard.read_budget`), a topic, instance or field not in the log (the message
         lists what is there), non-finite values, duplicated or decreasing time stamps, or an
         empty selection.
     """
-    from pyulog import ULog
-
     source = source_of(path)
     spec = signal_mapping(fields, "fields", source)
     parsed = {n: _parse_ulog_spec(s, n, source) for n, s in spec.items()}
@@ -127,11 +156,7 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
     ts = check_ts(ts, source)
     start, stop = check_window(start, stop, source)
     check_file(source)
-    topics = sorted({topic for topic, _, _ in parsed.values()})
-    try:
-        ulog = ULog(source, topics, disable_str_exceptions=True)
-    except Exception as exc:  # pyulog raises ULogException, struct.error, ... on a bad file
-        raise SignalError(f"{source}: cannot read as a PX4 ULog file ({type(exc).__name__}: {exc})") from None
+    ulog, printed = _parse(source, sorted({topic for topic, _, _ in parsed.values()}))
     datasets = {(d.name, d.multi_id): d for d in ulog.data_list}
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     what: dict[str, str] = {}
@@ -166,5 +191,5 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
     meta = {"format": "ulog", "fields": dict(spec), "info": info,
             "start_timestamp_s": ulog.start_timestamp * 1e-6,
             "dropouts": {"count": len(drop_ms), "total_ms": float(sum(drop_ms))},
-            "file_corruption": bool(ulog.file_corruption)}
+            "file_corruption": bool(ulog.file_corruption), "parser_reports": printed.lines}
     return from_series(series, what, sig_units, meta, ts, start, stop, source)

@@ -25,7 +25,7 @@ and quick commands start without loading cvxpy, CasADi and Dask.
 from __future__ import annotations
 
 import hashlib
-import json
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,11 +33,13 @@ from typing import Any
 
 import numpy as np
 
-from ilcdob.errors import SignalError, SpecError
+from ilcdob.atomic import remove_folders
+from ilcdob.errors import FleetError, SignalError, SpecError
 from ilcdob.fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
+from ilcdob.inputs import MAX_LOG_BYTES, check_input, read_bytes, read_json
 
 from .html import build_report, report_files
-from .output import OutputFolder, Provenance, check_output_path, write_file
+from .output import OutputError, OutputFolder, Provenance, check_output_path, write_file
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "compare_orders",
            "identify_fleet_to_folder", "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
@@ -62,7 +64,7 @@ def fleet_and_hash(path: str | Path | None, axis: str = "x") -> tuple[Fleet, str
         raise SpecError(f"`--axis {axis}`: the built-in fleet describes the x axis only (the paper's); give a "
                         f"--fleet file with [system.{axis}] sections")
     fleet = load_fleet(path, axis) if path else default_fleet()
-    data = Path(path if path else DEFAULT_FLEET_PATH).read_bytes()
+    data = read_bytes(path if path else DEFAULT_FLEET_PATH, "fleet file", error=FleetError)
     return fleet, hashlib.sha256(data).hexdigest()
 
 
@@ -77,6 +79,46 @@ def _write_folder(out: str | Path, provenance: Provenance, *maps: dict[str, Any]
     with OutputFolder(out, provenance, overwrite=overwrite, keep=keep) as folder:
         for files in maps:
             folder.add_all(files)
+
+
+#: Most learning iterations of ``reproduce`` (the paper flies 3).
+MAX_ITERATIONS = 100
+#: Seconds of one learning iteration of one scenario on one core, by plant: every system flown once more
+#: (rotorpy: with every law in each of its three disturbances). Measured: linear, 3 against 1 iteration of
+#: the four scenarios; nonlinear, 2 against 1 of scenario 1; rotorpy estimated from its default run (24 min
+#: on 2 cores).
+ITERATION_SECONDS = {"linear": 0.1, "nonlinear": 1.1, "rotorpy": 190.0}
+#: Most processes of ``reproduce --plant rotorpy --workers`` per usable core.
+WORKERS_PER_CORE = 2
+
+
+def _duration(seconds: float) -> str:
+    """``seconds`` in the largest unit that keeps it at least 1 (s, min, h, days)."""
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
+def _check_reproduce_counts(iterations: object, n_scenarios: int, plant: str, seed: object,
+                            workers: int | None) -> None:
+    """``reproduce``'s counts: iterations within :data:`MAX_ITERATIONS` (the message states what they would
+    take), a seed >= 0, workers within :data:`WORKERS_PER_CORE` per usable core."""
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise SpecError(f"`--iterations`: got {iterations!r}, expected an integer >= 1")
+    if iterations > MAX_ITERATIONS:
+        each = ITERATION_SECONDS[plant]
+        raise SpecError(f"`--iterations`: got {iterations}, expected 1 to {MAX_ITERATIONS} learning iterations (the "
+                        f"paper flies 3): each flies every system of each scenario once more, about {each:g} s per "
+                        f"scenario on one core with the {plant} plant, so {iterations} iterations of "
+                        f"{n_scenarios} scenario(s) would take about {_duration(iterations * n_scenarios * each)}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise SpecError(f"`seed`: got {seed!r}, expected an integer >= 0")
+    if workers is not None:
+        cores = len(os.sched_getaffinity(0))
+        if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= WORKERS_PER_CORE * cores:
+            raise SpecError(f"`--workers`: got {workers!r}, expected 1 to {WORKERS_PER_CORE * cores} processes "
+                            f"({WORKERS_PER_CORE} per usable core, {cores} here): more than the cores only share them")
 
 
 def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, scenarios: Sequence[int] = (1, 2, 3, 4),
@@ -137,6 +179,7 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         raise SpecError(f"`plant`: got {plant!r}, expected 'linear', 'nonlinear' or 'rotorpy'")
     if workers is not None and plant != "rotorpy":
         raise SpecError(f"`--workers`: got {workers}, but only `--plant rotorpy` flies in parallel (plant {plant!r})")
+    _check_reproduce_counts(iterations, len(list(scenarios)), plant, seed, workers)
     if plant == "rotorpy":
         given = [opt for opt, v in (("--fleet", fleet), ("--order", order),
                                     ("--law", None if law == "paper" else law),
@@ -160,8 +203,9 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     from ilcdob.design.band import check_bandwidth
 
     bandwidth = check_bandwidth(bandwidth, None)
-    check_output_path(out, folder=True, overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet)
+    check_bandwidth(bandwidth, flt.sample_time)  # a corner, against the fleet's Nyquist frequency
     order = None if order is None else check_order(flt.names, order, "--order")
     if plant == "nonlinear":
         from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
@@ -286,11 +330,13 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     options : ilcdob.identification.FitOptions
         Fit settings (delay, trend, limits).
     out : str or Path
-        ``model.json`` to write (atomically).
+        ``model.json`` to write (atomically); not one of the flight files, not inside ``plot``.
     validate : sequence of str or Path
         Held-out data files.
     plot : str or Path, optional
-        Folder for the compare / residual / Bode figures (written as a unit).
+        Folder for the compare / residual / Bode figures, written as a unit with the model:
+        the figures are staged and sealed, the model file written, then the folder swapped in,
+        so a run that fails (a full disk included) leaves neither.
     progress : callable, optional
         ``progress(done, total, what)``.
     argv : sequence of str, optional
@@ -312,9 +358,13 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     from ilcdob.identification.tfest import min_samples, tfest
     from ilcdob.signals import segments
 
-    check_output_path(out, folder=False)
+    logs = {"flight file": list(files), "--validate": list(validate)}
+    out = check_output_path(out, folder=False, inputs=logs)
     if plot is not None:
-        check_output_path(plot, folder=True)
+        plot = check_output_path(plot, folder=True, inputs=logs, option="--plot")
+        if Path(os.path.realpath(out)).is_relative_to(os.path.realpath(plot)):
+            raise OutputError(f"`--out` ({out}): lies inside `--plot` ({plot}), a folder that is replaced as a whole; "
+                              "write the model beside the figure folder, not in it")
     structures = list(structure) if isinstance(structure, (list, tuple)) else [structure]
     est_data = inputs.load(files)
     val_data = inputs.load(validate)
@@ -331,9 +381,13 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     data["files"] = {"estimation": [str(f) for f in files], "validation": [str(f) for f in validate]}
     data["segment_s"] = None if inputs.segment is None else float(inputs.segment)
     data["provenance"] = prov.to_dict()
-    if plot is not None:
-        _write_folder(plot, prov, fit_figures(est, est_data, val_data))
-    write_file(out, data)
+    if plot is None:
+        write_file(out, data)
+    else:  # both outputs or neither: the figures are staged and sealed, the model written, then the swap
+        with OutputFolder(plot, prov, option="--plot") as folder:
+            folder.add_all(fit_figures(est, est_data, val_data))
+            folder.seal()
+            write_file(out, data)
     return est, est_data, val_data
 
 
@@ -406,7 +460,7 @@ def identify_fleet_to_folder(out: str | Path, *, fleet: str | Path | None = None
     """
     from ilcdob.identification.fleet_id import identify_fleet
 
-    check_output_path(out, folder=True, overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet)
     result = identify_fleet(flt, seed=seed, progress=progress)
     _write_folder(out, _provenance("identify-fleet", argv, digest), result.files(), overwrite=overwrite)
@@ -415,6 +469,10 @@ def identify_fleet_to_folder(out: str | Path, *, fleet: str | Path | None = None
 
 def _csv_header(path: str | Path) -> list[str]:
     """Column names of a CSV file (first line that is neither blank nor a ``#`` comment); [] if unreadable."""
+    try:
+        check_input(path, "flight log", limit=MAX_LOG_BYTES)  # a FIFO or a device is not opened
+    except ValueError:
+        return []  # load_csv reports it
     try:
         with open(path, encoding="utf-8") as fh:
             for line in fh:
@@ -425,8 +483,28 @@ def _csv_header(path: str | Path) -> list[str]:
     return []
 
 
+#: Options of ``ilcdob design`` that only some methods use -> those methods (another method refuses them).
+DESIGN_OPTION_METHODS: dict[str, tuple[str, ...]] = {
+    "--rho": ("robust", "robust-set"), "--samples": ("fir", "robust"), "--bound": ("fir", "robust", "robust-set"),
+    "--n": ("norm-optimal",), "--c-prefix": ("closed-form", "fir"), "--c-float": ("closed-form", "fir")}
+
+
+def _refuse_unused(method: str, given: dict[str, Any]) -> None:
+    """A :class:`SpecError` for the first option of ``given`` (None: not given) that ``method`` does not use."""
+    for option, value in given.items():
+        users = DESIGN_OPTION_METHODS[option]
+        if value is not None and method not in users:
+            shown = "" if value is True else f" {value!r}"
+            which = users[0] if len(users) == 1 else ", ".join(users[:-1]) + f" and {users[-1]}"
+            why = " (the methods with C code)" if option.startswith("--c-") else ""
+            raise SpecError(f"`{option}`{shown}: --method {method} does not use it, only {which} "
+                            f"{'does' if len(users) == 1 else 'do'}{why}; omit {option}, or choose "
+                            f"{'that method' if len(users) == 1 else 'one of those methods'}")
+
+
 def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | Path | None = None,
-                     method: str = "closed-form", rho: float = 0.95, samples: int = 8, bound: float | None = None,
+                     method: str = "closed-form", rho: float | None = None, samples: int | None = None,
+                     bound: float | None = None,
                      n: int | None = None, law: str = "paper", trial: str | Path | None = None,
                      c_prefix: str | None = None, c_float: bool = False, bandwidth: object = "auto",
                      disturbance: str = "command", on_limit: str = "clip", overwrite: bool = False,
@@ -443,23 +521,26 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         Fleet TOML (None: the built-in fleet).
     method : str
         closed-form, fir, norm-optimal, robust or robust-set (:data:`ilcdob.design.pair.METHODS`).
-    rho : float
-        robust: guaranteed improvement; robust-set: on every plant of the Delta set.
-    samples : int
-        fir/robust: Delta-set samples per system.
+    rho : float, optional
+        robust and robust-set only: the guaranteed improvement factor (default 0.95; robust-set:
+        in (0, 1], on every plant of the Delta set).
+    samples : int, optional
+        fir and robust only: Delta-set samples per system (default 8).
     bound : float, optional
-        Multiplicative uncertainty bound instead of the identified covariance.
+        fir, robust and robust-set only: multiplicative uncertainty bound instead of the
+        identified covariance.
     n : int, optional
-        Trial length in samples for lifted matrices (default: the trial's, else 500).
+        norm-optimal only: trial length in samples of its lifted matrices (default: the trial's,
+        else 500).
     law : str
         Learning law (:mod:`ilcdob.design.laws`).
     trial : str or Path, optional
         CSV of the source's trial: time (s), error (m), learning (m/s^2) [, reference (m),
         acceleration (m/s^2)].
     c_prefix : str, optional
-        Prefix of the C symbols.
+        closed-form and fir only (the methods with C code): prefix of the C symbols.
     c_float : bool
-        Also emit float C functions.
+        closed-form and fir only: also emit float C functions.
     bandwidth : "auto", float or None
         The learning band's corner, rad/s (:mod:`ilcdob.design.band`): ``"auto"`` chooses it
         from the trial (or the fleet without one); None or ``"off"``: no filter.
@@ -480,11 +561,17 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     -------
     tuple of (PairDesign, dict)
         The design and the ``filters.json`` content written.
+
+    Raises
+    ------
+    SpecError
+        Besides bad values: an option the method does not use (:data:`DESIGN_OPTION_METHODS`), refused
+        rather than ignored.
     """
     from ilcdob.design.c_export import check_c_prefix, design_files
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.design.laws import check_law
-    from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
+    from ilcdob.design.pair import METHODS, design_pair, design_with_band, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
     from ilcdob.identification.loaders import load_csv
     from ilcdob.lifted import check_lifted_size
@@ -494,9 +581,19 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         check_c_prefix(c_prefix)
     if n is not None:
         check_lifted_size(n, "--n")
-    if method in ("fir", "robust", "robust-set") and samples > MAX_DELTA_SAMPLES:
+    if samples is not None and method in ("fir", "robust") and samples > MAX_DELTA_SAMPLES:
         raise SpecError(f"`--samples`: got {samples}, expected 1 to {MAX_DELTA_SAMPLES} Delta-set samples per system: "
                         f"every sample is a closed loop that --method {method} builds, flies and constrains on")
+    if method not in METHODS:
+        raise SpecError(f"`--method`: got {method!r}, valid methods are {list(METHODS)}")
+    _refuse_unused(method, {"--rho": rho, "--samples": samples, "--bound": bound, "--n": n, "--c-prefix": c_prefix,
+                            "--c-float": True if c_float else None})
+    if method == "robust-set" and rho is not None and not (np.isfinite(rho) and 0 < rho <= 1):
+        raise SpecError(f"`--rho`: got {rho!r}, expected a guaranteed improvement factor in (0, 1] for --method "
+                        "robust-set (|e_j| <= rho |e'_j| on every plant of the Delta set; 1: never worse than "
+                        "without learning)")
+    rho = 0.95 if rho is None else rho
+    samples = 8 if samples is None else samples
     law = check_law(law, "--law")
     if law == "multi-source":
         raise SpecError("`--law multi-source`: it learns from the trials of every earlier system at once, and "
@@ -510,7 +607,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     if method == "robust" and trial is None:
         raise SpecError("`--method robust`: the robust learning signal is an SOCP solved per trial; give the "
                         "previous system's trial with --trial CSV (columns time, error, learning)")
-    check_output_path(out, folder=True, overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet, "--trial": trial})
     flt, digest = fleet_and_hash(fleet, axis)
     columns = {"e": "error", "d_f": "learning"}
     if law == "exact-reference":
@@ -684,7 +781,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     from ilcdob.signals import FlightData
     from ilcdob.specs import LimitSpec
 
-    check_output_path(out, folder=True, overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite, inputs={"trial": trial, "--fleet": fleet,
+                                                                     "--design": design})
     data, e, df_prev = columns.load(trial)
     digest = None
     if design is not None:
@@ -694,10 +792,11 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
             raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
                             "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
         path = Path(design) / "filters.json"
-        try:
-            filters = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise SpecError(f"`--design`: cannot read {path} ({exc}); give a folder written by `ilcdob design`") from None
+        filters = read_json(path, "filters.json of --design", error=SpecError,
+                            hint="give a folder written by `ilcdob design`")
+        if not isinstance(filters, dict):
+            raise SpecError(f"{path}: expected a JSON object, got {type(filters).__name__}; give a folder written by "
+                            "`ilcdob design`")
         for name, given, key in (("--from", source, "from"), ("--to", target, "to")):
             if given is not None and given != filters.get(key):
                 raise SpecError(f"`{name}`: got {given!r}, but {path} was designed {filters.get('from')!r} -> "
@@ -777,7 +876,8 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     bound : float, optional
         Multiplicative uncertainty bound for every system (default: identified covariance).
     scale : float
-        Scale of the identified standard deviations.
+        Scale of the identified standard deviations (> 0; 1 with ``bound``, which replaces them:
+        :func:`ilcdob.design.delta.check_scale`).
     samples : int
         Sampled plants per Delta set.
     bandwidth : "auto", float or None
@@ -796,7 +896,7 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     from ilcdob.design.theorem import EXACT_TOL, learning_pairs, theorem_check
 
     if out is not None:
-        check_output_path(out, folder=False)
+        check_output_path(out, folder=False, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet, axis)
     order = list(order) if order else flt.names
     for name in order:
@@ -850,7 +950,7 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
     from ilcdob.validation.compare import compare_designs
 
     if out is not None:
-        check_output_path(out, folder=True, overwrite=overwrite)
+        check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet)
     cmp = compare_designs(flt, scenario, list(methods or DEFAULT_METHODS), options, progress=progress)
     if out is not None:
@@ -882,11 +982,39 @@ def extensions_to_folder(out: str | Path, *, fleet: str | Path | None = None, sc
     """
     from ilcdob.validation.extensions import extensions_study
 
-    check_output_path(out, folder=True, overwrite=overwrite)
+    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet)
     result = extensions_study(flt, list(scenarios))
     _write_folder(out, _provenance("extensions", argv, digest), result.files(out=str(out)), overwrite=overwrite)
     return result
+
+
+@dataclass(frozen=True)
+class _StoreState:
+    """What a campaign folder held before a run: put back when the run fails before a sample is stored."""
+
+    out: Path
+    missing: tuple[Path, ...]  # the folder and those of its parents that did not exist, outermost first
+    names: tuple[str, ...]  # the store's file names
+    had: frozenset[str]  # those present before
+
+    @classmethod
+    def of(cls, out: Path, names: Sequence[str]) -> _StoreState:
+        missing = []
+        p = out.absolute()
+        while not p.exists() and p.parent != p:
+            missing.append(p)
+            p = p.parent
+        return cls(out, tuple(reversed(missing)), tuple(names), frozenset(n for n in names if (out / n).exists()))
+
+    def restore(self, samples: str) -> None:
+        store = self.out / samples
+        if samples not in self.had and store.is_file() and store.stat().st_size > 0:
+            return  # samples were flown and stored: kept for the resume (the error says so)
+        for name in self.names:
+            if name not in self.had:
+                (self.out / name).unlink(missing_ok=True)
+        remove_folders(list(self.missing))  # each only while empty
 
 
 def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | None = None,
@@ -899,7 +1027,10 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     ----------
     out : str or Path
         Output folder: the sample store is appended in place while the campaign runs; the
-        summary files are written as a unit with it at the end.
+        summary files are written as a unit with it at the end. A campaign that fails before
+        a sample is stored (a bad option, an unreachable scheduler, a full disk) leaves the
+        folder as it was (a folder it created is removed); stored samples are kept, for the
+        same command to resume.
     options : ilcdob.validation.campaign.CampaignOptions
         Samples, methods, scenarios, Delta set, law.
     fleet : str or Path or None
@@ -921,12 +1052,17 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     -------
     CampaignResult
     """
-    from ilcdob.validation.campaign import STORE_FILES, run_campaign
+    from ilcdob.validation.campaign import SAMPLES_FILE, STORE_FILES, run_campaign
 
-    check_output_path(out, folder=True, overwrite=overwrite, resumable=STORE_FILES)
+    check_output_path(out, folder=True, overwrite=overwrite, resumable=STORE_FILES, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet)
-    result = run_campaign(flt, options, out, scheduler=scheduler, workers=workers, progress=progress,
-                          dashboard=dashboard)
+    before = _StoreState.of(Path(out), STORE_FILES)
+    try:
+        result = run_campaign(flt, options, out, scheduler=scheduler, workers=workers, progress=progress,
+                              dashboard=dashboard)
+    except BaseException:
+        before.restore(SAMPLES_FILE)
+        raise
     _write_folder(out, _provenance("campaign", argv, digest, options.law), result.files(), overwrite=overwrite,
                   keep=STORE_FILES)
     return result
@@ -957,7 +1093,7 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
     """
     from ilcdob.fleet_io import add_system
 
-    check_output_path(fleet_file, folder=False)
+    check_output_path(fleet_file, folder=False, inputs={"--model": model}, option="FLEET.toml")
     return add_system(fleet_file, name, model, controller, dob, sample_time=sample_time)
 
 
@@ -975,5 +1111,5 @@ def report_to_html(dirs: Sequence[str | Path], out: str | Path) -> Path:
     -------
     Path
     """
-    check_output_path(out, folder=False)
+    check_output_path(out, folder=False, inputs={"folder": list(dirs)})
     return write_file(out, build_report(dirs))

@@ -1,17 +1,20 @@
 """What the ``ilcdob`` commands show on the console: progress bars, notes, summaries, errors.
 
 :func:`run_command` maps parsed arguments onto the use cases of :mod:`ilcdob.app.commands`
-and prints their results: tables and summaries on stdout (for pipes), progress and notes on
-stderr (silenced by ``--quiet``), one ``ilcdob: error:`` line per failure.
+and prints their results: tables and summaries on stdout (for pipes), progress, notes and
+warnings on stderr (silenced by ``--quiet``; a warning, SciPy's or Dask's too, as one
+``ilcdob: warning:`` line, never its raw text), one ``ilcdob: error:`` line per failure, last.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 import time
+from pathlib import Path
 from typing import Any
 
 from ilcdob.errors import LearningLimitWarning, SpecError
@@ -35,13 +38,15 @@ class Console:
     Parameters
     ----------
     quiet : bool
-        No progress bars and no notes (errors are still printed).
+        No progress bars, notes or warnings (errors, and a learning signal clipped at the
+        acceleration limit, are still printed).
     """
 
     def __init__(self, quiet: bool = False) -> None:
         self.quiet = quiet
         self._bar: Any = None
         self._logged = -float("inf")
+        self._warned: set[str] = set()
 
     def note(self, text: str) -> None:
         """Print a note on stderr (unless quiet).
@@ -71,6 +76,33 @@ class Console:
         if tb:
             print(tb, file=sys.stderr, end="")
         print(f"ilcdob: {kind}: {text}", file=sys.stderr, flush=True)
+
+    def warning(self, message: Warning | str, category: type[Warning], filename: str = "") -> None:
+        """Print a warning as one ``ilcdob: warning:`` line on stderr.
+
+        ilcdob's own :class:`~ilcdob.errors.LearningLimitWarning` (a learning signal was clipped)
+        is always printed; any other warning (SciPy's ``LinAlgWarning`` or ``BadCoefficients``,
+        Dask's, ...) once per distinct text with its category and package, and not at all when
+        quiet.
+
+        Parameters
+        ----------
+        message : Warning or str
+            The warning.
+        category : type
+            Its class.
+        filename : str
+            The file that issued it (names the package).
+        """
+        text = " ".join(str(message).split())
+        if issubclass(category, LearningLimitWarning):
+            self.error(text, kind="warning")
+            return
+        line = f"{text} ({category.__name__} in {_package(filename)})"
+        if self.quiet or line in self._warned:
+            return
+        self._warned.add(line)
+        self.error(line, kind="warning")
 
     def internal_error(self, exc: BaseException, tb: str | None = None) -> None:
         """Print ``ilcdob: error: internal error: <type>: <message>`` for an unexpected exception (a bug).
@@ -123,6 +155,18 @@ class Console:
         if self._bar is not None:
             self._bar.close()
             self._bar = None
+
+
+def _package(filename: str) -> str:
+    """The module a warning came from (``scipy.linalg._basic``, ``ilcdob.loop``), else its file's name."""
+    for name, module in list(sys.modules.items()):
+        if getattr(module, "__file__", None) == filename:
+            return name
+    parts = Path(filename).parts
+    for marker in ("site-packages", "dist-packages"):
+        if marker in parts[:-1]:
+            return parts[parts.index(marker) + 1].removesuffix(".py")
+    return Path(filename).name or "unknown"
 
 
 def _reproduce(a: argparse.Namespace, argv: list[str], con: Console) -> int:
@@ -234,7 +278,7 @@ def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     from ilcdob.design.theorem import EXACT_TOL, format_theorem_table
 
     order = [s.strip() for s in a.order.split(",")] if a.order else None
-    checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=a.scale,
+    checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=_given(a.scale, 1.0),
                               bandwidth=a.bandwidth, argv=argv, axis=a.axis)
     print(format_theorem_table(checks))
     disagree = [f"{c.source} -> {c.target}" for c in checks if not c.agrees]
@@ -252,12 +296,42 @@ def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     return 0
 
 
+def _given(value: Any, default: Any) -> Any:
+    """An option's value, or its default when it was not given (None)."""
+    return default if value is None else value
+
+
+def _used_by(option: str, value: Any, methods: list[str], users: tuple[str, ...]) -> None:
+    """Refuse an option that none of ``methods`` uses (given: not None)."""
+    if value is not None and not set(users) & set(methods):
+        which = f"{users[0]} does" if len(users) == 1 else f"{' and '.join(users)} do"
+        raise SpecError(f"`{option}` {value!r}: none of the methods {', '.join(methods)} uses it, only {which}; omit "
+                        f"{option}, or add {'it' if len(users) == 1 else 'one of them'} to --methods")
+
+
+def _robust_set_rho(rho: float | None, methods: list[str]) -> None:
+    """robust-set guarantees ``|e_j| <= rho |e'_j|`` on every plant: rho above 1 is no guarantee."""
+    if rho is not None and "robust-set" in methods and not (math.isfinite(rho) and 0 < rho <= 1):
+        raise SpecError(f"`--rho`: got {rho!r}, expected a guaranteed improvement factor in (0, 1] with robust-set "
+                        "among the methods (1: never worse than without learning)")
+
+
 def _compare(a: argparse.Namespace, argv: list[str], con: Console) -> int:
+    from ilcdob.design.delta import check_scale
+    from ilcdob.design.pair import DEFAULT_METHODS
     from ilcdob.design.robust import RobustOptions
     from ilcdob.validation.compare import CompareOptions
+    from ilcdob.validation.scenarios import SCENARIOS
 
-    opts = CompareOptions(samples=a.samples, bound=a.bound, scale=a.scale, seed=a.seed, duration=a.duration,
-                          robust=RobustOptions(rho=a.rho), law=a.law)
+    methods = list(a.methods or DEFAULT_METHODS)
+    _used_by("--rho", a.rho, methods, ("robust", "robust-set"))
+    _robust_set_rho(a.rho, methods)
+    scenario = SCENARIOS.get(a.scenario)
+    if a.duration is not None and scenario is not None and a.duration > scenario.duration:
+        raise SpecError(f"`--duration`: got {a.duration:g} s, but scenario {a.scenario} lasts {scenario.duration:g} s; "
+                        "give a shorter duration, or omit --duration to fly all of it")
+    opts = CompareOptions(samples=a.samples, bound=a.bound, scale=check_scale(_given(a.scale, 1.0), a.bound),
+                          seed=a.seed, duration=a.duration, robust=RobustOptions(rho=_given(a.rho, 0.95)), law=a.law)
     cmp = uc.compare_to_folder(a.out, a.scenario, opts, fleet=a.fleet, methods=a.methods, overwrite=a.overwrite,
                                progress=con.progress, argv=argv)
     print(cmp.table(), end="")
@@ -276,10 +350,14 @@ def _campaign(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     from ilcdob.design.pair import DEFAULT_METHODS
     from ilcdob.validation.campaign import CampaignOptions
 
-    opts = CampaignOptions(samples=a.samples, seed=a.seed, scale=a.scale, bound=a.bound, scenarios=tuple(a.scenarios),
-                           methods=tuple(a.methods or DEFAULT_METHODS), duration=a.duration,
-                           robust_models=a.robust_models, rho=a.rho, law=a.law, delta_set=a.delta_set,
-                           margin=a.margin)
+    methods = list(a.methods or DEFAULT_METHODS)
+    _used_by("--rho", a.rho, methods, ("robust", "robust-set"))
+    _used_by("--robust-models", a.robust_models, methods, ("robust",))
+    _used_by("--delta-set", a.delta_set, methods, ("robust-set",))
+    opts = CampaignOptions(samples=a.samples, seed=a.seed, scale=_given(a.scale, 1.0), bound=a.bound,
+                           scenarios=tuple(a.scenarios), methods=tuple(methods), duration=a.duration,
+                           robust_models=_given(a.robust_models, 1), rho=_given(a.rho, 0.95), law=a.law,
+                           delta_set=_given(a.delta_set, "structured"), margin=a.margin)
     result = uc.campaign_to_folder(a.out, opts, fleet=a.fleet, scheduler=a.scheduler, workers=a.workers,
                                    overwrite=a.overwrite, progress=con.progress,
                                    dashboard=con.note if a.dashboard else None, argv=argv)
@@ -346,16 +424,12 @@ def run_command(args: argparse.Namespace, argv: list[str], console: Console) -> 
     console : Console
         Where progress and notes go.
     """
-    def limit_warning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
-        if issubclass(category, LearningLimitWarning):  # ilcdob's own: one line, as errors are
-            console.error(str(message), kind="warning")
-        else:
-            default(message, category, filename, lineno, file, line)
+    def one_line(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        console.warning(message, category, filename)  # no raw warning text, nothing at all with --quiet
 
-    default = warnings.showwarning
     try:
         with warnings.catch_warnings():
-            warnings.showwarning = limit_warning
+            warnings.showwarning = one_line
             return _COMMANDS[args.command](args, argv, console)
     finally:
         console.close()

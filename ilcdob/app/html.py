@@ -45,9 +45,16 @@ Inputs, detected by file name in each folder
 Beside ``results.json``, ``ilcdob reproduce`` writes the report's other inputs
 (:func:`report_files`): ``fleet.json`` (the fleet table with its identified models and
 uncertainty) and ``theorem.json`` + ``theorem.png`` (the Theorem check). The report reads
-these files and computes nothing. A folder's ``manifest.json`` lists the SHA-256 of every
-file of its run; a folder whose files do not match it (files from different runs) is
-refused.
+these files and computes nothing.
+
+The report trusts nothing it reads. A folder's ``manifest.json`` lists the SHA-256 of every
+file of its run: a folder holding a file that is missing, changed or not listed there (files
+from different runs, edited files) is refused, naming the file
+(:func:`ilcdob.app.output.verify_manifest`); a folder without any manifest (written before
+manifests existed) is rendered with its provenance stated as unknown. The fields of
+``results.json``, ``fleet.json`` and ``theorem.json`` that the report uses are type-checked
+when read, and a file that is not standard JSON is refused, each error naming the file and
+the key. Every value is HTML-escaped (:func:`ilcdob.names.html_text`) where it is rendered.
 """
 
 from __future__ import annotations
@@ -57,7 +64,6 @@ import io
 import json
 import math
 from dataclasses import dataclass, field
-from html import escape
 from pathlib import Path
 from typing import Any
 
@@ -65,8 +71,10 @@ import numpy as np
 
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
+from ilcdob.inputs import read_text
+from ilcdob.names import html_text, quoted
 
-from .output import MANIFEST, file_sha256, read_manifest
+from .output import MANIFEST, ManifestError, verify_manifest
 
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "report_files", "THEOREM_SAMPLES"]
@@ -145,12 +153,15 @@ class ReportInputs:
     folders : tuple of Path
     results, compare, campaign : tuple of JsonInput
         Parsed ``results.json``, ``compare.json`` and ``campaign.json`` files.
+    provenance : tuple of str
+        Per folder, what wrote it (:func:`check_folder`).
     """
 
     folders: tuple[Path, ...]
     results: tuple[JsonInput, ...] = ()
     compare: tuple[JsonInput, ...] = ()
     campaign: tuple[JsonInput, ...] = ()
+    provenance: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -182,48 +193,248 @@ class JsonTable:
 # ---------------------------------------------------------------------------------------------
 # inputs
 
+#: File name -> the command that writes it, for "regenerate it with ..." (the known files and the other inputs).
+_MADE_BY = {**KNOWN_FILES, "fleet.json": KNOWN_FILES["results.json"], "theorem.json": KNOWN_FILES["results.json"]}
+#: Deepest nesting of objects and lists a JSON input may have (ilcdob writes at most 6 levels).
+_MAX_DEPTH = 64
+
+
+def _finite(text: str) -> float:
+    """A JSON number as a float; ValueError when it overflows to an infinity (``1e999``)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text[:40]} is out of range")
+    return value
+
+
+def _not_json(name: str) -> Any:
+    """``parse_constant`` of :func:`json.loads`: ``NaN`` and ``Infinity`` are not standard JSON."""
+    raise ValueError(f"{name} is not a number of standard JSON")
+
+
+def _depth(data: Any) -> int:
+    """Nesting depth of objects and lists in ``data`` (counting stops past :data:`_MAX_DEPTH`)."""
+    deepest, stack = 0, [(data, 1)]
+    while stack:
+        value, level = stack.pop()
+        if isinstance(value, (dict, list)):
+            deepest = max(deepest, level)
+            if level > _MAX_DEPTH:
+                break
+            stack.extend((v, level + 1) for v in (value.values() if isinstance(value, dict) else value))
+    return deepest
+
+
+def _regenerate(path: Path) -> str:
+    return f"regenerate it with `{_MADE_BY.get(path.name, KNOWN_FILES['results.json'])}`"
+
+
 def _read_json(path: Path) -> Any:
+    """The parsed standard JSON of ``path``; ReportError naming the file when it is not that."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_text(path, "result file", error=ReportError, hint=_regenerate(path))  # regular file, size cap
     except OSError as exc:
         raise ReportError(f"{path}: cannot read ({exc.strerror})") from exc
     except UnicodeDecodeError as exc:
         raise ReportError(f"{path}: not a UTF-8 text file (byte {exc.object[exc.start]:#04x} at offset {exc.start}); "
-                          f"regenerate it with `{KNOWN_FILES[path.name]}`") from exc
+                          f"{_regenerate(path)}") from exc
     try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ReportError(f"{path}: not valid JSON ({exc}); regenerate it with `{KNOWN_FILES[path.name]}`") from exc
+        data = json.loads(text, parse_float=_finite, parse_constant=_not_json)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, a non-standard number, a huge integer
+        raise ReportError(f"{path}: not valid JSON ({str(exc)[:200]}); {_regenerate(path)}") from None
+    if _depth(data) > _MAX_DEPTH:
+        raise ReportError(f"{path}: objects and lists nested more than {_MAX_DEPTH} levels deep, which ilcdob never "
+                          f"writes; {_regenerate(path)}")
+    return data
+
+
+def _is_real(v: Any) -> bool:
+    """A finite JSON number (not a boolean)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:  # an integer beyond the float range
+        return False
+
+
+def _key(where: str, key: str) -> str:
+    """``where.key``, with ``key`` quoted when it is not plain printable text."""
+    plain = key.isprintable() and key.isascii() and len(key) <= 64 and not any(c in key for c in '."[]')
+    return f"{where}.{key}" if plain and key else f"{where}[{quoted(key)}]"
+
+
+@dataclass(frozen=True)
+class _Schema:
+    """Type checks of the fields of one JSON input that the report uses; each failure a ReportError
+    naming the file, the key, the value and what the file's writer puts there."""
+
+    path: Path
+
+    def fail(self, key: str, value: Any, expected: str) -> ReportError:
+        return ReportError(f"{self.path}: key \"{key}\": got {quoted(value)}, expected {expected}; "
+                           f"{_regenerate(self.path)}")
+
+    def obj(self, value: Any, key: str | None = None) -> dict:
+        if not isinstance(value, dict):
+            if key is None:
+                raise ReportError(f"{self.path}: expected a JSON object, got a JSON {type(value).__name__}; "
+                                  f"{_regenerate(self.path)}")
+            raise self.fail(key, value, "an object")
+        return value
+
+    def seq(self, value: Any, key: str, what: str) -> list:
+        if not isinstance(value, list):
+            raise self.fail(key, value, f"a list of {what}")
+        return value
+
+    def text(self, value: Any, key: str, null: bool = False) -> None:
+        if not (isinstance(value, str) or (null and value is None)):
+            raise self.fail(key, value, "a text" + (" or null" if null else ""))
+
+    def texts(self, value: Any, key: str) -> list:
+        for item in self.seq(value, key, "texts"):
+            if not isinstance(item, str):
+                raise self.fail(key, value, "a list of texts")
+        return value
+
+    def flag(self, value: Any, key: str, null: bool = False) -> None:
+        if not (isinstance(value, bool) or (null and value is None)):
+            raise self.fail(key, value, "true or false" + (" or null" if null else ""))
+
+    def real(self, value: Any, key: str, null: bool = False, positive: bool = False) -> None:
+        if not ((_is_real(value) and (value > 0 or not positive)) or (null and value is None)):
+            raise self.fail(key, value, ("a number > 0" if positive else "a number") + (" or null" if null else ""))
+
+    def reals(self, value: Any, key: str, null: bool = False) -> None:
+        for item in self.seq(value, key, "numbers"):
+            if not (_is_real(item) or (null and item is None)):
+                raise self.fail(key, value, "a list of numbers" + (" (or nulls)" if null else ""))
+
+    def integer(self, value: Any, key: str, least: int | None = None) -> None:
+        if isinstance(value, bool) or not isinstance(value, int) or (least is not None and value < least):
+            raise self.fail(key, value, "an integer" + (f" >= {least}" if least is not None else ""))
 
 
 def _check_results(path: Path, data: Any) -> None:
-    if not isinstance(data, dict):
-        raise ReportError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    """The fields of ``results.json`` that the report reads (module docstring), typed as its writer writes them."""
+    s = _Schema(path)
+    s.obj(data)
     plant = data.get("plant")
     if plant not in PLANTS:
-        raise ReportError(f"{path}: key \"plant\" is {plant!r}, expected one of {list(PLANTS)}")
-    scs = data.get("scenarios")
-    if not isinstance(scs, list) or not all(isinstance(s, dict) and isinstance(s.get("systems"), dict)
-                                            for s in scs):
-        raise ReportError(f"{path}: key \"scenarios\" must be a list of objects with \"systems\"; "
-                          f"regenerate it with `{KNOWN_FILES['results.json']}`")
+        raise ReportError(f"{path}: key \"plant\" is {quoted(plant)}, expected one of {list(PLANTS)}; "
+                          f"{_regenerate(path)}")
+    if data.get("law") is not None:
+        s.text(data["law"], "law")
+    if "sample_time" in data:
+        s.real(data["sample_time"], "sample_time", null=True, positive=True)
+    longest = 0
+    for i, sc in enumerate(s.seq(data.get("scenarios"), "scenarios", "scenario objects")):
+        where = f"scenarios[{i}]"
+        s.obj(sc, where)
+        s.integer(sc.get("id"), f"{where}.id", least=0)
+        if "title" in sc:
+            s.text(sc["title"], f"{where}.title")
+        systems = s.obj(sc.get("systems"), f"{where}.systems")
+        if sc.get("order") is not None:
+            order = s.texts(sc["order"], f"{where}.order")
+            if any(name not in systems for name in order):
+                raise s.fail(f"{where}.order", order, f"names of {where}.systems ({sorted(systems)})")
+        for name, m in systems.items():
+            key = _key(f"{where}.systems", name)
+            s.obj(m, key)
+            for field_ in ("rmse_no_dob", "rmse_dob", "rmse_dhat_dob"):
+                if field_ in m:
+                    s.real(m[field_], f"{key}.{field_}", null=True)
+            for field_ in ("rmse_learning", "rmse_dhat_learning"):
+                if field_ in m:
+                    s.reals(m[field_], f"{key}.{field_}", null=True)
+                    longest = max(longest, len(m[field_]))
+    if data.get("iterations") is not None:
+        s.integer(data["iterations"], "iterations", least=0)
+        if data["iterations"] != longest:
+            raise s.fail("iterations", data["iterations"], f"the number of learning iterations the file holds "
+                         f"({longest}: its longest rmse_learning list)")
+
+
+def _check_fleet_table(path: Path, data: Any) -> None:
+    """``fleet.json`` (:func:`report_files`): source, sample time, a header and rows of texts."""
+    s = _Schema(path)
+    s.obj(data)
+    s.text(data.get("source"), "source")
+    s.real(data.get("sample_time"), "sample_time", positive=True)
+    header = s.texts(data.get("header"), "header")
+    for i, row in enumerate(s.seq(data.get("rows"), "rows", "rows")):
+        if not (isinstance(row, list) and len(row) == len(header) and all(isinstance(c, str) for c in row)):
+            raise s.fail(f"rows[{i}]", row, f"a list of {len(header)} texts (one per header column)")
+
+
+def _check_theorem(path: Path, data: Any) -> None:
+    """``theorem.json`` (:func:`report_files`): ``missing``, or the sample count, seed and the pairs of each order."""
+    s = _Schema(path)
+    s.obj(data)
+    if "missing" in data:
+        s.text(data["missing"], "missing")
+        return
+    s.integer(data.get("samples"), "samples", least=1)
+    s.integer(data.get("seed"), "seed")
+    for i, o in enumerate(s.seq(data.get("orders"), "orders", "order objects")):
+        where = f"orders[{i}]"
+        s.obj(o, where)
+        s.texts(o.get("order"), f"{where}.order")
+        s.text(o.get("table"), f"{where}.table")
+        for j, c in enumerate(s.seq(o.get("pairs"), f"{where}.pairs", "pair objects")):
+            key = f"{where}.pairs[{j}]"
+            s.obj(c, key)
+            s.text(c.get("source"), f"{key}.source")
+            s.text(c.get("target"), f"{key}.target")
+            s.flag(c.get("holds_everywhere"), f"{key}.holds_everywhere")
+            s.real(c.get("min_margin"), f"{key}.min_margin", null=True)
+            band = c.get("failing_band")
+            if band is not None and not (isinstance(band, list) and len(band) == 2 and all(map(_is_real, band))):
+                raise s.fail(f"{key}.failing_band", band, "null or [low, high] in rad/s")
+            for field_ in ("band_rad_s", "exact_worst_ratio", "exact_worst_w_rad_s"):
+                s.real(c.get(field_), f"{key}.{field_}", null=True)
+            s.text(c.get("verdict"), f"{key}.verdict", null=True)
+            s.flag(c.get("agrees"), f"{key}.agrees", null=True)
+            s.text(c.get("statement"), f"{key}.statement", null=True)
+
+
+def _read_checked(path: Path, check: Any) -> Any:
+    """``path``'s JSON after ``check(path, data)`` (one of the ``_check_*`` functions)."""
+    data = _read_json(path)
+    check(path, data)
+    return data
 
 
 def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
-    """Find and parse the known files (:data:`KNOWN_FILES`) in every folder of ``dirs``.
+    """Find, verify and parse the known files (:data:`KNOWN_FILES`) in every folder of ``dirs``.
+
+    Each folder is checked against its ``manifest.json`` (:func:`check_folder`) before any of
+    its files is read.
+
+    Parameters
+    ----------
+    dirs : list of str or Path
+        The report's input folders.
+
+    Returns
+    -------
+    ReportInputs
 
     Raises
     ------
     ReportError
         No folder given; a folder that does not exist or is a file; a folder with none of
-        the known files; a known file that is not valid JSON; a ``results.json`` without a
-        valid ``"plant"`` or ``"scenarios"``.
+        the known files; a folder whose files do not match its manifest; a known file that is
+        not valid JSON; a ``results.json`` whose fields the report reads have the wrong type
+        (the message names the file and the key).
     """
     if not dirs:
         raise ReportError("`dirs`: got no folder; pass at least one output folder of "
                           + ", ".join(f"`{c.split(' ')[0]} {c.split(' ')[1]}`" for c in KNOWN_FILES.values()))
     found: dict[str, list[JsonInput]] = {name: [] for name in KNOWN_FILES}
-    folders = []
+    folders, provenance = [], []
     expected = ", ".join(KNOWN_FILES)
     for d in dirs:
         folder = Path(d)
@@ -240,43 +451,44 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
             raise ReportError(
                 f"report input {str(d)!r}: none of {expected} found (it holds {shown}); pass a folder written by "
                 + ", ".join(f"`{c}`" for c in KNOWN_FILES.values()))
+        provenance.append(check_folder(folder))
         for name in present:
             path = folder / name
-            data = _read_json(path)
-            if name == "results.json":
-                _check_results(path, data)
+            data = _read_checked(path, _check_results) if name == "results.json" else _read_json(path)
             found[name].append(JsonInput(folder, path, data))
         folders.append(folder)
     return ReportInputs(tuple(folders), tuple(found["results.json"]), tuple(found["compare.json"]),
-                        tuple(found["campaign.json"]))
+                        tuple(found["campaign.json"]), tuple(provenance))
 
 
 def check_folder(folder: Path) -> str:
-    """Check that the files of an output folder come from one run; returns a provenance sentence.
+    """Check that an output folder holds exactly the files of one run; returns a provenance sentence.
 
     Parameters
     ----------
     folder : Path
         An output folder.
 
+    Returns
+    -------
+    str
+        The command, version, time and run of the folder's ``manifest.json``, or that it has none
+        (written before manifests existed: provenance unknown, nothing to check against).
+
     Raises
     ------
     ReportError
-        A file listed in the folder's ``manifest.json`` is missing or differs from what that
-        run wrote (a file of another run, or edited since).
+        The folder does not match its manifest (:func:`ilcdob.app.output.verify_manifest`): a
+        listed file is missing or differs from what that run wrote, a file is not listed, or the
+        manifest is malformed; the message names the file.
     """
-    manifest = read_manifest(folder)
+    try:
+        manifest = verify_manifest(folder)
+    except ManifestError as exc:
+        raise ReportError(str(exc)) from exc
     if manifest is None:
-        return f"{folder}: no {MANIFEST} (written by an earlier version of ilcdob): provenance unknown"
-    for name, digest in (manifest.get("files") or {}).items():
-        path = folder / name
-        if not path.is_file():
-            raise ReportError(f"{folder}: {name} is listed in {MANIFEST} but missing; the folder is incomplete. "
-                              "Regenerate it with the command in its manifest")
-        if file_sha256(path) != digest:
-            raise ReportError(f"{folder}: {name} differs from the file its run wrote ({MANIFEST}); the folder mixes "
-                              f"files of different runs or was edited. Regenerate it: "
-                              f"ilcdob {manifest.get('command', '')} {' '.join(manifest.get('arguments', []))}")
+        return (f"{folder}: no {MANIFEST} (written by an earlier version of ilcdob): provenance unknown, its files "
+                "are not verified")
     args = " ".join(manifest.get("arguments") or [])
     return (f"{folder}: `ilcdob {args or manifest.get('command', '')}`, ilcdob {manifest.get('version')}, "
             f"{manifest.get('created_utc')}, run {str(manifest.get('run_id'))[:8]}")
@@ -415,27 +627,36 @@ def _fmt(v: Any) -> str:
 
 def _table(header: list[str], rows: list[list[str]], cls: str = "") -> str:
     """An HTML table; cells are escaped here."""
-    head = "".join(f"<th>{escape(h)}</th>" for h in header)
-    body = "\n".join("<tr>" + "".join(f"<td>{escape(c)}</td>" for c in r) + "</tr>" for r in rows)
+    head = "".join(f"<th>{html_text(h)}</th>" for h in header)
+    body = "\n".join("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in r) + "</tr>" for r in rows)
     c = f' class="{cls}"' if cls else ""
     return f"<table{c}><thead><tr>{head}</tr></thead>\n<tbody>\n{body}\n</tbody></table>"
 
 
-def _png_uri(data: bytes) -> str:
-    """``data:`` URI of a figure, re-encoded as a 256-colour palette PNG (line plots look the same;
-    the report shrinks about 2.5x)."""
+#: Largest figure the report embeds, pixels (the commands write about 1 megapixel).
+_MAX_PIXELS = 40_000_000
+
+
+def _png_uri(data: bytes, path: Path, made_by: str) -> str:
+    """``data:`` URI of the figure ``path`` (its bytes ``data``), re-encoded as a 256-colour palette PNG (line
+    plots look the same; the report shrinks about 2.5x); ReportError naming the file when it does not decode."""
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.open(io.BytesIO(data)).convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(
-        buf, "PNG", optimize=True)
+    try:
+        with Image.open(io.BytesIO(data)) as img:
+            if img.width * img.height > _MAX_PIXELS:
+                raise ReportError(f"{path}: a figure of {img.width} x {img.height} pixels, more than the "
+                                  f"{_MAX_PIXELS} the commands ever write; regenerate the folder with "
+                                  f"`{KNOWN_FILES[made_by]}`")
+            img.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(buf, "PNG", optimize=True)
+    except ReportError:
+        raise
+    except (OSError, ValueError, SyntaxError, EOFError, Image.DecompressionBombError) as exc:
+        raise ReportError(f"{path}: not a readable PNG figure ({str(exc)[:120]}); regenerate the folder with "
+                          f"`{KNOWN_FILES[made_by]}`") from exc
     small = buf.getvalue()
     return "data:image/png;base64," + base64.b64encode(small if len(small) < len(data) else data).decode("ascii")
-
-
-def _figure(data: bytes, alt: str, caption: str) -> str:
-    return (f'<figure><img src="{_png_uri(data)}" alt="{escape(alt)}">'
-            f"<figcaption>{escape(caption)}</figcaption></figure>")
 
 
 def _file_figure(folder: Path, name: str, caption: str, made_by: str = "results.json") -> str:
@@ -443,16 +664,17 @@ def _file_figure(folder: Path, name: str, caption: str, made_by: str = "results.
     ``made_by``: the known file whose command writes it (named when the file is not a PNG)."""
     path = folder / name
     if not path.is_file():
-        return f'<p class="missing">Figure {escape(name)} is not in {escape(str(folder))} (it was written without ' \
-               "figures, or by an older version): not shown.</p>"
+        return f'<p class="missing">Figure {html_text(name)} is not in {html_text(str(folder))} (it was written ' \
+               "without figures, or by an older version): not shown.</p>"
     data = path.read_bytes()
     if not data.startswith(b"\x89PNG\r\n\x1a\n"):
         raise ReportError(f"{path}: not a PNG file; regenerate the folder with `{KNOWN_FILES[made_by]}`")
-    return _figure(data, name, f"{caption} ({path})")
+    return (f'<figure><img src="{html_text(_png_uri(data, path, made_by))}" alt="{html_text(name)}">'
+            f"<figcaption>{html_text(f'{caption} ({path})')}</figcaption></figure>")
 
 
 def _missing(what: str, expected: str) -> str:
-    return f'<p class="missing"><strong>No input:</strong> {escape(what)} Expected {escape(expected)}.</p>'
+    return f'<p class="missing"><strong>No input:</strong> {html_text(what)} Expected {html_text(expected)}.</p>'
 
 
 def _poly(c: tuple[float, ...]) -> str:
@@ -512,8 +734,8 @@ def _fleet_table(fleet: Fleet) -> dict[str, Any]:
 
 
 def _fleet_html(table: dict[str, Any]) -> str:
-    return (f"<p>Fleet {escape(str(table['source']))}: {len(table['rows'])} systems, sample time "
-            f"{table['sample_time']:g} s. Fit in % "
+    return (f"<p>Fleet {html_text(table['source'])}: {len(table['rows'])} systems, sample time "
+            f"{html_text(format(table['sample_time'], 'g'))} s. Fit in % "
             "(MATLAB definition) on estimation and held-out flights; parameters as in "
             "<code>IdentificationSpec</code> (free denominator then numerator coefficients) with 1-sigma "
             "uncertainty; |Delta| is the 3-sigma multiplicative uncertainty of the identified model from its "
@@ -521,8 +743,8 @@ def _fleet_html(table: dict[str, Any]) -> str:
 
 
 def _rmse_table(data: dict) -> str:
-    n = int(data.get("iterations") or max((len(m.get("rmse_learning", [])) for sc in data["scenarios"]
-                                            for m in sc["systems"].values()), default=0))
+    n = int(data.get("iterations") or max((len(m.get(k, [])) for sc in data["scenarios"] for m in sc["systems"].values()
+                                            for k in ("rmse_learning", "rmse_dhat_learning")), default=0))
     header = (["scenario", "system", "no DOB (mm)", "only DOB (mm)"] + [f"learning {i + 1} (mm)" for i in range(n)]
               + [f"learning {n} / DOB", "d est. DOB (m/s^2)"] + [f"d est. learning {i + 1} (m/s^2)" for i in range(n)])
     rows = []
@@ -533,7 +755,7 @@ def _rmse_table(data: dict) -> str:
             learn = list(m.get("rmse_learning", []))
             dl = list(m.get("rmse_dhat_learning", []))
             mm = lambda v: "-" if v is None else f"{1e3 * v:.4g}"  # noqa: E731
-            ratio = learn[-1] / m["rmse_dob"] if learn and m.get("rmse_dob") else None
+            ratio = learn[-1] / m["rmse_dob"] if learn and learn[-1] is not None and m.get("rmse_dob") else None
             rows.append([str(sc.get("id", "?")), name, mm(m.get("rmse_no_dob")), mm(m.get("rmse_dob"))]
                         + [mm(v) for v in learn] + ["-"] * (n - len(learn))
                         + [_fmt(ratio) if ratio is not None else "-", _fmt(m.get("rmse_dhat_dob"))]
@@ -547,20 +769,20 @@ def _plant_section(res: JsonInput) -> str:
     from ilcdob.design.laws import LAW_DESCRIPTIONS
 
     law = data.get("law")
-    law_html = (f"learning law <strong>{escape(str(law))}</strong>"
-                + (f" ({escape(LAW_DESCRIPTIONS[law])})" if law in LAW_DESCRIPTIONS else "")
+    law_html = (f"learning law <strong>{html_text(str(law))}</strong>"
+                + (f" ({html_text(LAW_DESCRIPTIONS[law])})" if law in LAW_DESCRIPTIONS else "")
                 if law is not None else "learning law not recorded (files written before the law choice existed "
                                         "come from the paper's law)")
-    parts = [f"<p>From {escape(str(res.path))}: {law_html}; {len(data['scenarios'])} scenario(s), "
-             f"{escape(_fmt(data.get('iterations')))} learning iteration(s), sample time "
-             f"{escape(_fmt(data.get('sample_time')))} s. Tracking RMSE in mm (no DOB, only DOB, learning "
+    parts = [f"<p>From {html_text(str(res.path))}: {law_html}; {len(data['scenarios'])} scenario(s), "
+             f"{html_text(_fmt(data.get('iterations')))} learning iteration(s), sample time "
+             f"{html_text(_fmt(data.get('sample_time')))} s. Tracking RMSE in mm (no DOB, only DOB, learning "
              "iterations) and RMSE of the total disturbance estimate (d_hat + d_f) against the true disturbance "
              "in m/s^2.</p>", _rmse_table(data),
              _file_figure(folder, "rmse_bars.png", "Tracking RMSE (m, log scale) per scenario and system: no DOB, "
                           "only DOB and every learning iteration")]
     for sc in data["scenarios"]:
         sid = sc.get("id", "?")
-        parts.append(f"<h3>Scenario {escape(str(sid))}: {escape(str(sc.get('title', '')))}</h3>")
+        parts.append(f"<h3>Scenario {html_text(str(sid))}: {html_text(str(sc.get('title', '')))}</h3>")
         parts.append(_file_figure(folder, f"error_s{sid}.png",
                                   f"Scenario {sid}: tracking error e (m) against time (s), one row per system; "
                                   "left no DOB, only DOB and every learning iteration, right the learning "
@@ -616,25 +838,32 @@ def _theorem_pair(check: Any) -> dict[str, Any]:
             "exact_worst_ratio": exact.get("worst_ratio"), "exact_worst_w_rad_s": exact.get("worst_w_rad_s")}
 
 
-def _theorem_html(folder: Path) -> str:
+def _read_theorem(folder: Path) -> dict[str, Any] | None:
+    """The checked ``theorem.json`` of ``folder`` (None: the folder has none)."""
     path = folder / "theorem.json"
-    if not path.is_file():
+    return _read_checked(path, _check_theorem) if path.is_file() else None
+
+
+def _theorem_html(folder: Path, data: dict[str, Any] | None) -> str:
+    """The Theorem section of one folder from its checked ``theorem.json`` ``data`` (None: absent)."""
+    if data is None:
         return _missing(f"{folder} has no theorem.json (written by `ilcdob reproduce`).", "theorem.json")
-    data = _read_json(path)
     if "missing" in data:
         return _missing(str(data["missing"]) + ".", "a fleet identified with `ilcdob identify-fleet` "
                         "(or run `ilcdob check --bound B`)")
     parts = ["<p>The verdict follows the exact worst case of |e_j / e'_j| (the learning vehicle's error with "
              "learning over its error with the DOB alone) over every Delta_(j-1) with |Delta| at most the 3-sigma "
-             f"bound of the identification ({data['samples']} sampled plants per Delta set, seed {data['seed']}), "
+             f"bound of the identification ({html_text(data['samples'])} sampled plants per Delta set, seed "
+             f"{html_text(data['seed'])}), "
              "for the law as flown (the Theorem's filters through the learning band F, "
              "<code>ilcdob.design.band</code>); it holds where that stays within 1.01 at every frequency. Beside it, "
              "the paper's first-order condition |Delta_(j-1)| &lt; |1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III; "
              "margin = rhs / |Delta|, &gt; 1: holds), which is neither sufficient nor necessary; "
              "docs/theory.md section 2 explains both.</p>"]
     for o in data["orders"]:
-        rows = [[f"{c['source']} -> {c['target']}", "yes" if c["holds_everywhere"] else "NO", _fmt(c["min_margin"]),
-                 "-" if c["failing_band"] is None else f"{c['failing_band'][0]:.4g} .. {c['failing_band'][1]:.4g}",
+        rows = [[f"{c['source']} -> {c['target']}", "yes" if c["holds_everywhere"] else "NO", _fmt(c.get("min_margin")),
+                 "-" if c.get("failing_band") is None
+                 else f"{c['failing_band'][0]:.4g} .. {c['failing_band'][1]:.4g}",
                  "off" if c.get("band_rad_s") is None else f"{c['band_rad_s']:.4g}",
                  "-" if "exact_worst_ratio" not in c else
                  "unbounded" if c["exact_worst_ratio"] is None else _fmt(c["exact_worst_ratio"]),
@@ -642,13 +871,13 @@ def _theorem_html(folder: Path) -> str:
                  {"holds": "holds", "fails": "FAILS"}.get(c.get("verdict"), "-"),
                  "-" if c.get("agrees") is None else ("yes" if c["agrees"] else "NO")]
                 for c in o["pairs"]]
-        parts.append(f"<h3>Order {escape(' -> '.join(o['order']))}</h3>")
+        parts.append(f"<h3>Order {html_text(' -> '.join(o['order']))}</h3>")
         parts.append(_table(["pair", "paper's first-order condition", "min margin", "failing band (rad/s)",
                              "learning band (rad/s)", "exact worst ratio", "at w (rad/s)", "verdict",
                              "paper agrees"], rows))
-        parts.extend(f"<p>{escape(c['statement'])}</p>" for c in o["pairs"] if c.get("statement"))
+        parts.extend(f"<p>{html_text(c['statement'])}</p>" for c in o["pairs"] if c.get("statement"))
         parts.append("<details><summary>as printed by <code>ilcdob check</code></summary>"
-                     f'<pre class="plain">{escape(o["table"])}</pre></details>')
+                     f'<pre class="plain">{html_text(o["table"])}</pre></details>')
     parts.append(_file_figure(folder, "theorem.png", "The Theorem's condition per source system of the first "
                               "order against frequency (rad/s): |Delta_(j-1)| (3-sigma uncertainty) and "
                               "|1 + P C|_(j-1) / 2; learning helps where the first stays below the second"))
@@ -685,7 +914,7 @@ def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True) ->
 
 def _json_section(j: JsonInput, what: str) -> str:
     data = j.data
-    parts = [f"<h3>{escape(str(j.path))}</h3>"]
+    parts = [f"<h3>{html_text(str(j.path))}</h3>"]
     if isinstance(data, dict):
         meta = [[k, _fmt(v)] for k, v in data.items() if v is None or isinstance(v, (str, int, float, bool))]
         if meta:
@@ -696,10 +925,10 @@ def _json_section(j: JsonInput, what: str) -> str:
         cut = text[:4000] + ("\n..." if len(text) > 4000 else "")
         parts.append(_missing(f"{j.path} holds no table of {what} (rows = methods with numeric fields); its content "
                               "is shown as is.", "an object of methods, e.g. {\"methods\": {name: {field: number}}}"))
-        parts.append(f'<pre class="plain">{escape(cut)}</pre>')
+        parts.append(f'<pre class="plain">{html_text(cut)}</pre>')
     for t in tables:
         note = f" ({t.omitted} list values not tabulated)" if t.omitted else ""
-        parts.append(f"<p class=\"where\">{escape(t.path or '(top level)')}{escape(note)}</p>")
+        parts.append(f"<p class=\"where\">{html_text(t.path or '(top level)')}{html_text(note)}</p>")
         parts.append(_method_table(t))
     return "\n".join(parts)
 
@@ -708,14 +937,14 @@ def _method_table(t: JsonTable) -> str:
     """A method table as HTML; a row without result (:attr:`JsonTable.failed`) shows its reason
     across the value columns instead of empty cells."""
     reasons = dict(t.failed)
-    head = "".join(f"<th>{escape(h)}</th>" for h in ["method", *t.columns])
+    head = "".join(f"<th>{html_text(h)}</th>" for h in ["method", *t.columns])
     body = []
     for label, values in t.rows:
         if label in reasons:
-            body.append(f'<tr class="failed"><td>{escape(label)}</td><td colspan="{max(len(t.columns), 1)}">'
-                        f"<strong>no result</strong>: {escape(reasons[label])}</td></tr>")
+            body.append(f'<tr class="failed"><td>{html_text(label)}</td><td colspan="{max(len(t.columns), 1)}">'
+                        f"<strong>no result</strong>: {html_text(reasons[label])}</td></tr>")
         else:
-            body.append("<tr>" + "".join(f"<td>{escape(c)}</td>" for c in
+            body.append("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in
                                          [label, *(_fmt(values[k]) if k in values else "-" for k in t.columns)])
                         + "</tr>")
     return f"<table><thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody></table>"
@@ -780,7 +1009,11 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     if not isinstance(options, ReportOptions):
         raise ReportError(f"`options`: got {type(options).__name__}, expected a ReportOptions")
     inputs = discover_inputs(list(dirs))
-    provenance = [check_folder(f) for f in inputs.folders]
+    provenance = list(inputs.provenance)
+    # every input is read and checked before anything is rendered
+    fleet_tables = [_read_checked(r.folder / "fleet.json", _check_fleet_table)
+                    if (r.folder / "fleet.json").is_file() else None for r in inputs.results]
+    theorems = [_read_theorem(r.folder) for r in inputs.results]
 
     def plant_name(res: JsonInput) -> str:
         return _PLANT_TITLE[res.data["plant"]].split(" (")[0].lower()
@@ -790,12 +1023,11 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
 
     # fleet and identified models
     body, srcs = [], []
-    for res in inputs.results:
-        body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
-        table = res.folder / "fleet.json"
-        if table.is_file():
-            body.append(_fleet_html(_read_json(table)))
-            srcs.append(str(table))
+    for res, table in zip(inputs.results, fleet_tables):
+        body.append(f"<h3>{html_text(plant_name(res).capitalize())}: {html_text(str(res.folder))}</h3>")
+        if table is not None:
+            body.append(_fleet_html(table))
+            srcs.append(str(res.folder / "fleet.json"))
         else:
             body.append(_missing(f"{res.folder} has no fleet.json (written by `ilcdob reproduce`).", "fleet.json"))
         if (res.folder / "identified_models.png").is_file():
@@ -807,7 +1039,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     # Bode figures
     body, srcs = [], []
     for res in inputs.results:
-        body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
+        body.append(f"<h3>{html_text(plant_name(res).capitalize())}: {html_text(str(res.folder))}</h3>")
         for name, caption in _BODE_FIGURES.items():
             body.append(_file_figure(res.folder, name, caption))
         if any((res.folder / name).is_file() for name in _BODE_FIGURES):
@@ -824,12 +1056,11 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
 
     # Theorem check
     body, srcs = [], []
-    for res in inputs.results:
-        body.append(f"<h3>{escape(plant_name(res).capitalize())}: {escape(str(res.folder))}</h3>")
-        body.append(_theorem_html(res.folder))
-        theorem = res.folder / "theorem.json"
-        if theorem.is_file() and "missing" not in _read_json(theorem):
-            srcs.append(str(theorem))
+    for res, theorem in zip(inputs.results, theorems):
+        body.append(f"<h3>{html_text(plant_name(res).capitalize())}: {html_text(str(res.folder))}</h3>")
+        body.append(_theorem_html(res.folder, theorem))
+        if theorem is not None and "missing" not in theorem:
+            srcs.append(str(res.folder / "theorem.json"))
     sections.append(_Section("theorem", "Theorem check", "\n".join(body), srcs,
                              f"{reproduce_cmd}, naming a fleet with identified models"))
 
@@ -851,23 +1082,25 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     status_rows = []
     for s in sections:
         if s.sources:
-            status = f'<span class="status-ok">rendered</span> from {escape(", ".join(s.sources))}'
+            status = f'<span class="status-ok">rendered</span> from {html_text(", ".join(s.sources))}'
         else:
-            status = f'<span class="status-none">no input</span>: expected {escape(s.expected)}'
-        status_rows.append(f'<tr><td><a href="#{s.sid}">{escape(s.heading)}</a></td><td>{status}</td></tr>')
+            status = f'<span class="status-none">no input</span>: expected {html_text(s.expected)}'
+        status_rows.append(f'<tr><td><a href="#{html_text(s.sid)}">{html_text(s.heading)}</a></td>'
+                           f"<td>{status}</td></tr>")
     out = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
            '<meta name="viewport" content="width=device-width, initial-scale=1">',
-           f"<title>{escape(options.title)}</title><style>{_CSS}</style></head><body>",
-           f"<h1>{escape(options.title)}</h1>",
+           f"<title>{html_text(options.title)}</title><style>{_CSS}</style></head><body>",
+           f"<h1>{html_text(options.title)}</h1>",
            "<p>Modi, Chen, Liang, Zheng (2024), <em>Improving Disturbance Estimation and Suppression via "
            "Learning among Systems with Mismatched Dynamics</em>: quadrotors with PID + disturbance observer "
            "learn a repetitive task in wind from each other through the learning filters L1, L2. Generated by "
-           "<code>ilcdob report</code> from:</p><ul>" + "".join(f"<li>{escape(p)}</li>" for p in provenance) + "</ul>",
+           "<code>ilcdob report</code> from:</p><ul>"
+           + "".join(f"<li>{html_text(p)}</li>" for p in provenance) + "</ul>",
            '<h2 id="contents">Sections and their inputs</h2>',
            '<table class="wide"><thead><tr><th>section</th><th>input</th></tr></thead><tbody>',
            *status_rows, "</tbody></table>"]
     for s in sections:
-        out.append(f'<h2 id="{s.sid}">{escape(s.heading)}</h2>')
+        out.append(f'<h2 id="{html_text(s.sid)}">{html_text(s.heading)}</h2>')
         if s.sources:
             out.append(s.body)
         else:

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ilcdob.design.delta import MAX_DELTA_SAMPLES, check_scale
 from ilcdob.design.laws import DEFAULT_LAW, check_law
 from ilcdob.design.pair import DEFAULT_METHODS, METHODS
 from ilcdob.design.robust_set import DELTA_SETS
@@ -17,10 +18,24 @@ from ilcdob.fleet import Fleet
 
 from ..scenarios import SCENARIOS
 
-__all__ = ["CampaignError", "CampaignOptions", "campaign_settings", "FORMAT_VERSION"]
+__all__ = ["CampaignError", "CampaignOptions", "campaign_settings", "FORMAT_VERSION", "MAX_SAMPLES",
+           "SAMPLE_CPU_S"]
 
 #: Version of the sample records and the settings file.
 FORMAT_VERSION = 1
+
+#: Most samples of one campaign (its records are held in memory; a larger study is several campaigns).
+MAX_SAMPLES = 100_000
+#: Measured CPU seconds of one sample with the default designs over the four scenarios (the robust SOCP ~70 %).
+SAMPLE_CPU_S = 4.2
+
+
+def _duration(seconds: float) -> str:
+    """``seconds`` in the largest unit that keeps it at least 1 (s, min, h, days)."""
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
 
 
 class CampaignError(IlcdobError, ValueError):
@@ -34,12 +49,12 @@ class CampaignOptions:
     Attributes
     ----------
     samples : int
-        Number of samples N (each: one true plant per vehicle), >= 1.
+        Number of samples N (each: one true plant per vehicle), 1 to :data:`MAX_SAMPLES`.
     seed : int
         Campaign seed, >= 0; sample ``i`` uses the generator of ``SeedSequence(seed, spawn_key=(0, i))``.
     scale : float
         Scale of the identified standard deviations for the true plants (> 0; 1: the
-        identified uncertainty, > 1 beyond it).
+        identified uncertainty, > 1 beyond it; 1 with ``bound``, which replaces it).
     bound : float, optional
         Multiplicative uncertainty bound in (0, 1) instead of the identification (for true
         plants and design samples alike).
@@ -51,10 +66,12 @@ class CampaignOptions:
     duration : float, optional
         Fly only the first ``duration`` seconds of each scenario (s, > 0; default: all).
     robust_models : int
-        Delta samples per system in the robust SOCP besides the nominal pair (>= 0); its cost
-        per trial grows about linearly with ``1 + robust_models``.
+        Delta samples per system in the robust SOCP besides the nominal pair (0 to
+        :data:`~ilcdob.design.delta.MAX_DELTA_SAMPLES`); its cost per trial grows about linearly
+        with ``1 + robust_models``.
     rho : float
-        Robust design's guaranteed improvement factor on its models (> 0).
+        Robust design's guaranteed improvement factor on its models (> 0); robust-set's on every
+        plant of its Delta set, so in (0, 1] when robust-set is among the methods.
     law : {"paper", "exact-reference"}
         Learning law applied around every design (:mod:`ilcdob.design.laws`); ``multi-source``
         is refused (one pair from one DOB-only trial per scenario, where it is the paper's law).
@@ -93,12 +110,22 @@ class CampaignOptions:
 
         if not integer(self.samples) or self.samples < 1:
             raise CampaignError(f"`samples`: got {self.samples!r}, expected an integer >= 1")
+        if self.samples > MAX_SAMPLES:
+            raise CampaignError(
+                f"`samples`: got {self.samples}, expected at most {MAX_SAMPLES}: a sample flies every scenario with "
+                f"every design (measured: {SAMPLE_CPU_S:g} s of CPU with the default designs over the four "
+                f"scenarios), so {self.samples} samples would take about {_duration(self.samples * SAMPLE_CPU_S)} "
+                "of CPU; split a larger study into campaigns of different --seed")
         if not integer(self.seed) or self.seed < 0:
             raise CampaignError(f"`seed`: got {self.seed!r}, expected an integer >= 0")
         if not (isinstance(self.scale, (int, float)) and np.isfinite(self.scale) and self.scale > 0):
             raise CampaignError(f"`scale`: got {self.scale!r}, expected a factor > 0 (1: identified uncertainty)")
         if self.bound is not None and not (np.isfinite(self.bound) and 0 < self.bound < 1):
             raise CampaignError(f"`bound`: got {self.bound!r}, expected a relative error in (0, 1)")
+        try:
+            check_scale(self.scale, self.bound)
+        except IlcdobError as exc:
+            raise CampaignError(str(exc)) from None
         scenarios = tuple(self.scenarios)
         if not scenarios or any(not integer(s) or s not in SCENARIOS for s in scenarios):
             raise CampaignError(f"`scenarios`: got {list(scenarios)!r}, expected a non-empty list from "
@@ -110,11 +137,17 @@ class CampaignOptions:
                                 f"from {list(METHODS)}")
         if self.duration is not None and not (np.isfinite(self.duration) and self.duration > 0):
             raise CampaignError(f"`duration`: got {self.duration!r}, expected a duration > 0 s")
-        if not integer(self.robust_models) or self.robust_models < 0:
-            raise CampaignError(f"`robust_models`: got {self.robust_models!r}, expected an integer >= 0 "
-                                "(Delta samples besides the nominal pair)")
+        if not integer(self.robust_models) or not 0 <= self.robust_models <= MAX_DELTA_SAMPLES:
+            raise CampaignError(f"`robust_models`: got {self.robust_models!r}, expected an integer from 0 to "
+                                f"{MAX_DELTA_SAMPLES} (Delta samples besides the nominal pair; the robust SOCP's "
+                                "time per trial grows about linearly with 1 + robust_models: 4.2 / 5.6 / 10.7 s of "
+                                "CPU per sample at 1 / 2 / 4)")
         if not (np.isfinite(self.rho) and self.rho > 0):
             raise CampaignError(f"`rho`: got {self.rho!r}, expected an improvement factor > 0 (e.g. 0.95)")
+        if "robust-set" in tuple(self.methods) and self.rho > 1:
+            raise CampaignError(f"`rho`: got {self.rho!r}, expected a factor in (0, 1] with robust-set among the "
+                                "methods: it guarantees |e_j| <= rho |e'_j| on every plant (1: never worse than "
+                                "without learning)")
         if self.delta_set not in DELTA_SETS:
             raise CampaignError(f"`delta_set`: got {self.delta_set!r}, expected one of {list(DELTA_SETS)}")
         if not (isinstance(self.margin, (int, float)) and np.isfinite(self.margin) and 0 <= self.margin < 1):

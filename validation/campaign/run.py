@@ -6,6 +6,7 @@ import os
 import re
 import threading
 import time
+import warnings
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -27,10 +28,12 @@ from .options import CampaignError, CampaignOptions, campaign_settings
 from .statistics import CampaignResult, campaign_statistics
 from .store import SAMPLES_FILE, SampleStore, campaign_lock, check_settings
 
-__all__ = ["FIR_DESIGN_SAMPLES", "draw_true_loops", "run_sample", "run_campaign"]
+__all__ = ["FIR_DESIGN_SAMPLES", "WORKERS_PER_CORE", "draw_true_loops", "run_sample", "run_campaign"]
 
 #: Delta samples of the FIR design's robust ``|Te1|`` constraint (its default K).
 FIR_DESIGN_SAMPLES = 8
+#: Most local worker processes per usable core (more only share the cores, each with its own libraries).
+WORKERS_PER_CORE = 2
 _SCHEDULER_RE = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
 
 
@@ -105,7 +108,8 @@ class _WorkerState:
                 # robust-set guarantees over the family the true plants are drawn from (value sets, not samples)
                 self.designs[key] = design_pair(self.fleet, source, target, method, n=n, deltas=deltas,
                                                 robust=RobustOptions(rho=self.options.rho), lifted=False,
-                                                robust_set=self._robust_set_options())
+                                                robust_set=self._robust_set_options() if method == "robust-set"
+                                                else None)
             except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
                 self.designs[key] = f"design failed: {exc}"
         return self.designs[key]
@@ -114,7 +118,7 @@ class _WorkerState:
         """robust-set's options: over the structured family it guarantees over the plants the campaign keeps (its
         margin); the disc and "auto" keep the disc's own margin (``|1 + T0 Delta| >= m``, another quantity)."""
         o = self.options
-        rs = RobustSetOptions(rho=min(1.0, o.rho), delta_set=o.delta_set)
+        rs = RobustSetOptions(rho=o.rho, delta_set=o.delta_set)
         return replace(rs, margin=o.margin) if o.delta_set == "structured" else rs
 
     def with_law(self, sid: int, method: str, design: PairDesign) -> PairDesign:
@@ -190,6 +194,35 @@ def run_sample(fleet: Fleet, options: CampaignOptions, settings_id: str, index: 
             "scenarios": scenarios, "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
 
 
+def _sample_task(fleet: Fleet, options: CampaignOptions, settings_id: str,
+                 index: int) -> tuple[dict[str, Any], list[tuple[str, type[Warning], str, int]]]:
+    """The Dask task: :func:`run_sample` and the distinct warnings it raised on the worker (text, category,
+    file, line), for the client to show through its own warning machinery instead of the worker's stderr."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        record = run_sample(fleet, options, settings_id, index)
+    seen = {(str(w.message), w.category): (str(w.message), w.category, w.filename, w.lineno) for w in caught}
+    return record, list(seen.values())
+
+
+def _local_workers(workers: int | None, scheduler: str | None) -> None:
+    """Refuse a worker count that is not an integer from 1 to :data:`WORKERS_PER_CORE` times the usable cores,
+    or one given with a scheduler (whose cluster has its own workers)."""
+    if workers is None:
+        return
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise CampaignError(f"`workers`: got {workers!r}, expected an integer >= 1")
+    if scheduler is not None:
+        raise CampaignError(f"`workers`: got {workers} with `scheduler` {scheduler}: the cluster there has its own "
+                            "workers; omit --workers (it sizes a local cluster only)")
+    cores = len(os.sched_getaffinity(0))
+    if workers > WORKERS_PER_CORE * cores:
+        raise CampaignError(f"`workers`: got {workers}, expected 1 to {WORKERS_PER_CORE * cores} local worker "
+                            f"processes ({WORKERS_PER_CORE} per usable core, {cores} here): each is a Python process "
+                            "with its own copy of the libraries, and more than the cores only share them; for more, "
+                            "run a Dask cluster and give its --scheduler")
+
+
 def _check_scheduler(address: str) -> None:
     m = _SCHEDULER_RE.match(address)
     if not m or not 0 < int(m.group(3)) < 65536:
@@ -218,9 +251,10 @@ def _client(scheduler: str | None, workers: int | None, dashboard: bool = False)
             client.close()
         return
     n = workers if workers is not None else len(os.sched_getaffinity(0))
+    # the workers log nothing (a failed sample's traceback too): the failure reaches the client as its exception
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                       dashboard_address=":0" if dashboard else None,
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+                      silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
         yield client
 
 
@@ -262,15 +296,22 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
     Raises
     ------
     CampaignError
-        Bad scheduler address or no connection, ``out`` holding a campaign with other settings
-        or in use, a sample failing on a worker (finished samples are kept: run again to resume).
+        Bad scheduler address or no connection, a worker count beyond :data:`WORKERS_PER_CORE`
+        per usable core (or given with a scheduler), ``out`` holding a campaign with other
+        settings or in use, a sample failing on a worker (finished samples are kept: run again
+        to resume).
+
+    Warns
+    -----
+    Warning
+        What a sample raised on its worker (SciPy, cvxpy, ...), issued again here, once per
+        distinct text and category per sample, instead of reaching the worker's stderr.
     """
     t_start = time.perf_counter()
     say = progress if progress is not None else (lambda done, total, what: None)
     if scheduler is not None:
         _check_scheduler(scheduler)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise CampaignError(f"`workers`: got {workers!r}, expected an integer >= 1")
+    _local_workers(workers, scheduler)
     if len(fleet.systems) < 2:
         raise CampaignError(f"fleet {fleet.source}: a campaign needs at least two systems, got {fleet.names}")
     if options.bound is None:
@@ -279,6 +320,8 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
             raise CampaignError(f"fleet {fleet.source}: systems {lacking} have neither an identification nor an "
                                 "`uncertainty = { bound }` to draw true plants from; identify them (ilcdob "
                                 "identify-fleet), state a bound in the fleet file, or give one (--bound 0.2)")
+    for sid in options.scenarios:  # the scenarios' signals, as every worker cuts them (a bad duration is refused here)
+        pair_scenario(fleet, sid, options.duration)
     settings = campaign_settings(fleet, options)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -299,18 +342,20 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
 
                 n_workers = len(client.scheduler_info()["workers"])
                 fleet_f = client.scatter(fleet, broadcast=True)
-                futures = [client.submit(run_sample, fleet_f, options, settings["id"], i, pure=False,
+                futures = [client.submit(_sample_task, fleet_f, options, settings["id"], i, pure=False,
                                          key=f"ilcdob-campaign-{settings['id']}-{i}") for i in todo]
                 done = resumed
                 for fut in as_completed(futures):
                     try:
-                        rec = fut.result()
+                        rec, warned = fut.result()
                     except Exception as exc:  # noqa: BLE001 - any worker failure stops the campaign, resumable
                         for f in futures:
                             f.cancel()
                         raise CampaignError(f"a sample failed on a worker: {type(exc).__name__}: {exc}; the "
                                             f"finished samples are kept in {store.path}, run the same command "
                                             "again to resume") from exc
+                    for text, category, filename, lineno in warned:  # the client's filters and display decide
+                        warnings.warn_explicit(text, category, filename, lineno)
                     store.append(rec)
                     records[rec["sample"]] = rec
                     done += 1
