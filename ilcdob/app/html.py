@@ -71,7 +71,7 @@ import numpy as np
 
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
-from ilcdob.inputs import read_text
+from ilcdob.inputs import read_bytes, read_text
 from ilcdob.names import html_text, quoted
 
 from .output import MANIFEST, ManifestError, verify_manifest
@@ -659,6 +659,10 @@ def _png_uri(data: bytes, path: Path, made_by: str) -> str:
     return "data:image/png;base64," + base64.b64encode(small if len(small) < len(data) else data).decode("ascii")
 
 
+#: Largest figure embedded, bytes (ilcdob's PNGs are a few hundred kB).
+MAX_FIGURE_BYTES = 32 * 2**20
+
+
 def _file_figure(folder: Path, name: str, caption: str, made_by: str = "results.json") -> str:
     """The PNG ``folder / name`` as an embedded figure with ``caption`` (a note when it is absent);
     ``made_by``: the known file whose command writes it (named when the file is not a PNG)."""
@@ -666,7 +670,7 @@ def _file_figure(folder: Path, name: str, caption: str, made_by: str = "results.
     if not path.is_file():
         return f'<p class="missing">Figure {html_text(name)} is not in {html_text(str(folder))} (it was written ' \
                "without figures, or by an older version): not shown.</p>"
-    data = path.read_bytes()
+    data = read_bytes(path, "figure", limit=MAX_FIGURE_BYTES, error=ReportError)  # regular file, size cap
     if not data.startswith(b"\x89PNG\r\n\x1a\n"):
         raise ReportError(f"{path}: not a PNG file; regenerate the folder with `{KNOWN_FILES[made_by]}`")
     return (f'<figure><img src="{html_text(_png_uri(data, path, made_by))}" alt="{html_text(name)}">'

@@ -50,7 +50,7 @@ from typing import Any
 
 from ilcdob.atomic import atomic_path, current_umask, make_folders, remove_folders, stale_entries
 from ilcdob.errors import IlcdobError
-from ilcdob.inputs import file_kind, read_text
+from ilcdob.inputs import file_kind, read_json, read_text
 
 __all__ = ["FIGURE_DPI", "MANIFEST", "OutputError", "OutputFolder", "Provenance", "check_output_path",
            "file_sha256", "json_text", "read_manifest", "version", "write_file",
@@ -217,9 +217,9 @@ def read_manifest(folder: str | Path) -> dict[str, Any] | None:
         An output folder.
     """
     path = Path(folder) / MANIFEST
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+    try:  # a regular file of bounded size only: a FIFO named manifest.json must not hang the command
+        data = read_json(path, "manifest")
+    except (OSError, IlcdobError):
         return None
     return data if isinstance(data, dict) and data.get("writer") == "ilcdob" else None
 

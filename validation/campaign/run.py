@@ -351,9 +351,10 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
                     except Exception as exc:  # noqa: BLE001 - any worker failure stops the campaign, resumable
                         for f in futures:
                             f.cancel()
-                        raise CampaignError(f"a sample failed on a worker: {type(exc).__name__}: {exc}; the "
-                                            f"finished samples are kept in {store.path}, run the same command "
-                                            "again to resume") from exc
+                        kept = (f"the {done} finished samples are kept in {store.path}, run the same command "
+                                "again to resume" if done else "no sample had finished, so nothing is kept")
+                        raise CampaignError(f"a sample failed on a worker: {type(exc).__name__}: {exc}; "
+                                            f"{kept}") from exc
                     for text, category, filename, lineno in warned:  # the client's filters and display decide
                         warnings.warn_explicit(text, category, filename, lineno)
                     store.append(rec)
