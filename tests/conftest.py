@@ -1,12 +1,22 @@
-"""Shared fixtures: the built-in fleet and a writer for fleet files."""
+"""Shared fixtures: the built-in fleet, a writer for fleet files and the C compiler."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
 
 import ilcdob
+
+
+@pytest.fixture(scope="session")
+def cc() -> str:
+    """The C compiler (`cc` on PATH); the test is skipped without one."""
+    path = shutil.which("cc")
+    if path is None:
+        pytest.skip("no C compiler: `cc` is not on PATH, the emitted C code cannot be compiled")
+    return path
 
 
 @pytest.fixture(scope="session")

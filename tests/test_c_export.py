@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -48,14 +47,6 @@ dob = { q_order = 3, q_time_constant = 0.15 }
 """
 
 CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-pedantic", "-Werror", "-ffp-contract=off"]
-
-
-@pytest.fixture(scope="module")
-def cc() -> str:
-    path = shutil.which("cc")
-    if path is None:
-        pytest.skip("no C compiler: `cc` is not on PATH, the emitted C code cannot be compiled")
-    return path
 
 
 @pytest.fixture(scope="module")

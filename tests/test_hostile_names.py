@@ -146,14 +146,6 @@ def test_every_escape_neutralises_every_hostile_name():
     assert len(seen_files) == len(HOSTILE)  # two different names never share a file
 
 
-@pytest.fixture(scope="module")
-def cc() -> str:
-    path = shutil.which("cc")
-    if path is None:
-        pytest.skip("no C compiler: `cc` is not on PATH, the emitted C code cannot be compiled")
-    return path
-
-
 @pytest.mark.parametrize("label", ["backslash-newline splice", "trigraph splice", "comment opener",
                                    "right-to-left override"])
 def test_c_code_of_a_hostile_name_compiles_and_defines_nothing_injected(cc, fleet, tmp_path, label):
