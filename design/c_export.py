@@ -76,11 +76,15 @@ from ilcdob.signals import as_signal
 
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
 
-__all__ = ["CCode", "c_code", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
+__all__ = ["CCode", "c_code", "check_filters", "MAX_ADVANCE", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
            "float_error", "design_readme", "design_files", "signal_header", "FILTER_KEYS"]
 
 #: The filters of ``filters.json`` that get C functions, and their lower-case C names.
 FILTER_KEYS = ("L1", "L2")
+
+#: Most samples of look-ahead (``advance``) a filter of ``filters.json`` may state: 1000 s at
+#: 1 kHz, far beyond any learning filter, and small enough to allocate.
+MAX_ADVANCE = 1_000_000
 
 _FIT_MAX = 16   # samples the continuation is fitted to (extend_smoothly's n_fit)
 _FIT_DEG = 3    # its degree
@@ -619,6 +623,75 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
                         "correction {'sos': [[b0, b1, b2, 1, a1, a2], ...]}")
     return _Learning(sos, zi, pad, end_fit, float(cutoff) if sos is not None else None, order, why, w_sos,
                      sos is not None and band.get("start") == "fold")
+
+
+def _real(value: object, key: str, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+        raise SpecError(f"`{key}`: got {value!r:.80}, expected {what}")
+    return float(value)
+
+
+def _filter_entry(coeffs: object, key: str) -> None:
+    """One filter of ``filters.json`` checked: ``advance``, then ``sos`` (and ``lookahead``) or ``num``/``den``."""
+    if not isinstance(coeffs, dict):
+        raise SpecError(f"`{key}`: got {coeffs!r:.80}, expected a mapping with `advance` and `sos` or `num`/`den`")
+    adv = _count(coeffs.get("advance"), f"{key}.advance", 0)
+    if adv > MAX_ADVANCE:
+        raise SpecError(f"`{key}.advance`: got {adv} samples, expected at most {MAX_ADVANCE} (a look-ahead of "
+                        "a few hundred samples is already long)")
+    if coeffs.get("sos"):
+        _sections(coeffs["sos"], f"{key}.sos")
+    else:
+        try:
+            num, den = (np.asarray(coeffs.get(part), dtype=float) for part in ("num", "den"))
+        except (TypeError, ValueError):
+            raise SpecError(f"`{key}.num`/`{key}.den`: expected lists of numbers (or `sos`)") from None
+        if num.ndim != 1 or den.ndim != 1 or not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+            raise SpecError(f"`{key}.num`/`{key}.den`: expected lists of finite numbers (or `sos`)")
+        _direct_form(coeffs)
+    lookahead_taps(coeffs, f"{key}.lookahead")
+
+
+def check_filters(filters: object, source: str) -> dict[str, Any]:
+    """The content of a ``filters.json`` read from a file, checked before it is used.
+
+    Checks every entry the learning law (:func:`~ilcdob.design.export.apply_learning`) and
+    the C code (:func:`c_code`) read: ``from``/``to`` names, ``sample_time`` (s), ``L1`` and
+    ``L2`` (``advance`` at most :data:`MAX_ADVANCE`, finite sections or polynomials,
+    look-ahead taps), ``band`` and ``disturbance``.
+
+    Parameters
+    ----------
+    filters : object
+        The parsed document.
+    source : str
+        Where it came from, first in messages (its path).
+
+    Returns
+    -------
+    dict
+        ``filters``, unchanged.
+
+    Raises
+    ------
+    SpecError
+        An entry missing or of the wrong type, shape or value; the message names the file and
+        the key.
+    """
+    try:
+        if not isinstance(filters, dict):
+            raise SpecError(f"expected a JSON object, got {type(filters).__name__}")
+        for key in ("from", "to"):
+            if not isinstance(filters.get(key), str):
+                raise SpecError(f"`{key}`: got {filters.get(key)!r:.80}, expected the system's name")
+        _real(filters.get("sample_time"), "sample_time", "the sample time, a number > 0 (s)")
+        for key in FILTER_KEYS:
+            if key in filters:
+                _filter_entry(filters[key], key)
+        _learning_parts(filters)
+    except SpecError as exc:
+        raise SpecError(f"{source}: {exc}") from None
+    return filters
 
 
 def _learn_c(prefix: str, lp: _Learning) -> str:

@@ -40,6 +40,7 @@ import casadi as cs
 import numpy as np
 
 from ilcdob.errors import IlcdobError, SpecError
+from ilcdob.interrupts import honour_interrupts
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal, extend_smoothly
 
@@ -404,7 +405,8 @@ def fit_fir(target: np.ndarray, w: np.ndarray, ts: float, options: FIROptions,
     args = {"x0": x0}
     if lbg is not None:
         args.update(lbg=lbg, ubg=ubg)
-    sol = solver(**args)
+    with honour_interrupts():  # CasADi turns a Ctrl-C into a failed solve
+        sol = solver(**args)
     stats = solver.stats()
     status = str(stats.get("return_status", ""))
     h = np.asarray(sol["x"], float).reshape(-1) * s

@@ -101,7 +101,7 @@ class FitOptions:
     delay : float or "auto"
         Input delay in s (fixed), or ``"auto"`` to estimate it in ``[0, max_delay]``.
     max_delay : float or None
-        Upper bound of the delay search, s. Must be below half the shortest experiment's
+        Upper bound of the delay search, s (``delay="auto"`` only). Must be below half the shortest experiment's
         duration. None (default): :data:`DEFAULT_DELAY_SHARE` of the shortest experiment, so
         that a slow process sampled every few seconds is searched as far as a fast vehicle's
         log is, relative to its record.
@@ -164,6 +164,9 @@ class FitOptions:
         if self.max_delay is not None and not (isinstance(self.max_delay, (int, float)) and not isinstance(
                 self.max_delay, bool) and math.isfinite(self.max_delay) and self.max_delay >= 0):
             raise SpecError(f"`max_delay`: got {self.max_delay!r}, expected None or a number >= 0 (s)")
+        if self.max_delay is not None and self.delay != "auto":
+            raise SpecError(f"`max_delay`: got {self.max_delay!r} with a fixed delay ({self.delay!r} s); it bounds "
+                            "the search of delay='auto' (--delay auto): give both, or neither")
         if self.trend is not None and (isinstance(self.trend, bool) or self.trend not in range(6)):
             raise SpecError(f"`trend`: got {self.trend!r}, expected None (no trend) or a polynomial degree 0-5 "
                             "(0: offset, 1: offset + slope)")
@@ -955,7 +958,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     t_start = time.perf_counter()
     deadline = t_start + (opts.time_limit if opts.time_limit is not None else math.inf)
     exps, ts = _experiments(data, input, output, structure, opts, say)
-    if opts.max_delay is None:
+    if opts.max_delay is None and opts.delay == "auto":
         opts = dataclasses.replace(opts, max_delay=DEFAULT_DELAY_SHARE * min(e.n for e in exps) * ts)
     estimate_delay = opts.delay == "auto"
     model = _Model(structure, exps, ts, opts, estimate_delay)

@@ -38,13 +38,40 @@ def _source_checkout_layout() -> None:
 
 _source_checkout_layout()
 
-from .errors import FleetError, IlcdobError, ModelFileError, NumericalError, SignalError, SpecError, UnstableLoopError
-from .fleet import Fleet, default_fleet, fleet_from_dict, fleet_from_systems, load_fleet
-from .fleet_io import add_system, fleet_to_toml
-from .identified import IdentifiedModel, load_model
-from .loop import LoopSystem, build_loop, freqresp
-from .specs import (DOBSpec, IdentificationSpec, LimitSpec, NoiseSpec, PIDSpec, PlantSpec, SensorSpec, SystemSpec,
-                    UncertaintySpec)
+#: Public names -> the module that defines them, imported on first use (PEP 562), so that
+#: ``import ilcdob`` (and the command line's start, which an early Ctrl-C may interrupt) stays light.
+_EXPORTS = {
+    **dict.fromkeys(("IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError",
+                     "SignalError", "NumericalError"), "errors"),
+    **dict.fromkeys(("Fleet", "load_fleet", "default_fleet", "fleet_from_dict", "fleet_from_systems"), "fleet"),
+    **dict.fromkeys(("add_system", "fleet_to_toml"), "fleet_io"),
+    **dict.fromkeys(("IdentifiedModel", "load_model"), "identified"),
+    **dict.fromkeys(("LoopSystem", "build_loop", "freqresp"), "loop"),
+    **dict.fromkeys(("PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "SystemSpec", "IdentificationSpec",
+                     "UncertaintySpec", "LimitSpec", "SensorSpec"), "specs"),
+}
+
+
+def __getattr__(name: str):
+    """Import a public name (or a submodule) on first use."""
+    import importlib
+
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    if not name.startswith("_"):
+        try:
+            return importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})
+
 
 try:
     from importlib.metadata import PackageNotFoundError as _NotFound, version as _version

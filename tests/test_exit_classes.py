@@ -318,3 +318,231 @@ def test_campaign_duration_below_two_samples_is_refused_before_the_cluster(tmp_p
                            "--duration", "1e-9", "--workers", "1", "--out", str(tmp_path / "c")])
     assert "`duration`: got 1e-09 s" in line and "at least 2 samples" in line
     assert not (tmp_path / "c").exists()
+
+
+# ---------------------------------------------------------------- fault probe: signals, tampered inputs, options
+
+def test_ctrl_c_while_the_interface_loads_is_one_line(monkeypatch, capsys):
+    """The command's entry point imports the interface inside its own handler: a Ctrl-C there (about a
+    second of imports) ends with exit 130 and one line, not a traceback."""
+    import importlib.abc
+
+    import ilcdob.__main__ as entry
+
+    class _Interrupting(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path, target=None):
+            if name == "ilcdob.app.cli":
+                raise KeyboardInterrupt
+            return None
+
+    monkeypatch.delitem(sys.modules, "ilcdob.app.cli")
+    monkeypatch.setattr(sys, "meta_path", [_Interrupting(), *sys.meta_path])
+    assert entry.main() == 130
+    err = capsys.readouterr().err
+    assert err.startswith("ilcdob: error: interrupted") and err.count("\n") == 1
+
+
+def test_sigterm_while_writing_leaves_no_staging_folder(tmp_path, capsys, monkeypatch):
+    """SIGTERM mid-write runs the output's cleanup (as Ctrl-C does): exit 143, one line, no staging
+    folder and no output; the previous default handler ended the process with the folder left behind."""
+    import os
+    import signal
+
+    from ilcdob.app import output
+
+    real, calls = output._write, []
+
+    def write_then_terminate(*args, **kwargs):
+        calls.append(args)
+        real(*args, **kwargs)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(output, "_write", write_then_terminate)
+    before = signal.getsignal(signal.SIGTERM)
+    out = tmp_path / "out"
+    line = _error(capsys, [*DESIGN, "--out", str(out)], code=143)
+    assert "terminated" in line and len(calls) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == []   # no folder, no staging folder
+    assert signal.getsignal(signal.SIGTERM) is before        # the handler is put back
+
+
+def test_a_swallowed_ctrl_c_inside_ipopt_is_raised_again():
+    """CasADi catches the KeyboardInterrupt of a Ctrl-C during an IPOPT solve and returns as from a
+    failed solve (``NonIpopt_Exception_Thrown``); :func:`honour_interrupts` raises it again."""
+    import os
+    import signal
+    import threading
+
+    import casadi as cs
+
+    from ilcdob.interrupts import honour_interrupts
+
+    n = 20000  # a solve of several seconds: the signal arrives inside it
+    x = cs.MX.sym("x", n)
+    solver = cs.nlpsol("long", "ipopt", {"x": x, "f": cs.sumsqr(cs.sin(x) - 0.3) + cs.sum1(cs.exp(1e-3 * x))},
+                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 100000,
+                        "ipopt.tol": 1e-30})
+    timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
+    with pytest.raises(KeyboardInterrupt):
+        with honour_interrupts():
+            timer.start()
+            solver(x0=5.0 * np.ones(n))
+    timer.join()
+    assert solver.stats()["return_status"] == "NonIpopt_Exception_Thrown"  # what CasADi made of the Ctrl-C
+
+
+def test_campaign_store_that_is_a_fifo_or_holds_nan_is_refused(tmp_path):
+    """Resuming reads the sample store through the input checks: a FIFO is refused before it is
+    opened (it blocked forever), and a record with NaN (never written: records are standard JSON)."""
+    import os
+
+    from ilcdob.validation.campaign.options import CampaignError
+    from ilcdob.validation.campaign.store import SAMPLES_FILE, SampleStore, campaign_lock
+
+    fifo = tmp_path / "fifo"
+    fifo.mkdir()
+    os.mkfifo(fifo / SAMPLES_FILE)
+    with pytest.raises(CampaignError, match="FIFO"):
+        SampleStore(fifo / SAMPLES_FILE, "abc").load()
+    with pytest.raises(CampaignError, match="FIFO"):
+        with campaign_lock(fifo):
+            pass
+    store = tmp_path / SAMPLES_FILE
+    store.write_text('{"sample": 0, "settings": "abc", "ratio": 0.5}\n'
+                     '{"sample": 1, "settings": "abc", "ratio": NaN}\n', encoding="utf-8")
+    with pytest.raises(CampaignError, match="line 2"):
+        SampleStore(store, "abc").load()
+
+
+@pytest.fixture(scope="module")
+def design_and_trial(tmp_path_factory):
+    """A closed-form design folder (UAV1 -> UAV2) and a 500-sample trial of UAV1 (error 0.01 sin t m)."""
+    base = tmp_path_factory.mktemp("learn")
+    assert main(["--quiet", *DESIGN, "--out", str(base / "design")]) == 0
+    t = np.arange(500) * 0.02
+    rows = "".join(f"{t[k]:.10g},{0.01 * np.sin(t[k]):.10g}\n" for k in range(t.size))
+    (base / "trial.csv").write_text("# units: time=s, error=m\ntime,error\n" + rows, encoding="utf-8")
+    return base
+
+
+def _tampered_design(base: Path, tmp_path: Path, change, forge: bool) -> Path:
+    """A copy of the design folder with ``change(filters)`` applied (and, with ``forge``, rehashed)."""
+    import hashlib
+    import json
+    import shutil
+
+    design = tmp_path / "design"
+    shutil.copytree(base / "design", design)
+    path = design / "filters.json"
+    filters = json.loads(path.read_text(encoding="utf-8"))
+    change(filters)
+    path.write_text(json.dumps(filters), encoding="utf-8")
+    if forge:
+        manifest = json.loads((design / "manifest.json").read_text(encoding="utf-8"))
+        manifest["files"]["filters.json"] = hashlib.sha256(path.read_bytes()).hexdigest()
+        (design / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    return design
+
+
+@pytest.mark.parametrize("change, forge, words", [
+    (lambda f: f["L1"].__setitem__("advance", 3), False, "filters.json"),   # edited, manifest not updated
+    (lambda f: f.update(sample_time="fast"), True, "`sample_time`: got 'fast'"),
+    (lambda f: f.update(L1=3), True, "`L1`: got 3"),
+    (lambda f: f["L1"].update(sos=[["a"] * 6]), True, "`L1.sos`"),
+    (lambda f: f["L1"].update(advance=10**12), True, "at most 1000000"),
+])
+def test_learn_refuses_a_tampered_design_folder(design_and_trial, tmp_path, capsys, change, forge, words):
+    """An edited ``filters.json`` fails the folder's manifest; a forged one (rehashed) is type-checked:
+    each ended in exit 3 ("internal error") or was used."""
+    design = _tampered_design(design_and_trial, tmp_path, change, forge)
+    line = _error(capsys, ["learn", str(design_and_trial / "trial.csv"), "--design", str(design), "--error",
+                           "error", "--out", str(tmp_path / "out")])
+    assert words in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_learn_refuses_absurd_trial_values(design_and_trial, tmp_path, capsys):
+    """An error of 1e300 m overflowed the limit check's RMS and ended in exit 3."""
+    text = (design_and_trial / "trial.csv").read_text(encoding="utf-8").splitlines()
+    text[12] = text[12].split(",")[0] + ",1e300"
+    (tmp_path / "trial.csv").write_text("\n".join(text) + "\n", encoding="utf-8")
+    line = _error(capsys, ["learn", str(tmp_path / "trial.csv"), "--design", str(design_and_trial / "design"),
+                           "--error", "error", "--out", str(tmp_path / "out")])
+    assert "1e+300 m at sample 10" in line
+
+
+@pytest.mark.parametrize("contents, words", [
+    ({"methods": [1, 2]}, 'key "methods": got [1, 2], expected an object'),
+    ({"methods": {"fir": {"ratio_nominal": "big"}}}, "methods.fir.ratio_nominal"),
+    ({"methods": {}, "scenarios": {"s1": {"methods": "all"}}}, "scenarios.s1.methods"),
+])
+def test_report_type_checks_compare_and_campaign_tables(tmp_path, capsys, contents, words):
+    """The method tables of compare.json and campaign.json were rendered whatever they held."""
+    import json
+
+    folder = tmp_path / "compare"
+    folder.mkdir()
+    (folder / "compare.json").write_text(json.dumps(contents), encoding="utf-8")
+    line = _error(capsys, ["report", str(folder), "--out", str(tmp_path / "r.html")])
+    assert words in line and not (tmp_path / "r.html").exists()
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["compare", "--scenario", "1", "--methods", ","], "without empty entries"),
+    (["campaign", "--samples", "1", "--methods", "closed-form,"], "without empty entries"),
+])
+def test_empty_method_lists_are_refused(tmp_path, capsys, monkeypatch, argv, words):
+    """``--methods ,`` ran every default method."""
+    _no_work(monkeypatch)
+    assert words in _error(capsys, [*argv, "--out", str(tmp_path / "out")])
+
+
+def _flight_csv(path: Path) -> str:
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.standard_normal(40), 25)
+    y = np.convolve(u, 0.1 * 0.9 ** np.arange(50))[:u.size]
+    path.write_text("time,u,y\n" + "".join(f"{0.01 * k:.4f},{u[k]:.6g},{y[k]:.6g}\n" for k in range(u.size)),
+                    encoding="utf-8")
+    return str(path)
+
+
+@pytest.mark.parametrize("extra, out, words", [
+    (["--max-delay", "0.1"], "m.json", "with a fixed delay"),
+    (["--input", "y"], "m.json", "both name 'y'"),
+    ([], "m.json/", "ends in a slash"),
+])
+def test_identify_options_that_contradict_are_refused(tmp_path, capsys, extra, out, words):
+    """``--max-delay`` without ``--delay auto`` was ignored, a signal modelled from itself accepted, and
+    ``--out m.json/`` wrote a file."""
+    flight = _flight_csv(tmp_path / "flight.csv")
+    line = _error(capsys, ["identify", flight, "--input", "u", "--output", "y", "--poles", "1", *extra,
+                           "--out", f"{tmp_path}/{out}"])
+    assert words in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.csv"]
+
+
+def test_a_full_disk_names_what_was_being_written(tmp_path, capsys, monkeypatch):
+    """ENOSPC carries no file name: the message names the output it was writing."""
+    import errno
+
+    from ilcdob.app import output
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(output, "_write", full)
+    out = tmp_path / "out"
+    line = _error(capsys, [*DESIGN, "--out", str(out)])
+    assert f"No space left on device while writing {out}: free space" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_campaign_into_a_dangling_link_writes_where_it_points(tmp_path, capsys):
+    """``--out`` a symbolic link to a folder not made yet: the campaign writes there, as every other
+    command does (it ended in a bare "File exists")."""
+    (tmp_path / "link").symlink_to(tmp_path / "target")
+    rc = main(["--quiet", "campaign", "--samples", "1", "--scenarios", "1", "--methods", "closed-form",
+               "--duration", "2", "--workers", "1", "--out", str(tmp_path / "link")])
+    assert rc == 0, capsys.readouterr().err
+    assert (tmp_path / "link").is_symlink() and (tmp_path / "target" / "campaign.json").is_file()

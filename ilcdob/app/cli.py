@@ -10,7 +10,9 @@ usage; 3 a solver or numerical failure, or an internal error (a bug: reported in
 from __future__ import annotations
 
 import argparse
+import errno
 import math
+import signal
 import sys
 import traceback
 from collections.abc import Callable, Sequence
@@ -170,7 +172,11 @@ def _names(text: str) -> list[str]:
 
 
 def _methods(text: str) -> list[str]:
-    return [m.strip() for m in text.split(",") if m.strip()]
+    methods = [m.strip() for m in text.split(",")]
+    if not all(methods):
+        raise argparse.ArgumentTypeError(f"got {text!r}, expected comma-separated design names without empty "
+                                         "entries, e.g. closed-form,fir")
+    return methods
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -397,6 +403,42 @@ def main(argv: Sequence[str] | None = None) -> int:
             stream.reconfigure(errors="backslashreplace")
         except (AttributeError, ValueError, OSError):
             pass
+    previous = _terminate_as_interrupt()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated): the outputs' cleanup has run
+        name = "terminated" if isinstance(exc, Terminated) else "interrupted"
+        sys.stderr.write(f"ilcdob: error: {name}; outputs of this run were not written (earlier outputs are "
+                         "intact)\n")
+        return 128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+#: Errors of a write that found no room: a full disk or quota, a file beyond the size limit.
+_FULL = {errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", errno.ENOSPC)}
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C so that every cleanup (staging folders,
+    temporaries, locks) runs before the process ends."""
+
+
+def _raise_terminated(signum: int, frame: object) -> NoReturn:
+    raise Terminated(signum)
+
+
+def _terminate_as_interrupt():
+    """Turn SIGTERM into :class:`Terminated`; returns the previous handler (None: not installed,
+    e.g. when called from a thread other than the main one)."""
+    try:
+        return signal.signal(signal.SIGTERM, _raise_terminated)
+    except (ValueError, OSError):
+        return None
+
+
+def _main(argv: list[str]) -> int:
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors (2), --help and --version (0): argparse has printed why
@@ -411,17 +453,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         console.error(str(exc), tb=traceback.format_exc() if args.debug else None)
         return 3
     except (IlcdobError, OSError) as exc:
-        console.error(_os_message(exc), tb=traceback.format_exc() if args.debug else None)
+        console.error(_os_message(exc, getattr(args, "out", None)), tb=traceback.format_exc() if args.debug else None)
         return 2
     except KeyboardInterrupt:
-        console.error("interrupted; outputs of this run were not written (earlier outputs are intact)")
-        return 130
+        raise
     except Exception as exc:  # a bug, not bad input: one line (--debug: the traceback), exit 3
         console.internal_error(exc, tb=traceback.format_exc() if args.debug else None)
         return 3
 
 
-def _os_message(exc: BaseException) -> str:
+def _os_message(exc: BaseException, out: object = None) -> str:
+    if isinstance(exc, OSError) and exc.errno in _FULL and not isinstance(exc, IlcdobError):
+        where = f" while writing {exc.filename or out}" if (exc.filename or out) else ""
+        return f"{exc.strerror or exc}{where}: free space on that disk (or raise the file size limit) and run again"
     if isinstance(exc, OSError) and not isinstance(exc, IlcdobError):
         where = f" ({exc.filename})" if exc.filename else ""
         return f"{exc.strerror or exc}{where}: check the path, its permissions and the free space"

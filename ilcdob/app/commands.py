@@ -39,7 +39,7 @@ from ilcdob.fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
 from ilcdob.inputs import MAX_LOG_BYTES, check_input, read_bytes, read_json
 
 from .html import build_report, report_files
-from .output import OutputError, OutputFolder, Provenance, check_output_path, write_file
+from .output import OutputError, OutputFolder, Provenance, check_output_path, verify_manifest, write_file
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "compare_orders",
            "identify_fleet_to_folder", "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
@@ -289,7 +289,7 @@ class IdentifyInputs(LogClock):
     Raises
     ------
     SpecError
-        ``segment`` is not a finite number > 0.
+        ``input`` and ``output`` name the same signal, or ``segment`` is not a finite number > 0.
     """
 
     input: str
@@ -297,6 +297,9 @@ class IdentifyInputs(LogClock):
     segment: float | None = None
 
     def __post_init__(self) -> None:
+        if self.input == self.output:
+            raise SpecError(f"`--input` and `--output`: both name {self.input!r}; a model from a signal to itself "
+                            "is the identity: name the command (input) and the response (output)")
         if self.segment is not None:
             from ilcdob.signals import segments
 
@@ -674,6 +677,11 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     return design, written
 
 
+#: Largest magnitude of a trial's error (m) or learning signal (m/s^2) accepted: a million km
+#: (or km/s^2) is no flight, and squares of larger values overflow the limit check's RMS.
+MAX_TRIAL_VALUE = 1e9
+
+
 @dataclass(frozen=True)
 class TrialColumns(LogClock):
     """Which signals of a recorded trial :func:`learn_to_folder` reads (and, keyword-only, :class:`LogClock`'s fields).
@@ -721,6 +729,12 @@ class TrialColumns(LogClock):
             fields["d_f"] = self.learning
         data = self.load_fields([path], fields)[0]
         e = data["e"] if self.error is not None else data["r"] - data["y"]
+        for name, values, unit in (("error", e, "m"), ("learning", data["d_f"] if self.learning else None, "m/s^2")):
+            big = None if values is None else np.flatnonzero(np.abs(values) > MAX_TRIAL_VALUE)
+            if big is not None and big.size:
+                raise SignalError(f"{path}: the {name} is {float(values[big[0]]):.4g} {unit} at sample {big[0]} "
+                                  f"({big.size} samples beyond {MAX_TRIAL_VALUE:g} {unit}); a flown trial's values "
+                                  "are far smaller: check the column and its units")
         return data, np.asarray(e, float), (np.asarray(data["d_f"], float) if self.learning is not None
                                             else np.zeros(len(data)))
 
@@ -755,7 +769,10 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     fleet : str or Path, optional
         Fleet TOML (None: the built-in fleet); refused with ``design``.
     design : str or Path, optional
-        A folder written by ``ilcdob design`` (closed-form or fir: filters with L1/L2).
+        A folder written by ``ilcdob design`` (closed-form or fir: filters with L1/L2). Checked
+        against its ``manifest.json`` (an edited, added or missing file is refused, naming it;
+        a folder without one is used and labelled "provenance unknown") and its ``filters.json``
+        type-checked (:func:`ilcdob.design.c_export.check_filters`).
     method : str
         Design method without ``design``: closed-form or fir (other than the default: refused with ``design``).
     bandwidth : "auto", float or None
@@ -791,12 +808,12 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         if ignored:
             raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
                             "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
+        from ilcdob.design.c_export import check_filters
+
         path = Path(design) / "filters.json"
-        filters = read_json(path, "filters.json of --design", error=SpecError,
-                            hint="give a folder written by `ilcdob design`")
-        if not isinstance(filters, dict):
-            raise SpecError(f"{path}: expected a JSON object, got {type(filters).__name__}; give a folder written by "
-                            "`ilcdob design`")
+        manifest = verify_manifest(design)  # an edited or added file is refused, naming it
+        filters = check_filters(read_json(path, "filters.json of --design", error=SpecError,
+                                          hint="give a folder written by `ilcdob design`"), str(path))
         for name, given, key in (("--from", source, "from"), ("--to", target, "to")):
             if given is not None and given != filters.get(key):
                 raise SpecError(f"`{name}`: got {given!r}, but {path} was designed {filters.get('from')!r} -> "
@@ -804,7 +821,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         if axis is not None and axis != filters.get("axis", "x"):
             raise SpecError(f"`--axis`: got {axis!r}, but {path} was designed for axis {filters.get('axis', 'x')!r}")
         source, target = filters.get("from"), filters.get("to")
-        origin = f"filters.json of {Path(design).name}"
+        origin = f"filters.json of {Path(design).name}" + ("" if manifest else " (no manifest: provenance unknown)")
     else:
         if source is None or target is None:
             raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
@@ -1054,9 +1071,9 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     """
     from ilcdob.validation.campaign import SAMPLES_FILE, STORE_FILES, run_campaign
 
-    check_output_path(out, folder=True, overwrite=overwrite, resumable=STORE_FILES, inputs={"--fleet": fleet})
+    out = check_output_path(out, folder=True, overwrite=overwrite, resumable=STORE_FILES, inputs={"--fleet": fleet})
     flt, digest = fleet_and_hash(fleet)
-    before = _StoreState.of(Path(out), STORE_FILES)
+    before = _StoreState.of(out, STORE_FILES)
     try:
         result = run_campaign(flt, options, out, scheduler=scheduler, workers=workers, progress=progress,
                               dashboard=dashboard)

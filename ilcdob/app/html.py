@@ -52,7 +52,8 @@ file of its run: a folder holding a file that is missing, changed or not listed 
 from different runs, edited files) is refused, naming the file
 (:func:`ilcdob.app.output.verify_manifest`); a folder without any manifest (written before
 manifests existed) is rendered with its provenance stated as unknown. The fields of
-``results.json``, ``fleet.json`` and ``theorem.json`` that the report uses are type-checked
+``results.json``, ``fleet.json`` and ``theorem.json`` that the report uses, and the method
+tables of ``compare.json`` and ``campaign.json``, are type-checked
 when read, and a file that is not standard JSON is refused, each error naming the file and
 the key. Every value is HTML-escaped (:func:`ilcdob.names.html_text`) where it is rendered.
 """
@@ -400,6 +401,41 @@ def _check_theorem(path: Path, data: Any) -> None:
             s.text(c.get("statement"), f"{key}.statement", null=True)
 
 
+#: The numeric fields of a method's row in ``compare.json`` and ``campaign.json`` (number or null).
+_METHOD_NUMBERS = ("rmse_nominal", "ratio_nominal", "rmse_worst", "ratio_worst", "ratio_median", "improved_share",
+                   "design_time_s", "median", "p95", "worst", "share_improved")
+
+
+def _check_method_table(s: _Schema, table: Any, key: str) -> None:
+    for name, row in s.obj(table, key).items():
+        where = _key(key, name)
+        s.obj(row, where)
+        for field_ in _METHOD_NUMBERS:
+            if field_ in row:
+                s.real(row[field_], f"{where}.{field_}", null=True)
+        for field_ in ("runs", "failed"):
+            if field_ in row:
+                s.integer(row[field_], f"{where}.{field_}", least=0)
+        if "ratios" in row:
+            s.reals(row["ratios"], f"{where}.ratios", null=True)
+        for field_ in ("method", "order", "error"):
+            if field_ in row:
+                s.text(row[field_], f"{where}.{field_}", null=True)
+
+
+def _check_methods(path: Path, data: Any) -> None:
+    """``compare.json`` / ``campaign.json``: an object whose ``methods`` (and each campaign scenario's
+    ``methods``) map method names to rows with numeric fields, typed as their writers write them."""
+    s = _Schema(path)
+    s.obj(data)
+    if "methods" in data:
+        _check_method_table(s, data["methods"], "methods")
+    if isinstance(data.get("scenarios"), dict):  # the campaign's (compare's scenario is a number)
+        for name, sc in s.obj(data["scenarios"], "scenarios").items():
+            where = _key("scenarios", name)
+            _check_method_table(s, s.obj(sc, where).get("methods"), f"{where}.methods")
+
+
 def _read_checked(path: Path, check: Any) -> Any:
     """``path``'s JSON after ``check(path, data)`` (one of the ``_check_*`` functions)."""
     data = _read_json(path)
@@ -427,8 +463,8 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
     ReportError
         No folder given; a folder that does not exist or is a file; a folder with none of
         the known files; a folder whose files do not match its manifest; a known file that is
-        not valid JSON; a ``results.json`` whose fields the report reads have the wrong type
-        (the message names the file and the key).
+        not valid JSON; a ``results.json``, ``compare.json`` or ``campaign.json`` whose fields
+        the report reads have the wrong type (the message names the file and the key).
     """
     if not dirs:
         raise ReportError("`dirs`: got no folder; pass at least one output folder of "
@@ -454,7 +490,7 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
         provenance.append(check_folder(folder))
         for name in present:
             path = folder / name
-            data = _read_checked(path, _check_results) if name == "results.json" else _read_json(path)
+            data = _read_checked(path, _check_results if name == "results.json" else _check_methods)
             found[name].append(JsonInput(folder, path, data))
         folders.append(folder)
     return ReportInputs(tuple(folders), tuple(found["results.json"]), tuple(found["compare.json"]),

@@ -482,10 +482,14 @@ def check_output_path(out: str | Path, *, folder: bool, overwrite: bool = False,
     Raises
     ------
     OutputError
-        ``out`` is a file where a folder is expected (or the reverse), a special file, a mount
+        ``out`` is a file where a folder is expected (or the reverse, a file name ending in a
+        slash included), a special file, a mount
         point, an input (or holds or lies in one), its parent folder cannot be created or
         written, or a folder would be replaced that is not ilcdob's to replace.
     """
+    if not folder and isinstance(out, str) and out.endswith(("/", os.sep)):
+        raise OutputError(f"`{option}` ({out}): ends in a slash, which names a folder; expected a file name, e.g. "
+                          f"`{option} {out.rstrip('/' + os.sep) or 'result.json'}`")
     given = Path(out)
     out = _target(given, option)
     try:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Iterator, Mapping
 
 from ilcdob.atomic import write_json_atomic
+from ilcdob.inputs import MAX_LOG_BYTES, check_input, read_bytes, read_json
 
 from .options import CampaignError
 
@@ -54,9 +55,9 @@ class SampleStore:
             A complete line that is not a record of this campaign, or two different records of
             one sample.
         """
-        if not self.path.exists():
+        if not os.path.lexists(self.path):
             return {}
-        raw = self.path.read_bytes()
+        raw = read_bytes(self.path, "campaign sample store", limit=MAX_LOG_BYTES, error=CampaignError)
         end = raw.rfind(b"\n") + 1
         if end < len(raw):  # torn last line (killed mid-write): drop it, the sample is flown again
             with open(self.path, "r+b") as f:
@@ -68,7 +69,7 @@ class SampleStore:
             if not line.strip():
                 continue
             try:
-                rec = json.loads(line)
+                rec = json.loads(line, parse_constant=_no_constant)  # stored with allow_nan=False
                 idx = rec["sample"]
                 ok = rec["settings"] == self.settings_id and isinstance(idx, int) and idx >= 0
             except (ValueError, KeyError, TypeError):
@@ -98,6 +99,10 @@ class SampleStore:
             os.fsync(f.fileno())
 
 
+def _no_constant(name: str) -> None:
+    raise ValueError(f"{name} in a sample record")
+
+
 @contextmanager
 def campaign_lock(out: Path) -> Iterator[None]:
     """Exclusive lock on ``out/samples.jsonl`` for this process (released by the OS if the process dies).
@@ -112,7 +117,10 @@ def campaign_lock(out: Path) -> Iterator[None]:
     CampaignError
         Another process holds the lock.
     """
-    f = open(out / SAMPLES_FILE, "a")
+    path = out / SAMPLES_FILE
+    if os.path.lexists(path):  # opening a FIFO to append would wait for a reader
+        check_input(path, "campaign sample store", limit=MAX_LOG_BYTES, error=CampaignError)
+    f = open(path, "a")
     try:
         try:
             fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -141,11 +149,9 @@ def check_settings(out: Path, settings: dict[str, Any]) -> None:
         samples without a settings file.
     """
     path = out / SETTINGS_FILE
-    if path.exists():
-        try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-        except ValueError as exc:
-            raise CampaignError(f"{path}: not valid JSON ({exc}); start fresh with another --out folder") from None
+    if os.path.lexists(path):
+        old = read_json(path, "campaign settings file", error=CampaignError,
+                        hint="start fresh with another --out folder")
         if not isinstance(old, dict):
             raise CampaignError(f"{path}: expected a JSON object, got {type(old).__name__}; start fresh with another "
                                 "--out folder")
