@@ -76,8 +76,9 @@ from ilcdob.signals import as_signal
 
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
 
-__all__ = ["CCode", "c_code", "check_filters", "MAX_ADVANCE", "default_c_prefix", "check_c_prefix", "reference_trial", "emulate_c_filter",
-           "float_error", "design_readme", "design_files", "signal_header", "FILTER_KEYS"]
+__all__ = ["CCode", "c_code", "check_filters", "MAX_ADVANCE", "default_c_prefix", "check_c_prefix",
+           "reference_trial", "emulate_c_filter", "float_error", "design_readme", "design_files", "signal_header",
+           "FILTER_KEYS"]
 
 #: The filters of ``filters.json`` that get C functions, and their lower-case C names.
 FILTER_KEYS = ("L1", "L2")
@@ -625,12 +626,6 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
                      sos is not None and band.get("start") == "fold")
 
 
-def _real(value: object, key: str, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
-        raise SpecError(f"`{key}`: got {value!r:.80}, expected {what}")
-    return float(value)
-
-
 def _filter_entry(coeffs: object, key: str) -> None:
     """One filter of ``filters.json`` checked: ``advance``, then ``sos`` (and ``lookahead``) or ``num``/``den``."""
     if not isinstance(coeffs, dict):
@@ -684,7 +679,9 @@ def check_filters(filters: object, source: str) -> dict[str, Any]:
         for key in ("from", "to"):
             if not isinstance(filters.get(key), str):
                 raise SpecError(f"`{key}`: got {filters.get(key)!r:.80}, expected the system's name")
-        _real(filters.get("sample_time"), "sample_time", "the sample time, a number > 0 (s)")
+        ts = filters.get("sample_time")
+        if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not (math.isfinite(ts) and ts > 0):
+            raise SpecError(f"`sample_time`: got {ts!r:.80}, expected the sample time, a number > 0 (s)")
         for key in FILTER_KEYS:
             if key in filters:
                 _filter_entry(filters[key], key)

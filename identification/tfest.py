@@ -101,10 +101,10 @@ class FitOptions:
     delay : float or "auto"
         Input delay in s (fixed), or ``"auto"`` to estimate it in ``[0, max_delay]``.
     max_delay : float or None
-        Upper bound of the delay search, s (``delay="auto"`` only). Must be below half the shortest experiment's
-        duration. None (default): :data:`DEFAULT_DELAY_SHARE` of the shortest experiment, so
-        that a slow process sampled every few seconds is searched as far as a fast vehicle's
-        log is, relative to its record.
+        Upper bound of the delay search, s (``delay="auto"`` only: refused with a fixed delay).
+        Must be below half the shortest experiment's duration. None (default):
+        :data:`DEFAULT_DELAY_SHARE` of the shortest experiment, so that a slow process sampled
+        every few seconds is searched as far as a fast vehicle's log is, relative to its record.
     estimate_x0 : bool
         Estimate each experiment's initial condition (else: the system starts at rest).
     trend : int or None

@@ -36,18 +36,10 @@ from ilcdob.identification.oe import simulate_zoh
 from ilcdob.inputs import MAX_DOCUMENT_BYTES, MAX_LOG_BYTES, MAX_NESTING, InputFileError, read_json, read_toml
 from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure
+from probe_faults import MODEL  # a model.json as `ilcdob identify` writes it
 
 FLEET = DEFAULT_FLEET_PATH.read_text(encoding="utf-8")
 IDENTIFY = ["--input", "u", "--output", "y", "--poles", "2"]
-MODEL = {"num": [7.4], "den": [1.0, 7.2, 0.0, 0.0], "delay": 0.03,
-         "structure": {"poles": 3, "zeros": 0, "integrators": 2}, "parameters": [7.2, 7.4],
-         "std": [0.02, 0.019, 0.001], "delay_estimated": True,
-         "fit_percent": {"estimation": 98.5, "validation": 97.25},
-         "covariance": [[4e-4, 3.5e-4, 0.0], [3.5e-4, 3.8e-4, 0.0], [0.0, 0.0, 1e-6]],
-         "noise_variance": 1e-6, "sample_time": 0.02,
-         "residuals": {"whiteness_inside_99": 1.0, "input_correlation_inside_99": 1.0},
-         "signals": {"input": "acc_cmd", "output": "x"}, "solver": {"status": "converged"},
-         "files": {"estimation": ["chirp.csv"], "validation": []}}
 
 
 def _error(capsys, argv: list[str]) -> str:

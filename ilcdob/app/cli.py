@@ -4,7 +4,8 @@ Argument parsing and dispatch only: every command is a use case of
 :mod:`ilcdob.app.commands`, which Python users can call directly. Exit status: 0 success;
 1 a check that ran and did not hold (``check``; ``identify --min-fit``; a learning signal beyond
 the acceleration limit with ``design --on-limit refuse``); 2 bad input or
-usage; 3 a solver or numerical failure, or an internal error (a bug: reported in one line).
+usage; 3 a solver or numerical failure, or an internal error (a bug: reported in one line);
+130 Ctrl-C and 143 SIGTERM, each after the run's cleanup (:class:`Terminated`).
 """
 
 from __future__ import annotations

@@ -733,7 +733,7 @@ class TrialColumns(LogClock):
             big = None if values is None else np.flatnonzero(np.abs(values) > MAX_TRIAL_VALUE)
             if big is not None and big.size:
                 raise SignalError(f"{path}: the {name} is {float(values[big[0]]):.4g} {unit} at sample {big[0]} "
-                                  f"({big.size} samples beyond {MAX_TRIAL_VALUE:g} {unit}); a flown trial's values "
+                                  f"({big.size} sample(s) beyond {MAX_TRIAL_VALUE:g} {unit}); a flown trial's values "
                                   "are far smaller: check the column and its units")
         return data, np.asarray(e, float), (np.asarray(data["d_f"], float) if self.learning is not None
                                             else np.zeros(len(data)))
