@@ -49,6 +49,11 @@ _EXPORTS = {
     **dict.fromkeys(("LoopSystem", "build_loop", "freqresp"), "loop"),
     **dict.fromkeys(("PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "SystemSpec", "IdentificationSpec",
                      "UncertaintySpec", "LimitSpec", "SensorSpec"), "specs"),
+    # the workflow: flight logs -> models -> fleet -> filters
+    "load_flight": "identification.loaders",
+    **dict.fromkeys(("tfest", "FitOptions"), "identification.tfest"),
+    "ModelStructure": "uncertainty",
+    "design_pair": "design.pair",
 }
 
 
@@ -80,11 +85,4 @@ try:
 except _NotFound:  # a source checkout that is not installed
     __version__ = "unknown"
 
-__all__ = [
-    "IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError", "NumericalError",
-    "Fleet", "load_fleet", "default_fleet", "fleet_from_dict", "fleet_from_systems", "add_system", "fleet_to_toml",
-    "IdentifiedModel", "load_model",
-    "LoopSystem", "build_loop", "freqresp",
-    "PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "SystemSpec", "IdentificationSpec", "UncertaintySpec",
-    "LimitSpec", "SensorSpec",
-]
+__all__ = list(_EXPORTS)

@@ -388,8 +388,10 @@ class FlightData:
         """
         import json
 
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        from .extras import require
+
+        pa = require("pyarrow", "logs", f"{path}: writing a Parquet file")
+        pq = require("pyarrow.parquet", "logs", f"{path}: writing a Parquet file")
 
         cols = {"time": self.t, **self.signals}
         table = pa.table(cols).replace_schema_metadata(

@@ -69,34 +69,67 @@ def test_learning_improves_the_disturbance_estimate(result):
         assert m["rmse_dhat_learning"][0] <= 0.25 * m["rmse_dhat_dob"], (sid, name, m)
 
 
+#: Agreement with the committed report, relative to each quantity's natural size: a position RMSE
+#: against the system's DOB-only RMSE, a disturbance-estimate RMSE or learning-signal peak against
+#: its DOB-only disturbance-estimate RMSE. Different NumPy/SciPy/BLAS builds move these results by
+#: about 1e-7 of that size (measured: 4e-9 to 8.7e-9 m on a learning RMSE of 5e-5 m, against a
+#: DOB-only RMSE of 0.1 m); 1e-6 of it (1e-7 m there) leaves a tenfold margin and still catches a
+#: change of 0.2 % in that learning RMSE.
+SCALED_TOLERANCE = 1e-6
+#: Other numbers (sample time, durations) are inputs, reproduced exactly up to rounding.
+EXACT_TOLERANCE = 1e-12
+
+
+def _scale(where: str, system: dict | None) -> float | None:
+    """The natural size of the quantity at ``where`` (None: not a result of one system)."""
+    if system is None:
+        return None
+    field = where.rsplit("/", 1)[-1].split("[")[0]
+    return system["rmse_dob"] if field in ("rmse_no_dob", "rmse_dob", "rmse_learning") else system["rmse_dhat_dob"]
+
+
+def _assert_agrees(got, want, where: str = "", system: dict | None = None) -> None:
+    """``got`` has ``want``'s structure and values, floats within the scaled tolerances above."""
+    if isinstance(want, dict):
+        assert set(got) == set(want), where
+        inside = want if "rmse_dob" in want else system
+        for k in want:
+            if k != "fleet":  # the path of the fleet file differs between checkouts
+                _assert_agrees(got[k], want[k], f"{where}/{k}", inside)
+    elif isinstance(want, list):
+        assert len(got) == len(want), where
+        for i, (g, w) in enumerate(zip(got, want)):
+            _assert_agrees(g, w, f"{where}[{i}]", system)
+    elif isinstance(want, float):
+        scale = _scale(where, system)
+        tol = EXACT_TOLERANCE * abs(want) if scale is None else SCALED_TOLERANCE * scale
+        assert abs(got - want) <= tol, (where, got, want, tol)
+    else:
+        assert got == want, where
+
+
+def _assert_text_agrees(got: str, want: str) -> None:
+    """The same text, integers equal and each decimal within one unit of its last printed digit (a
+    value at float noise from a rounding boundary may print one digit apart)."""
+    number = r"-?\d+(?:\.\d+)?"
+    assert re.split(number, got) == re.split(number, want)
+    for g, w in zip(re.findall(number, got), re.findall(number, want)):
+        unit = 10.0 ** -len(w.split(".")[1]) if "." in w else 0.0
+        assert abs(float(g) - float(w)) <= 1.01 * unit, (g, w)
+
+
 def test_default_law_reproduces_the_committed_results(result):
-    """``reproduce`` with the default law is the paper's law and gives ``reports/paper/results.json``:
-    measured max absolute difference 6.4e-12 (m, m/s^2; the committed file comes from another machine,
-    this one reproduces itself bit for bit), bound 1e-9."""
+    """``reproduce`` with the default law is the paper's law and gives ``reports/paper/results.json``
+    (within :data:`SCALED_TOLERANCE` of each quantity's natural size)."""
     committed = json.loads((COMMITTED / "results.json").read_text())
     assert result["law"] == "paper" and committed["law"] == "paper"
-
-    def walk(got, want, where):
-        if isinstance(want, dict):
-            assert set(got) == set(want), where
-            for k in want:
-                if k != "fleet":  # the absolute path of the fleet file differs between checkouts
-                    walk(got[k], want[k], f"{where}/{k}")
-        elif isinstance(want, list):
-            assert len(got) == len(want), where
-            for i, (g, w) in enumerate(zip(got, want)):
-                walk(g, w, f"{where}[{i}]")
-        elif isinstance(want, float):
-            assert abs(got - want) <= 1e-9, (where, got, want)
-        else:
-            assert got == want, where
-
-    walk(result, committed, "")
+    _assert_agrees(result, committed)
 
 
 def test_files_regenerate_the_committed_report(run):
-    """``files()`` is the content of ``reports/paper``: results.json to 1e-9 (relative), README.md
-    identical once the run time is the committed one, and the figures in the committed order."""
+    """``files()`` is the content of ``reports/paper``: results.json within the scaled tolerances,
+    README.md the same text (numbers to their last printed digit) once the run time is the
+    committed one, and the figures in the committed order."""
     res, _ = run
     readme = (COMMITTED / "README.md").read_text()
     elapsed = float(re.search(r"Run time ([0-9.]+) s for the simulations", readme).group(1))
@@ -105,25 +138,9 @@ def test_files_regenerate_the_committed_report(run):
         "bode_loops.png", "identified_models.png", "bode_learning.png", "bode_te.png"]
     assert list(files) == [*figures, "README.md", "results.json"]  # results.json last
     assert all(isinstance(files[f], Figure) for f in figures)
-    assert files["README.md"] == readme
+    _assert_text_agrees(files["README.md"], readme)
     want = json.loads((COMMITTED / "results.json").read_text())
-    got = json.loads(json.dumps(files["results.json"], allow_nan=False))
-
-    def walk(g, w, where):
-        if isinstance(w, dict):
-            assert set(g) == set(w), where
-            for k in w:
-                walk(g[k], w[k], f"{where}/{k}")
-        elif isinstance(w, list):
-            assert len(g) == len(w), where
-            for i, (a, b) in enumerate(zip(g, w)):
-                walk(a, b, f"{where}[{i}]")
-        elif isinstance(w, float):
-            assert abs(g - w) <= 1e-9 * abs(w), (where, g, w)
-        else:
-            assert g == w, where
-
-    walk(got, want, "")
+    _assert_agrees(json.loads(json.dumps(files["results.json"], allow_nan=False)), want)
 
 
 def test_files_without_figures_and_progress(run):

@@ -27,6 +27,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ilcdob.errors import SignalError
+from ilcdob.extras import require
 from ilcdob.signals import FlightData
 
 from .common import (check_file, check_ts, check_units, check_window, from_series, listing, signal_mapping,
@@ -40,7 +41,7 @@ _DF_SPEC = re.compile(r"^([A-Za-z0-9_]+)(?:\[(\w+)\]|:(\w+))?\.([A-Za-z0-9_]+)$"
 
 
 def _open_dataflash(source: str) -> Any:
-    from pymavlink import DFReader
+    DFReader = require("pymavlink.DFReader", "logs", f"{source}: reading an ArduPilot DataFlash log")
 
     with open(source, "rb") as fh:
         head = fh.read(3)

@@ -36,6 +36,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ilcdob.errors import SignalError
+from ilcdob.extras import require
 from ilcdob.inputs import MAX_LOG_BYTES, read_text
 from ilcdob.signals import FlightData
 
@@ -317,8 +318,11 @@ def _fast_csv(text: str, time: str, cols: dict[str, str]) -> tuple | None:
     (slower; exact messages with line numbers) reads the file."""
     import io
 
-    import pyarrow as pa
-    import pyarrow.csv as pacsv
+    try:  # the fast path; without pyarrow (the logs extra) the line-by-line parser reads every file
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:
+        return None
 
     pos, line_no, file_units = 0, 0, {}
     while True:
@@ -408,9 +412,8 @@ def load_parquet(path: str | os.PathLike, columns: Mapping[str, str] | Sequence[
         cannot read, null or non-numeric values, non-finite values, time stamps that are not
         strictly increasing, or an empty selection.
     """
-    import pyarrow.parquet as pq
-
     source, cols, units_arg, ts, start, stop = _tabular_arguments(path, columns, time, units, ts, start, stop)
+    pq = require("pyarrow.parquet", "logs", f"{source}: reading a Parquet file")
     try:
         schema = pq.read_schema(source)
     except Exception as exc:  # pyarrow raises ArrowInvalid, OSError, ... for a bad file

@@ -26,6 +26,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ilcdob.errors import SignalError
+from ilcdob.extras import require
 from ilcdob.signals import FlightData
 
 from .common import (check_file, check_ts, check_units, check_window, from_series, listing, signal_mapping,
@@ -80,7 +81,7 @@ def _parse(source: str, topics: list[str] | None) -> tuple[Any, CapturedOutput]:
     SignalError
         The file is not a ULog file, or its message stream is damaged beyond the read budget.
     """
-    from pyulog import ULog
+    ULog = require("pyulog", "logs", f"{source}: reading a PX4 ULog file").ULog
 
     with captured_output() as printed, BudgetedFile(source) as fh:
         try:

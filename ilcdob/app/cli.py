@@ -21,7 +21,6 @@ from typing import NoReturn
 
 from ilcdob.errors import IlcdobError, LearningLimitError, NumericalError
 
-from .console import CheckFailed, Console, run_command
 from .output import version
 
 __all__ = ["main", "build_parser"]
@@ -444,6 +443,8 @@ def _main(argv: list[str]) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors (2), --help and --version (0): argparse has printed why
         return int(exc.code or 0)
+    from .console import CheckFailed, Console, run_command  # the commands' imports: not for --help
+
     console = Console(quiet=args.quiet)
     try:
         return run_command(args, argv, console)

@@ -15,6 +15,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from ilcdob.design.delta import DeltaSet, delta_set
+from ilcdob.extras import require
 from ilcdob.design.laws import DEFAULT_LAW
 from ilcdob.design.pair import PairDesign, design_pair, with_law
 from ilcdob.design.robust import RobustOptions
@@ -236,7 +237,8 @@ def _client(scheduler: str | None, workers: int | None, dashboard: bool = False)
     connected to ``scheduler``."""
     import logging
 
-    from distributed import Client, LocalCluster
+    distributed = require("distributed", "campaign", "a campaign (it runs on a Dask cluster)")
+    Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
     if scheduler is not None:
         _check_scheduler(scheduler)
