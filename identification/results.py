@@ -245,8 +245,35 @@ class TFEstimate:
     # ------------------------------------------------------------------ use
     @property
     def model(self) -> ct.TransferFunction:
-        """python-control transfer function (the delay is in ``delay``, not in the object)."""
-        return ct.tf(self.num, self.den)
+        """python-control transfer function ``num(s)/den(s)``, its signals named as in the fit.
+
+        ``inputs``/``outputs`` are :attr:`input` and :attr:`output`, each ``.`` replaced by
+        ``_`` (python-control reserves ``.`` for ``system.signal``: a ULog field
+        ``vehicle_local_position.x`` becomes ``vehicle_local_position_x``). The input delay is not
+        part of the dynamics (python-control has no delay; no Pade approximation is made): it
+        is attached as the attribute ``input_delay`` (s, equal to :attr:`delay`) for reference,
+        and any operation on the object (series, feedback, sampling) drops it. Use
+        :meth:`to_control` to receive it beside the system, or :meth:`frequency_response`,
+        which includes it.
+        """
+        sys = ct.tf(self.num, self.den, inputs=[self.input.replace(".", "_")],
+                    outputs=[self.output.replace(".", "_")])
+        sys.input_delay = self.delay
+        return sys
+
+    def to_control(self) -> tuple[ct.TransferFunction, float]:
+        """The model as python-control holds it, and its input delay.
+
+        Returns
+        -------
+        G : control.TransferFunction
+            :attr:`model`: ``num(s)/den(s)``, inputs/outputs named after :attr:`input`/:attr:`output`.
+        delay : float
+            Input delay, s: the model is ``G(s) exp(-delay s)`` (for a delay-free object of
+            your own choice, e.g. ``control.pade(delay, n)`` in series, or shift the input
+            ``round(delay / ts)`` samples).
+        """
+        return self.model, self.delay
 
     @property
     def std(self) -> np.ndarray:
@@ -372,8 +399,8 @@ class TFEstimate:
     def __repr__(self) -> str:
         held = "" if self.fit_validation is None else f", held-out {self.fit_validation:.1f} %"
         delay = f" * exp(-{self.delay:.4g} s)" if self.delay else ""
-        return (f"<TFEstimate G(s) = ({_poly(self.num)}) / ({_poly(self.den)}){delay}; fit {self.fit_estimation:.1f} %"
-                f"{held}; {self.solver.get('status', 'status unknown')}>")
+        return (f"<TFEstimate {self.input} -> {self.output}: G(s) = ({_poly(self.num)}) / ({_poly(self.den)})"
+                f"{delay}; fit {self.fit_estimation:.1f} %{held}; {self.solver.get('status', 'status unknown')}>")
 
     def _repr_html_(self) -> str:
         std = np.sqrt(np.clip(np.diag(np.asarray(self.covariance)), 0.0, None))

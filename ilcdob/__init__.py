@@ -54,6 +54,9 @@ _EXPORTS = {
     **dict.fromkeys(("tfest", "FitOptions"), "identification.tfest"),
     "ModelStructure": "uncertainty",
     "design_pair": "design.pair",
+    # designs and models as python-control objects and MATLAB files
+    **dict.fromkeys(("LearningFilterTF", "filter_tf", "filters_tf", "load_design", "design_to_mat"), "design.objects"),
+    "model_to_mat": "matfile",
 }
 
 

@@ -49,6 +49,9 @@ __all__ = ["LoopSystem", "build_loop", "freqresp", "delta_poles", "loop_eigenval
 #: A discrete closed loop counts as stable when every eigenvalue has modulus below this.
 STABILITY_MARGIN = 1.0 - 1e-9
 
+#: Units of the closed loops' signals (:class:`LoopSystem`), for its repr.
+_SIGNAL_UNITS = {"r": "m", "y": "m", "e": "m", "d": "m/s^2", "d_f": "m/s^2", "d_hat": "m/s^2", "u2": "m/s^2"}
+
 
 def freqresp(sys: ct.LTI, w: np.ndarray) -> np.ndarray:
     """Complex frequency response of a discrete SISO system, ``sys(e^{j w Ts})``.
@@ -192,6 +195,17 @@ class LoopSystem:
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     blocks: dict = field(default_factory=dict, repr=False, compare=False)
     closed_loop_a_minus_i: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def __repr__(self) -> str:
+        sizes = ", ".join(f"{k} {getattr(self, k).nstates}" for k in ("P", "C", "Q", "M"))
+        model = "exact model" if self.spec.model is None else "model differs from the plant"
+
+        def named(labels: list[str]) -> str:
+            return ", ".join(f"{n} [{_SIGNAL_UNITS.get(n, '?')}]" for n in labels)
+
+        return (f"<LoopSystem {self.name[:60]!r}: Ts {self.ts:g} s, DOB loop {self.closed_loop.nstates} states "
+                f"({sizes}), {model}; {named(self.closed_loop.input_labels)} -> "
+                f"{named(self.closed_loop.output_labels)}>")
 
     @property
     def name(self) -> str:

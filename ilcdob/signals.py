@@ -302,6 +302,19 @@ class FlightData:
         return cls(t=grid, signals={n: resample_onto(t, x, grid) for n, (t, x) in checked.items()},
                    units=dict(units or {}), metadata=meta, source=source)
 
+    def __repr__(self) -> str:
+        source = self.source if len(self.source) <= 40 else "..." + self.source[-37:]
+        names = [f"{n if len(n) <= 32 else n[:29] + '...'} [{self.units.get(n) or '?'}]" for n in self.signals]
+        shown, size = [], 0
+        for name in names:  # the signals, within about 70 characters
+            if shown and size + len(name) > 70:
+                break
+            shown.append(name)
+            size += len(name) + 2
+        more = f", +{len(names) - len(shown)} more" if len(shown) < len(names) else ""
+        return (f"<FlightData {source!r}: {len(self)} samples, Ts {self.ts:g} s, t {self.t[0]:g} to {self.t[-1]:g} s; "
+                f"{len(names)} signal{'s' if len(names) != 1 else ''}: {', '.join(shown) or 'none'}{more}>")
+
     @property
     def ts(self) -> float:
         """Sample time, s."""
