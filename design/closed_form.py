@@ -181,6 +181,10 @@ class LearningFilters:
     L1: ZPKFilter
     L2: ZPKFilter
 
+    def __repr__(self) -> str:
+        return (f"<LearningFilters {self.source.name!r} -> {self.target.name!r}: L1 {len(self.L1.poles)} poles, "
+                f"advance {self.L1.advance}; L2 {len(self.L2.poles)} poles, advance {self.L2.advance}>")
+
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
         """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem).
 

@@ -70,6 +70,13 @@ class DeltaSet:
     rejected: int
     source: str
 
+    def __repr__(self) -> str:
+        w = np.asarray(self.w)
+        span = f"{w.min():.3g}-{w.max():.3g} rad/s" if w.size else "no frequencies"
+        return (f"<DeltaSet {self.system!r} ({self.source}): {len(self.loops)} sampled loops, bound max "
+                f"{float(np.max(self.bound)) if np.size(self.bound) else 0.0:.3g} on {w.size} frequencies {span}, "
+                f"{self.rejected} rejected>")
+
     def deltas(self, w: np.ndarray | None = None) -> np.ndarray:
         """Multiplicative model errors ``Delta_k(e^{jw Ts}) = P_k / P_hat - 1`` of every sample.
 

@@ -113,6 +113,11 @@ class ZPKFilter:
     gain: float
     ts: float
 
+    def __repr__(self) -> str:
+        outside = int(np.sum(np.abs(np.asarray(self.poles)) > 1 + _CIRCLE_TOL))
+        return (f"<ZPKFilter {np.size(self.zeros)} zeros, {np.size(self.poles)} poles ({outside} outside the unit "
+                f"circle), gain {self.gain:.4g}, Ts {self.ts:g} s, advance {self.advance}>")
+
     @cached_property
     def substituted(self) -> np.ndarray:
         """Poles inverted with zero phase error instead of exactly (module docstring): in the left

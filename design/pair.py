@@ -82,6 +82,14 @@ class LearningSignal:
     band: LearningBand
     limit: LimitReport | None = None
 
+    def __repr__(self) -> str:
+        peak = float(np.max(np.abs(self.d_f))) if self.d_f.size else 0.0
+        clipped = "" if self.limit is None or not self.limit.beyond else (
+            f"; {self.limit.beyond} samples beyond the limit {self.limit.limit:g} m/s^2"
+            + (" (clipped)" if self.limit.clipped else ""))
+        return (f"<LearningSignal {self.d_f.size} samples, peak {peak:.4g} m/s^2; band {self.band.describe()[:60]}"
+                f"{clipped}>")
+
 
 @dataclass(frozen=True)
 class PairDesign:

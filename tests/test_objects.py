@@ -21,7 +21,8 @@ import scipy.io
 import ilcdob
 from ilcdob.design.export import apply_coefficients, apply_learning, coefficients_freqresp
 from ilcdob.design.objects import LearningFilterTF, design_to_mat, filter_tf, filters_tf, load_design
-from ilcdob.design.pair import design_pair
+from ilcdob.design.closed_form import closed_form_filters
+from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.errors import ModelFileError, NumericalError, SpecError
 from ilcdob.identification import FitOptions, tfest
 from ilcdob.identification.oe import simulate_zoh
@@ -148,7 +149,12 @@ def test_reprs_are_one_short_line(estimate, closed_form):
     for obj, needles in [(fleet.loop("UAV1"), ["'UAV1'", "0.02 s", "d_f [m/s^2]", "y [m]", "11 states"]),
                          (data, ["'step test'", "1500 samples", "0.02 s", "thrust [N]", "alt [m]"]),
                          (est, ["thrust -> alt", "fit 9"]),
-                         (l1, ["L1", "z^24", "23-tap", "6 sections", "0.02 s"])]:
+                         (l1, ["L1", "z^24", "23-tap", "6 sections", "0.02 s"]),
+                         (closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2")), ["'UAV1' -> 'UAV2'", "L2"]),
+                         (closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2")).L1, ["poles", "advance"]),
+                         (fleet_delta_sets(fleet, ["UAV1"])["UAV1"], ["'UAV1'", "sampled loops", "rad/s"]),
+                         (closed_form.learning(0.01 * np.sin(np.arange(500) * 0.02), np.zeros(500)),
+                          ["500 samples", "m/s^2"])]:
         text = repr(obj)
         assert "\n" not in text and len(text) <= 200, text
         assert all(n in text for n in needles), (needles, text)
