@@ -1085,6 +1085,9 @@ _FILE_TEXT = {
                   "L2 d_f,j-1); for robust the learning signal d_f, the predicted improvement ratios and errors",
     "learning_signal.csv": "the learning signal d_f,j (m/s^2) computed from the given trial of the previous "
                            "vehicle, to feed forward on the next flight",
+    "bode.png": "Bode plots (magnitude in dB, phase in degrees, against rad/s up to Nyquist) of the pair's "
+                "closed-form filters L1 and L2, its error propagation Te1 and Te2 under a stated model error, and "
+                "Omega (disturbance -> DOB estimate) of both vehicles, with the learning band marked",
     "reference_terms.csv": "exact-reference law: the previous vehicle's model reference error e_ref_source (m), "
                            "removed from its error before L1, and the correction (m/s^2) added to the learning "
                            "signal, for the given trial's reference",

@@ -298,5 +298,6 @@ def test_design_rerun_with_another_method_leaves_no_stale_file(tmp_path, capsys)
     assert (out / "filters.h").exists()
     assert main(["--quiet", "design", "--from", "UAV1", "--to", "UAV2", "--method", "norm-optimal", "--n", "40",
                  "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["README.md", "filters.json", "lifted.npz", "manifest.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["README.md", "bode.png", "filters.json", "lifted.npz",
+                                                    "manifest.json"]
     assert json.loads((out / "filters.json").read_text())["method"] == "norm-optimal"

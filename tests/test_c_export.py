@@ -300,7 +300,8 @@ def test_c_prefix_is_checked(tmp_path, capsys):
 def test_design_cli_writes_the_folder(lagged_file, tmp_path, capsys):
     out = tmp_path / "ab"
     assert main(["design", "--fleet", str(lagged_file), "--from", "A", "--to", "B", "--out", str(out)]) == 0
-    assert {p.name for p in out.iterdir()} == {"filters.json", "filters.h", "filters.c", "README.md", "manifest.json"}
+    assert {p.name for p in out.iterdir()} == {"filters.json", "filters.h", "filters.c", "README.md", "bode.png",
+                                               "manifest.json"}
     filters = json.loads((out / "filters.json").read_text())
     assert filters["c"]["prefix"] == "ilcdob_a_b_" and "float" not in filters["c"]
     assert "num_den_omitted" in filters["L1"]
@@ -320,7 +321,7 @@ def test_design_cli_writes_the_folder(lagged_file, tmp_path, capsys):
     out3 = tmp_path / "no"
     assert main(["design", "--fleet", str(lagged_file), "--from", "A", "--to", "B", "--method", "norm-optimal",
                  "--n", "40", "--out", str(out3)]) == 0
-    assert {p.name for p in out3.iterdir()} == {"filters.json", "lifted.npz", "README.md", "manifest.json"}
+    assert {p.name for p in out3.iterdir()} == {"filters.json", "lifted.npz", "README.md", "bode.png", "manifest.json"}
     assert "lifted.npz" in (out3 / "README.md").read_text()
 
 

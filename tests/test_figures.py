@@ -1,16 +1,27 @@
-"""Figures of the reproduction (``ilcdob.validation.figures``) and of the comparison: every learning
-iteration is drawn, line styles are distinct, axes carry units, and no legend lies on the data."""
+"""Figures of the reproduction (``ilcdob.validation.figures``), of a design (``ilcdob.design.figure``,
+``bode.png`` of ``ilcdob design``) and of the comparison: every learning iteration is drawn, and
+iterations that coincide are one line said so in words; Bode curves that coincide are drawn once,
+phases are wrapped; the design's curves are the paper's block formulas; line styles are distinct,
+axes carry units, and no legend lies on the data."""
 
 from __future__ import annotations
 
+import json
+from dataclasses import replace
+
+import control as ct
 import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.lines import Line2D
 
 import ilcdob
+from ilcdob.app.cli import main
+from ilcdob.design.band import LearningBand
+from ilcdob.design.figure import COINCIDE_RTOL, pair_bode_figure
+from ilcdob.fleet import fleet_from_dict
 from ilcdob.validation.compare import Comparison, MethodComparison
-from ilcdob.validation.figures import reproduction_figures
+from ilcdob.validation.figures import ITERATIONS_RTOL, reproduction_figures
 from ilcdob.validation.reproduce import reproduce
 
 ITERATIONS = 2
@@ -18,8 +29,22 @@ ITERATIONS = 2
 
 @pytest.fixture(scope="module")
 def run():
-    """Scenario 4 (order UAV1 -> UAV3 -> UAV2), two learning iterations per system."""
+    """Scenario 4 (order UAV1 -> UAV3 -> UAV2), two learning iterations per system (exact models:
+    the iterations coincide)."""
     res = reproduce(ilcdob.default_fleet(), [4], ITERATIONS)
+    return res, reproduction_figures(res)
+
+
+@pytest.fixture(scope="module")
+def distinct(run):
+    """The same run with learning iterations that differ (iteration i's error scaled by 1 + 0.5 i, its
+    learning signal shifted by 0.1 i m/s^2), as with model errors or noise."""
+    res = run[0]
+    sr = res.scenarios[0]
+    systems = {name: replace(s, learning=tuple(replace(f, e=f.e * (1 + 0.5 * i), d_f=f.d_f + 0.1 * i)
+                                               for i, f in enumerate(s.learning)))
+               for name, s in sr.systems.items()}
+    res = replace(res, scenarios=[replace(sr, systems=systems)])
     return res, reproduction_figures(res)
 
 
@@ -42,8 +67,8 @@ def _distinct_styles(lines: list[Line2D]) -> None:
     assert len(set(styles)) == len(styles), styles
 
 
-def test_error_figure_has_every_iteration(run):
-    res, figs = run
+def test_error_figure_has_every_iteration(distinct):
+    res, figs = distinct
     fig = figs["error_s4.png"]
     learning = [f"learning {i + 1}" for i in range(ITERATIONS)]
     for system, left, right in _rows(fig, res):
@@ -62,8 +87,8 @@ def test_error_figure_has_every_iteration(run):
     assert [t.get_text() for t in legend.get_texts()] == ["no DOB", "only DOB", *learning]
 
 
-def test_disturbance_figure_has_every_iteration(run):
-    res, figs = run
+def test_disturbance_figure_has_every_iteration(distinct):
+    res, figs = distinct
     fig = figs["disturbance_s4.png"]
     learning = [f"learning {i + 1}: d_hat + d_f" for i in range(ITERATIONS)]
     for system, left, right in _rows(fig, res):
@@ -135,3 +160,227 @@ def test_compare_figure_names_failed_designs_and_keeps_its_legend_off_the_data()
     assert "robust rho = 0.13" in [t.get_text() for t in ax.get_legend().get_texts()]
     fig = _comparison(failed=False).figure()
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["closed-form"]
+
+
+# ------------------------------------------------------------------------------ coinciding iterations
+
+def test_coinciding_iterations_are_one_line_said_in_words(run):
+    res, figs = run
+    fig = figs["error_s4.png"]
+    for system, left, right in _rows(fig, res):
+        for ax in (left, right):
+            (line,) = [ln for ln in _lines(ax) if ln.get_label().startswith("learning")]
+            assert line.get_label() == "learning 1 and 2 (coincide)"
+            np.testing.assert_array_equal(line.get_ydata(), system.learning[0].e)
+            peak = np.max(np.abs(system.learning[0].e))
+            for flight in system.learning[1:]:  # what the one line stands for
+                assert np.max(np.abs(flight.e - line.get_ydata())) <= ITERATIONS_RTOL * peak
+    assert "every system: learning 1 and 2 coincide (within 0.1 % of their peak)" in fig.get_suptitle()
+    (legend,) = fig.legends
+    assert [t.get_text() for t in legend.get_texts()] == ["no DOB", "only DOB", "learning 1 and 2 (coincide)"]
+
+    # the disturbance estimates coincide but at the trial's last samples: there the second is drawn too
+    fig = figs["disturbance_s4.png"]
+    for system, left, right in _rows(fig, res):
+        first, second = system.learning
+        for ax, want in ((left, lambda f: f.d_hat + f.d_f), (right, lambda f: f.d_hat + f.d_f - f.d)):
+            one, apart = [ln for ln in _lines(ax) if ln.get_label().startswith("learning")]
+            assert one.get_label() == "learning 1 and 2: d_hat + d_f (coincide)"
+            assert apart.get_label() == "learning 2: d_hat + d_f (where it differs)"
+            np.testing.assert_array_equal(one.get_ydata(), want(first))
+            shown = np.isfinite(apart.get_ydata())
+            np.testing.assert_array_equal(apart.get_ydata()[shown], want(second)[shown])
+            assert 0 < shown.sum() < 0.05 * shown.size and shown[-1]
+            # where the second is not drawn it lies on the first
+            peak = np.max(np.abs(want(first)))
+            assert np.max(np.abs(want(second) - want(first))[~shown]) <= ITERATIONS_RTOL * peak
+    assert "learning 1 and 2 coincide (within 0.1 % of their peak) except on at most" in fig.get_suptitle()
+    assert "where learning 2 is drawn too" in fig.get_suptitle()
+
+
+# ------------------------------------------------------------------------------ Bode figures
+
+BODE = ("bode_loops.png", "bode_learning.png", "bode_te.png")
+
+
+def _phase_axes(fig):
+    return [ax for ax in fig.axes if ax.get_ylabel() == "phase (deg)"]
+
+
+@pytest.mark.parametrize("name", BODE)
+def test_bode_phases_are_wrapped(run, name):
+    fig = run[1][name]
+    axes = _phase_axes(fig)
+    assert axes and len(axes) == len(fig.axes) // 2
+    for ax in axes:
+        for ln in _lines(ax):
+            y = np.asarray(ln.get_ydata(), float)
+            y = y[np.isfinite(y)]
+            assert y.size and np.all(y > -180) and np.all(y <= 180), (name, ln.get_label(), y.min(), y.max())
+        assert ax.get_ylim()[0] >= -200 and ax.get_ylim()[1] <= 200
+
+
+def _names_in(label: str, names: list[str]) -> bool:
+    return all(n in label.replace("\n", " ") for n in names)
+
+
+def test_coinciding_bode_curves_are_drawn_once(run):
+    res, figs = run
+    pairs = sorted(res.filters)
+    label = [f"{a} -> {b}" for a, b in pairs]
+    mag_l1, mag_l2 = [ax for ax in figs["bode_learning.png"].axes if ax.get_ylabel() == "magnitude (dB)"]
+    # every Q of the built-in fleet is the same: L2 = 1 for every pair, one line naming all of them
+    (l2,) = _lines(mag_l2)
+    assert l2.get_label().startswith("coincide:") and _names_in(l2.get_label(), label)
+    assert [t.get_text() for t in mag_l2.get_legend().get_texts()] == [l2.get_label()]
+    np.testing.assert_allclose(l2.get_ydata(), 0.0, atol=1e-6)
+    # L1 depends on the source only: one line per source, naming its pairs
+    lines = _lines(mag_l1)
+    sources = sorted({a for a, _ in pairs})
+    assert len(lines) == len(sources)
+    w = lines[0].get_xdata()
+    for ln, src in zip(lines, sources):
+        mine = [(a, b) for a, b in pairs if a == src]
+        assert _names_in(ln.get_label(), [f"{a} -> {b}" for a, b in mine])
+        for key in mine:
+            want = 20 * np.log10(np.abs(res.filters[key].l1_response(w)))
+            assert np.max(np.abs(ln.get_ydata() - want)) <= 20 * np.log10(1 + COINCIDE_RTOL)
+    # Omega of the three vehicles (same Q): one line naming all three
+    omega = [ax for ax in figs["bode_te.png"].axes if "Omega" in ax.get_title()]
+    (line,) = _lines(omega[0])
+    assert _names_in(line.get_label(), res.fleet.names)
+    # Te1 of the six pairs differ: six lines, each its own pair
+    te1 = [ax for ax in figs["bode_te.png"].axes if ax.get_title().startswith("Te1")][0]
+    assert [ln.get_label() for ln in _lines(te1)] == label
+
+
+# ------------------------------------------------------------------------------ the design's figure
+
+#: Two vehicles with unequal Q (so L2 != 1); A's model differs from its plant (so Te is the fleet's own).
+PAIR_FLEET = {"sample_time": 0.01, "description": "a pair with a model error", "system": [
+    {"name": "A", "plant": {"num": [1.0], "den": [0.08, 1.0, 0.0, 0.0]},
+     "model": {"num": [0.9], "den": [0.1, 1.0, 0.0, 0.0]},
+     "controller": {"kp": 3.0, "ki": 0.3, "kd": 2.4, "derivative_filter": 0.05},
+     "dob": {"q_order": 3, "q_time_constant": 0.15}},
+    {"name": "B", "plant": {"num": [1.0], "den": [0.12, 1.0, 0.0, 0.0]},
+     "controller": {"kp": 1.2, "ki": 0.12, "kd": 1.53, "derivative_filter": 0.05},
+     "dob": {"q_order": 3, "q_time_constant": 0.2}},
+]}
+
+
+def _blocks(system: dict, ts: float, true: bool):
+    """The blocks P, C, Q, M of a fleet entry as python-control transfer functions, discretised here
+    (plant and Q by zero-order hold, PID and M = Q / P_hat by Tustin), evaluated on z."""
+    s = ct.tf("s")
+    plant = system["plant"] if true or "model" not in system else system["model"]
+    model = system.get("model", system["plant"])
+    c, q = system["controller"], system["dob"]
+    q_s = 1 / (q["q_time_constant"] * s + 1) ** q["q_order"]
+    blocks = {"P": ct.c2d(ct.tf(plant["num"], plant["den"]), ts, "zoh"),
+              "C": ct.c2d(c["kp"] + c["ki"] / s + c["kd"] * s / (c["derivative_filter"] * s + 1), ts, "tustin"),
+              "Q": ct.c2d(q_s, ts, "zoh"),
+              "M": ct.c2d(q_s * ct.tf(model["den"], model["num"]), ts, "tustin")}
+    return lambda z: {k: np.array([complex(sys(zk)) for zk in z]) for k, sys in blocks.items()}
+
+
+def _paper_formulas(w: np.ndarray) -> dict[str, np.ndarray]:
+    """The paper's block formulas (Sec. II-III) on z = e^{j w Ts} for A -> B of :data:`PAIR_FLEET`."""
+    ts = PAIR_FLEET["sample_time"]
+    sys_a, sys_b = PAIR_FLEET["system"]
+    z = np.exp(1j * w * ts)
+    a_hat, a, b = _blocks(sys_a, ts, False)(z), _blocks(sys_a, ts, True)(z), _blocks(sys_b, ts, True)(z)
+    l1 = -(1 - b["Q"]) * (1 / a_hat["P"] + (a_hat["M"] + a_hat["C"]) / (1 - a_hat["Q"]))
+    l2 = (1 - b["Q"]) / (1 - a_hat["Q"])
+
+    def maps(k):  # D = 1 - Q + P (M + C); Gd = P (1 - Q) / D, Gf = -P / D, Omega = (M + Q C) P / D
+        d = 1 - k["Q"] + k["P"] * (k["M"] + k["C"])
+        return k["P"] * (1 - k["Q"]) / d, -k["P"] / d, (k["M"] + k["Q"] * k["C"]) * k["P"] / d
+
+    (gd_a, gf_a, om_a), (gd_b, gf_b, om_b) = maps(a), maps(b)
+    te1 = gd_b / gd_a - gf_b * l1
+    return {"L1": l1, "L2": l2, "Te1": te1, "Te2": te1 * gf_a, "Omega A": om_a, "Omega B": om_b}
+
+
+def _axes(fig) -> dict[str, object]:
+    return {ax.get_label(): ax for ax in fig.axes}
+
+
+def _curve(ax, label: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(w, y) of the one data line of ``ax`` (or the one labelled ``label``), NaN breaks dropped."""
+    lines = [ln for ln in _lines(ax) if label is None or ln.get_label() == label]
+    assert len(lines) == 1, [ln.get_label() for ln in _lines(ax)]
+    w, y = (np.asarray(v, float) for v in lines[0].get_data())
+    keep = np.isfinite(y)
+    return w[keep], y[keep]
+
+
+def test_design_figure_is_the_paper_block_formulas():
+    fleet = fleet_from_dict(PAIR_FLEET, source="pair")
+    band = LearningBand(fleet.sample_time, 20.0, source="stated")
+    fig = pair_bode_figure(fleet, "A", "B", band)
+    axes = _axes(fig)
+    # to 3e-4 relative (0.003 dB, 0.02 degrees): Te1 is a difference of terms that cancel to 1e-8 at
+    # 0.01 rad/s, where the filter's own rounding (1e-13) leaves 2e-4 of it
+    rtol = 3e-4
+    for key, label in (("L1", None), ("L2", None), ("Te1", None), ("Te2", None), ("Omega", "A"), ("Omega", "B")):
+        want_key = key if key != "Omega" else f"Omega {label}"
+        w, mag = _curve(axes[f"{key} magnitude"], label)
+        assert w[0] == pytest.approx(0.01) and w[-1] == pytest.approx(np.pi / fleet.sample_time, rel=2e-3)
+        want = _paper_formulas(w)[want_key]
+        np.testing.assert_allclose(mag, 20 * np.log10(np.abs(want)), rtol=0, atol=20 * np.log10(1 + rtol),
+                                   err_msg=want_key)
+        w, phase = _curve(axes[f"{key} phase"], label)
+        assert np.all(phase > -180) and np.all(phase <= 180), want_key
+        error = (phase - np.degrees(np.angle(_paper_formulas(w)[want_key])) + 180) % 360 - 180
+        assert np.max(np.abs(error)) < np.degrees(rtol), (want_key, np.max(np.abs(error)))
+    assert "the fleet's true plants" in axes["Te1 magnitude"].get_title()
+    # L2 is not 1 here (unequal Q): the check above compared a curve, not a constant
+    assert np.ptp(_curve(axes["L2 magnitude"])[1]) > 1.0
+    # the learning band: its corner marked on every Bode axes, and stated
+    for key, ax in axes.items():
+        if key != "description":
+            assert any(np.allclose(ln.get_xdata(), 20.0) for ln in ax.lines if ln.get_label() == "_band"), key
+    text = " ".join(t.get_text() for t in axes["description"].texts)
+    assert "learning band: corner 20 rad/s" in text and "A -> B" in text
+
+
+def test_design_command_writes_the_bode_figure(tmp_path):
+    out = tmp_path / "design"
+    assert main(["design", "--from", "UAV1", "--to", "UAV2", "--out", str(out), "--quiet"]) == 0
+    png = out / "bode.png"
+    assert png.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert "bode.png" in manifest["files"]
+    readme = (out / "README.md").read_text()
+    assert "`bode.png`: Bode plots" in readme
+    from PIL import Image
+
+    with Image.open(png) as img:  # laid out for 110 dpi: 15 x 10.5 inches
+        assert img.size == (1650, 1155)
+    # the default fleet states no true plant besides the models: Te under the stated 10 % gain error,
+    # and Omega of the two vehicles (equal Q) is one line naming both
+    fig = pair_bode_figure(ilcdob.default_fleet(), "UAV1", "UAV2")
+    axes = _axes(fig)
+    assert "10 % stronger than models" in axes["Te1 magnitude"].get_title()
+    (line,) = _lines(axes["Omega magnitude"])
+    assert line.get_label() == "coincide: UAV1 and UAV2"
+    assert not any(ln.get_label() == "_band" for ax in fig.axes for ln in ax.lines)  # band off: nothing marked
+
+
+def test_design_figure_says_what_it_cannot_draw(monkeypatch):
+    import ilcdob.design.figure as module
+    from ilcdob.errors import UnstableLoopError
+
+    def unstable(loop, gain):
+        raise UnstableLoopError(f"system {loop.name!r}: unstable")
+
+    monkeypatch.setattr(module, "with_gain_error", unstable)
+    axes = _axes(pair_bode_figure(ilcdob.default_fleet(), "UAV1", "UAV2", method="fir"))
+    for key in ("Te1", "Te2"):
+        assert not _lines(axes[f"{key} magnitude"])
+        (note,) = axes[f"{key} magnitude"].texts
+        assert "not drawn: a plant 10 % stronger than its model makes the loop of UAV1 unstable" in \
+            note.get_text().replace("\n", " ")
+    assert len(_lines(axes["L1 magnitude"])) == 1  # the rest is drawn
+    text = " ".join(t.get_text() for t in axes["description"].texts)
+    assert "Te1, Te2 not drawn" in text and "design method fir" in text

@@ -42,9 +42,10 @@ CAMPAIGN = {"samples": 200, "seed": 7, "statistics": [
 
 @pytest.fixture(scope="module")
 def paper_dir(tmp_path_factory, fleet) -> Path:
-    """A tiny ``ilcdob reproduce`` output: scenario 4 (order UAV1 -> UAV3 -> UAV2), one iteration."""
+    """A tiny ``ilcdob reproduce`` output: scenario 4 (order UAV1 -> UAV3 -> UAV2), two iterations (exact
+    models: they coincide)."""
     out = tmp_path_factory.mktemp("paper")
-    reproduce_to_folder(out, fleet=None, scenarios=[4], iterations=1)
+    reproduce_to_folder(out, fleet=None, scenarios=[4], iterations=2)
     return out
 
 
@@ -70,9 +71,9 @@ def json_dirs(tmp_path_factory) -> tuple[Path, Path]:
 @pytest.fixture(scope="module")
 def failed_compare(tmp_path_factory) -> Path:
     """A real ``ilcdob compare`` folder where the FIR design fails: a convergence margin of 0.95
-    (|Te1| <= 0.05) that 8 taps cannot meet under a 60 % bound, in 5 solver iterations."""
+    (|Te1| <= 0.05) that 8 taps cannot meet under a 60 % bound, refused rather than relaxed."""
     out = tmp_path_factory.mktemp("failed") / "compare"
-    fir = FIROptions(n_taps=8, advance=2, max_iter=5, n_grid=20, margin=0.95)
+    fir = FIROptions(n_taps=8, advance=2, max_iter=5, n_grid=20, margin=0.95, unattainable="refuse")
     cmp = compare_to_folder(out, 1, CompareOptions(samples=1, bound=0.6, duration=5.0, fir=fir),
                             methods=["closed-form", "fir"])
     assert cmp.row("fir").error and cmp.row("closed-form").error is None
@@ -137,26 +138,32 @@ def test_sections_render_from_their_inputs(full_report, paper_dir):
     assert f"{1e3 * m['rmse_dob']:.4g}" in html  # RMSE table in mm, from results.json
     assert "Order UAV1 -&gt; UAV3 -&gt; UAV2" in html  # Theorem check in the scenario's learning order
     assert "UAV3 -&gt; UAV2" in html
-    # compare: rows = methods, columns = numeric fields; the list "w" is left out and counted
-    for text in ("closed-form", "robust", "ratio_median", "0.0123", "0.0456", "3 list values not tabulated",
-                 "share_improved", "0.985", "1.75", "0.0876"):
+    # compare: rows = methods, columns = numeric fields (human labels); the list "w" is left out and counted
+    for text in ("closed-form", "robust", ">ratio median<", "0.0123", "0.0456", "3 list values not tabulated",
+                 ">improved<", "98.5 %", "1.75", "0.0876"):
         assert text in html, text
-    # only the nonlinear and rotorpy plants have no input here
-    assert html.count('<span class="status-none">') == 2
-    assert 'results.json with &quot;plant&quot;: &quot;nonlinear&quot;' in html
-    assert 'results.json with &quot;plant&quot;: &quot;rotorpy&quot; from `ilcdob reproduce --plant rotorpy' in html
+    # only the nonlinear and rotorpy plants have no input here: left out, and named once
+    assert '<span class="status-none">' not in html and 'class="missing"' not in html
+    (note,) = re.findall(r'<p class="not-included">(.*?)</p>', html)
+    assert "Nonlinear plant (<code>ilcdob reproduce --plant nonlinear --out DIR</code>)" in note
+    assert "Rotorpy plant (<code>ilcdob reproduce --plant rotorpy --out DIR</code>)" in note
+    assert '<h2 id="nonlinear">' not in html and '<h2 id="rotorpy">' not in html
 
 
-def test_missing_inputs_are_named_and_no_numbers_invented(tmp_path, json_dirs):
+def test_sections_not_run_are_listed_once_and_no_numbers_invented(tmp_path, json_dirs):
     html = build_report([json_dirs[1]])
-    for heading in ("Fleet and identified models", "Bode figures of the paper", "Linear plant",
-                    "Nonlinear plant", "Theorem check", "Design comparison"):
-        row = re.search(rf'<a href="#\w+">{re.escape(heading)}[^<]*</a></td><td>(.*?)</td>', html).group(1)
-        assert "no input" in row and "expected" in row, heading
+    # one short list of what was not included, no "no input" box per section, no empty section
+    (note,) = re.findall(r'<p class="not-included">(.*?)</p>', html)
+    for heading, command in (("Fleet and identified models", "ilcdob reproduce"),
+                             ("Bode figures of the paper", "ilcdob reproduce"), ("Linear plant", "ilcdob reproduce"),
+                             ("Nonlinear plant", "--plant nonlinear"), ("Rotorpy plant", "--plant rotorpy"),
+                             ("Theorem check", "ilcdob reproduce"), ("Design comparison", "ilcdob compare")):
+        assert note.count(heading) == 1 and command in note, heading
+        assert f">{heading}" not in html.replace(note, ""), heading  # no heading, no contents row
+    assert "No input" not in html and 'class="missing"' not in html and 'class="status-none"' not in html
+    assert re.findall(r'<h2 id="(\w+)">', html) == ["contents", "campaign"]
     # no results.json: no figure but the campaign's own
     assert [img["alt"] for img in _parse(html).images] == ["campaign_ratios.png"]
-    compare = html[html.index('<h2 id="compare">'):html.index('<h2 id="campaign">')]
-    assert "<table" not in compare and "No input" in compare and "<img" not in compare
     assert "0.0654" in html  # the campaign that was given is rendered
 
 
@@ -202,7 +209,7 @@ def test_a_failed_design_shows_its_reason(failed_compare):
     assert row.group(2) == f"<strong>no result</strong>: {escape(reason)}"
     # it spans the value columns of the table: one cell instead of a row of nulls
     header = re.search(r"<thead><tr><th>method</th>(.*?)</tr></thead>\n<tbody>\n<tr><td>closed-form", html)
-    assert int(row.group(1)) == header.group(1).count("<th>")
+    assert int(row.group(1)) == header.group(1).count("<th")
     # the design that was made keeps its numbers; the figure of the real folder is embedded
     assert re.search(r"<tr><td>closed-form</td><td>[0-9.e-]+</td>", html)
     assert list(_figures(html)) == ["compare_ratios.png"]
@@ -233,6 +240,40 @@ def test_json_tables_shapes():
     (t,) = json_tables({"methods": {"a": {"x": 1.0, "error": None}, "b": {"x": None, "error": " boom "}}})
     assert t.columns == ("x",) and t.failed == (("b", "boom"),)
     assert COMPARE and json_tables(COMPARE)[0].failed == ()
+
+
+def test_columns_have_human_labels_with_units(tmp_path):
+    data = {"samples": 3, "sample_cpu_s": 4.25, "wall_time_s": 12.5, "duration": None,
+            "methods": {"closed-form": {"runs": 3, "median": 0.02, "p95": 0.04, "share_improved": 1.0,
+                                        "rmse_nominal": 0.0123, "settle_time_s": 1.5, "ratio": {"median": 0.5}},
+                        "fir": {"runs": 3, "median": 0.03, "p95": 0.05, "share_improved": 0.985,
+                                "rmse_nominal": 0.0456, "settle_time_s": 2.5, "ratio": {"median": 0.25}}}}
+    (tmp_path / "campaign.json").write_text(json.dumps(data))
+    html = build_report([tmp_path])
+    head = re.search(r"<thead><tr><th>method</th>(.*?)</tr></thead>", html).group(1)
+    labels = dict(re.findall(r'<th title="([^"]+)">([^<]+)</th>', head))
+    assert labels == {"runs": "runs", "median": "median", "p95": "95th percentile", "share_improved": "improved",
+                      "rmse_nominal": "RMSE nominal (mm)", "settle_time_s": "settle time (s)",
+                      "ratio.median": "ratio median"}
+    rows = re.findall(r"<tr><td>(closed-form|fir)</td>(.*?)</tr>", html)
+    cells = {name: re.findall(r"<td>([^<]*)</td>", row) for name, row in rows}
+    assert cells["closed-form"] == ["3", "0.02", "0.04", "100 %", "12.3", "1.5", "0.5"]  # share in %, RMSE in mm
+    assert cells["fir"][3] == "98.5 %" and cells["fir"][4] == "45.6"
+    # the run's settings: labels with units, a null as "-"
+    meta = dict(re.findall(r"<tr><td>([^<]+)</td><td>([^<]*)</td></tr>", html.split('<table class="meta">')[1]
+                           .split("</table>")[0]))
+    assert meta == {"samples": "3", "CPU per sample (s)": "4.25", "wall time (s)": "12.5", "trial duration (s)": "-"}
+    for raw in (">sample_cpu_s<", ">share_improved<", ">wall_time_s<", "null"):
+        assert raw not in html, raw
+
+
+def test_coinciding_learning_iterations_are_said_in_words(full_report):
+    html = full_report.read_text(encoding="utf-8")
+    assert ("The learning iterations coincide for every system of every scenario: all 2 leave the same tracking "
+            "RMSE (within 0.1 %).") in html
+    captions = _figures(html)
+    for name in ("bode_loops.png", "bode_learning.png", "bode_te.png"):
+        assert "wrapped to (-180, 180]" in captions[name] and "drawn once" in captions[name], name
 
 
 def test_errors_name_the_folder_and_the_expected_files(tmp_path, paper_dir):

@@ -10,55 +10,49 @@
 * ``bode_te.png`` - Te1, Te2 (error propagation with learning, under a stated model error)
   and Omega (disturbance -> DOB estimate).
 
+The Bode figures follow :mod:`ilcdob.design.figure`: phase wrapped to (-180, 180] degrees,
+and curves that coincide (L2 of pairs with equal Q, Omega of equal Q) drawn once with one
+legend entry naming them all. In the time series, learning iterations that coincide (within
+:data:`ITERATIONS_RTOL` of their peak, as with exact models) are drawn as one line, and the
+legend and the figure say so in words (a member that differs on a few samples, as at a trial's
+end, is drawn there too).
+
 :func:`reproduction_figures` returns them by file name; nothing here writes a file (the
 figures are laid out for PNG at 110 dpi, :data:`FIGURE_DPI`).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import textwrap
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from ilcdob.design import LearningFilters
+from ilcdob.design.figure import (TE_GAIN_ERROR, BodeCurve, draw_bode, finish_bode_axes, frequency_grid, loop_maps,
+                                  magnitude_db, te_responses, with_gain_error)
 from ilcdob.fleet import Fleet
-from ilcdob.loop import LoopSystem, build_loop, freqresp
-from ilcdob.specs import PlantSpec
+from ilcdob.loop import freqresp
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
 if TYPE_CHECKING:
     from .reproduce import ReproductionResult
 
-__all__ = ["reproduction_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR", "FIGURE_DPI"]
+__all__ = ["reproduction_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR", "FIGURE_DPI",
+           "ITERATIONS_RTOL", "ITERATIONS_APART"]
 
-#: Model error used for the Te figure: every true plant 10 % stronger than its model.
-TE_GAIN_ERROR = 0.10
 #: Resolution the figures are made for (dots per inch of the PNG files).
 FIGURE_DPI = 110
+#: Learning iterations whose curves differ by at most this share of their peak coincide: they
+#: are drawn as one line (0.1 %, well below a pixel of the figures).
+ITERATIONS_RTOL = 1e-3
+#: ... also when they differ on at most this share of the samples (with exact models the
+#: disturbance estimates of the iterations differ at the trial's last samples only): each is
+#: then drawn where it differs.
+ITERATIONS_APART = 0.05
 _COLORS = ["#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860"]
-
-
-def frequency_grid(ts: float, n: int = 400) -> np.ndarray:
-    """Log-spaced frequencies from 0.01 rad/s to just below Nyquist (pi/ts).
-
-    Parameters
-    ----------
-    ts : float
-        Sample time, s.
-    n : int
-        Number of frequencies.
-    """
-    return np.logspace(-2, np.log10(0.999 * np.pi / ts), n)
-
-
-def _db(x: np.ndarray) -> np.ndarray:
-    return 20 * np.log10(np.maximum(np.abs(x), 1e-300))
-
-
-def _phase(x: np.ndarray) -> np.ndarray:
-    return np.degrees(np.unwrap(np.angle(x)))
 
 
 def _subplots(nrows: int, ncols: int, figsize: tuple[float, float], **kwargs) -> tuple[Figure, object]:
@@ -124,49 +118,148 @@ def _iteration_style(i: int, iterations: int) -> dict[str, object]:
             "lw": max(2.4 - 0.5 * i, 0.9), "label": f"learning {i + 1}"}
 
 
+def _iteration_names(group: list[int]) -> str:
+    """``"1"``, ``"1 and 2"``, ``"1-3"`` or ``"1, 3 and 4"`` for 0-based iteration indices."""
+    nums = [i + 1 for i in group]
+    if len(nums) >= 3 and nums == list(range(nums[0], nums[-1] + 1)):
+        return f"{nums[0]}-{nums[-1]}"
+    return str(nums[0]) if len(nums) == 1 else ", ".join(map(str, nums[:-1])) + f" and {nums[-1]}"
+
+
+def _iteration_groups(curves: list[tuple[np.ndarray, ...]]) -> list[tuple[list[int], dict[int, np.ndarray]]]:
+    """Groups of learning iterations that coincide: in every panel within :data:`ITERATIONS_RTOL` of
+    the first iteration's peak there, at all samples but at most :data:`ITERATIONS_APART` of them.
+    Each group: its members, and per later member the samples where it differs from the first."""
+    if not curves:
+        return []
+    peaks = [max(float(np.max(np.abs(part), initial=0.0)), 1e-300) for part in curves[0]]
+    norm = [np.stack([part / peak for part, peak in zip(parts, peaks)]) for parts in curves]
+    groups: list[tuple[list[int], dict[int, np.ndarray]]] = []
+    for i, v in enumerate(norm):
+        for members, apart in groups:
+            ref = norm[members[0]]
+            if ref.shape != v.shape:
+                continue
+            off = np.any(np.abs(v - ref) > ITERATIONS_RTOL, axis=0)
+            if np.mean(off) <= ITERATIONS_APART:
+                members.append(i)
+                apart[i] = off
+                break
+        else:
+            groups.append(([i], {}))
+    return groups
+
+
+@dataclass(frozen=True)
+class _Coincide:
+    """Learning iterations drawn as one line (0-based ``members``); ``differ``: those drawn too on
+    ``samples`` samples (``seconds``) where they differ from it."""
+
+    members: tuple[int, ...]
+    differ: tuple[int, ...] = ()
+    samples: int = 0
+    seconds: float = 0.0
+
+
+def _draw_iterations(axes, curves: list[tuple[np.ndarray, ...]], t: list[np.ndarray], iterations: int,
+                     suffix: str = "") -> tuple[_Coincide, ...]:
+    """Draw the learning iterations (``curves[i][k]`` on ``axes[k]`` against ``t[i]``): each group of
+    coinciding ones once, labelled with all of them, and a member only where it differs from the
+    group's line. Returns the groups of more than one iteration."""
+    found = []
+    for members, apart in _iteration_groups(curves):
+        style = _iteration_style(members[0], iterations)
+        style["label"] = f"learning {members[0] + 1}{suffix}"
+        if len(members) > 1:  # one line for several iterations: nothing hides under it, so no wide line
+            style.update(lw=1.0, label=f"learning {_iteration_names(members)}{suffix} (coincide)")
+        for ax, y in zip(axes, curves[members[0]]):
+            ax.plot(t[members[0]], y, **style)
+        if len(members) == 1:
+            continue
+        differ = [i for i in members[1:] if apart[i].any()]
+        n = int(np.count_nonzero(np.any([apart[i] for i in differ], axis=0))) if differ else 0
+        dt = float(t[members[0]][1] - t[members[0]][0]) if len(t[members[0]]) > 1 else 0.0
+        for i in differ:
+            show = np.convolve(apart[i], np.ones(3), "same") > 0  # the differing samples and their neighbours
+            style = _iteration_style(i, iterations)
+            style["label"] = f"learning {i + 1}{suffix} (where it differs)"
+            for ax, y in zip(axes, curves[i]):
+                ax.plot(t[i], np.where(show, y, np.nan), **style)
+        found.append(_Coincide(tuple(members), tuple(differ), n, n * dt))
+    return tuple(found)
+
+
+def _coincide_note(rows: list[tuple[_Coincide, ...]]) -> str:
+    """Words for the coinciding iterations that every row of ``rows`` shares (largest sample counts)."""
+    parts = []
+    for k, c in enumerate(rows[0]):
+        text = f"learning {_iteration_names(list(c.members))} coincide"
+        if k == 0:
+            text += f" (within {100 * ITERATIONS_RTOL:g} % of their peak)"
+        if c.differ:
+            n = max(r[k].samples for r in rows)
+            sec = max(r[k].seconds for r in rows)
+            text += (f" except on {'at most ' if len(rows) > 1 else ''}{n} sample{'s' * (n != 1)} ({sec:.3g} s), "
+                     f"where learning {_iteration_names(list(c.differ))} {'is' if len(c.differ) == 1 else 'are'} "
+                     "drawn too")
+        parts.append(text)
+    return "; ".join(parts)
+
+
 def _per_system(sr, iterations: int, title: str, panels: tuple[str, str], ylabel: tuple[str, str],
                 draw) -> Figure:
     """One row per system of scenario ``sr``, two panels per row (all trials | a zoom);
-    ``draw(ax_left, ax_right, system_result, iterations)`` fills a row. One legend below."""
+    ``draw(ax_left, ax_right, system_result, iterations)`` fills a row and returns its coinciding
+    iterations (:class:`_Coincide`). One legend below; coinciding iterations are stated in the
+    title when every row has the same, else above their row's right panel."""
     names = sr.order
-    fig = Figure(figsize=(13, 2.3 * len(names) + 0.9), layout="constrained")
+    fig = Figure(figsize=(13, 2.3 * len(names) + 1.1), layout="constrained")
     axes = fig.subplots(len(names), 2, sharex=True, squeeze=False)
+    found = []
     for row, system in zip(axes, names):
-        draw(row[0], row[1], sr.systems[system], iterations)
+        found.append(draw(row[0], row[1], sr.systems[system], iterations))
         for ax, lab in zip(row, ylabel):
             ax.set_ylabel(f"{system}\n{lab}")
             ax.grid(True, alpha=0.3)
-    for ax, panel in zip(axes[0], panels):
-        ax.set_title(panel, fontsize=9)
+    titles = list(panels)
+    suptitle = f"Scenario {sr.scenario.id}: {title}"
+    shape = [[(c.members, c.differ) for c in f] for f in found]
+    if found and found[0] and all(s == shape[0] for s in shape):  # the same iterations coincide for every system
+        suptitle += f"\nevery system: {_coincide_note(found)}"
+    else:
+        for r, (row, f) in enumerate(zip(axes, found)):
+            if f:
+                note = textwrap.fill(_coincide_note([f]), 100)
+                if r == 0:
+                    titles[1] += "\n" + note
+                else:
+                    row[1].set_title(note, fontsize=7)
+    for ax, panel in zip(axes[0], titles):
+        ax.set_title(panel, fontsize=9 if "\n" not in panel else 7)
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
-    fig.suptitle(f"Scenario {sr.scenario.id}: {title}")
+    fig.suptitle(suptitle, fontsize=11)
     seen: dict[str, object] = {}
-    for ax in axes[0]:
+    for ax in axes.flat:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(lab, h)
     _legend_below(fig, list(seen.values()), list(seen), ncol=min(len(seen), 6))
     return fig
 
 
-def _draw_error(left, right, s, iterations: int) -> None:
+def _draw_error(left, right, s, iterations: int) -> tuple[_Coincide, ...]:
     left.plot(s.no_dob.t, s.no_dob.e, color=_COLORS[0], lw=0.9, label="no DOB")
     left.plot(s.dob.t, s.dob.e, color=_COLORS[1], lw=0.9, label="only DOB")
-    for i, f in enumerate(s.learning):
-        left.plot(f.t, f.e, **_iteration_style(i, iterations))
-        right.plot(f.t, f.e, **_iteration_style(i, iterations))
+    return _draw_iterations([left, right], [(f.e, f.e) for f in s.learning], [f.t for f in s.learning], iterations)
 
 
-def _draw_disturbance(left, right, s, iterations: int) -> None:
+def _draw_disturbance(left, right, s, iterations: int) -> tuple[_Coincide, ...]:
     # the true disturbance on top of the estimates (zorder), so that it stays visible
     left.plot(s.dob.t, s.dob.d, color="k", lw=1.0, zorder=5, label="true d (wind + noise)")
     left.plot(s.dob.t, s.dob.d_hat, color=_COLORS[1], lw=0.9, label="only DOB: d_hat")
     right.plot(s.dob.t, s.dob.d_hat - s.dob.d, color=_COLORS[1], lw=0.9, label="only DOB: d_hat")
-    for i, f in enumerate(s.learning):
-        style = _iteration_style(i, iterations)
-        style["label"] = f"learning {i + 1}: d_hat + d_f"
-        left.plot(f.t, f.d_hat + f.d_f, **style)
-        right.plot(f.t, f.d_hat + f.d_f - f.d, **style)
+    curves = [(f.d_hat + f.d_f, f.d_hat + f.d_f - f.d) for f in s.learning]
+    return _draw_iterations([left, right], curves, [f.t for f in s.learning], iterations, ": d_hat + d_f")
 
 
 def _time_series(res: ReproductionResult) -> dict[str, Figure]:
@@ -185,79 +278,58 @@ def _time_series(res: ReproductionResult) -> dict[str, Figure]:
     return figs
 
 
-def _bode_pair(axes, w, resp, label, color, ls="-"):
-    axes[0].semilogx(w, _db(resp), color=color, ls=ls, label=label)
-    axes[1].semilogx(w, _phase(resp), color=color, ls=ls)
+def _bode_columns(fig: Figure, ts: float, w: np.ndarray, columns: list[tuple[str, list[BodeCurve]]]) -> Figure:
+    """One column per response: magnitude above, phase below (:func:`~ilcdob.design.figure.draw_bode`)."""
+    axes = fig.subplots(2, len(columns), sharex=True, squeeze=False)
+    for col, (title, curves) in enumerate(columns):
+        draw_bode(axes[0, col], axes[1, col], w, curves)
+        finish_bode_axes(axes[0, col], axes[1, col], title, ts)
+    return _done(fig)
 
 
-def _min_span(ax, span: float) -> None:
-    """Keep matplotlib from zooming into rounding noise (L2 = 1 to 1e-8 with exact models)."""
-    lo, hi = ax.get_ylim()
-    if hi - lo < span:
-        mid = 0.5 * (lo + hi)
-        ax.set_ylim(mid - span / 2, mid + span / 2)
-
-
-def _finish_bode(axes, titles, ts):
-    for col, title in enumerate(titles):
-        _min_span(axes[0, col], 10.0)
-        _min_span(axes[1, col], 30.0)
-        axes[0, col].set_title(title)
-        axes[0, col].set_ylabel("magnitude (dB)")
-        axes[1, col].set_ylabel("phase (deg)")
-        axes[1, col].set_xlabel("frequency (rad/s)")
-        for row in range(2):
-            axes[row, col].grid(True, which="both", alpha=0.3)
-            axes[row, col].axvline(np.pi / ts, color="0.6", lw=0.8)
-        axes[0, col].legend(fontsize=7)
+def _color(i: int) -> str:
+    return _COLORS[i % len(_COLORS)]
 
 
 def _bode_loops(fleet: Fleet) -> Figure:
     w = frequency_grid(fleet.sample_time)
-    fig, axes = _subplots(2, 2, (11, 6.5), sharex=True)
+    g_r, g_d = [], []
     for i, lp in enumerate(fleet.loops):
-        c = _COLORS[i % len(_COLORS)]
-        _bode_pair(axes[:, 0], w, freqresp(lp.G_r, w), lp.name, c)
-        _bode_pair(axes[:, 1], w, freqresp(lp.G_d, w), f"{lp.name} (DOB)", c)
-        _bode_pair(axes[:, 1], w, freqresp(lp.G_d_no_dob, w), f"{lp.name} (no DOB)", c, ls=":")
-    _finish_bode(axes, ["G_r: reference -> position", "G_d: disturbance -> position"], fleet.sample_time)
-    return _done(fig)
+        g_r.append(BodeCurve(lp.name, freqresp(lp.G_r, w), _color(i)))
+        g_d.append(BodeCurve(f"{lp.name} (DOB)", freqresp(lp.G_d, w), _color(i)))
+        g_d.append(BodeCurve(f"{lp.name} (no DOB)", freqresp(lp.G_d_no_dob, w), _color(i), ":"))
+    return _bode_columns(Figure(figsize=(11, 6.5)), fleet.sample_time, w,
+                         [("G_r: reference -> position", g_r), ("G_d: disturbance -> position", g_d)])
+
+
+def _pair(src: str, tgt: str) -> str:
+    return f"{src} -> {tgt}"
 
 
 def _bode_learning(filters: dict[tuple[str, str], LearningFilters], ts: float) -> Figure:
     w = frequency_grid(ts)
-    fig, axes = _subplots(2, 2, (11, 6.5), sharex=True)
-    for i, ((src, tgt), lf) in enumerate(sorted(filters.items())):
-        c = _COLORS[i % len(_COLORS)]
-        _bode_pair(axes[:, 0], w, lf.l1_response(w), f"{src} -> {tgt}", c)
-        _bode_pair(axes[:, 1], w, lf.l2_response(w), f"{src} -> {tgt}", c)
-    _finish_bode(axes, ["L1 (applied to e_{j-1})", "L2 (applied to d_f,{j-1})"], ts)
-    return _done(fig)
-
-
-def _with_gain_error(lp: LoopSystem, gain: float) -> LoopSystem:
-    model = lp.spec.nominal_plant
-    true = PlantSpec(tuple(np.asarray(model.num) * gain), model.den, model.delay)
-    return build_loop(replace(lp.spec, plant=true, model=model), lp.ts)
+    pairs = sorted(filters.items())
+    l1 = [BodeCurve(_pair(*key), lf.l1_response(w), _color(i)) for i, (key, lf) in enumerate(pairs)]
+    l2 = [BodeCurve(_pair(*key), lf.l2_response(w), _color(i)) for i, (key, lf) in enumerate(pairs)]
+    return _bode_columns(Figure(figsize=(11, 6.5)), ts, w,
+                         [("L1 (applied to e_{j-1})", l1), ("L2 (applied to d_f,{j-1})", l2)])
 
 
 def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters]) -> Figure:
     ts = fleet.sample_time
     w = frequency_grid(ts)
-    fig, axes = _subplots(2, 3, (14, 6.5), sharex=True)
-    true = {lp.name: _with_gain_error(lp, 1 + TE_GAIN_ERROR) for lp in fleet.loops}
+    true = {lp.name: with_gain_error(lp, 1 + TE_GAIN_ERROR) for lp in fleet.loops}
+    te1, te2 = [], []
     for i, ((src, tgt), lf) in enumerate(sorted(filters.items())):
-        c = _COLORS[i % len(_COLORS)]
-        te1, te2 = lf.te_responses(w, true[src], true[tgt])
-        _bode_pair(axes[:, 0], w, te1, f"{src} -> {tgt}", c)
-        _bode_pair(axes[:, 1], w, te2, f"{src} -> {tgt}", c)
-    for i, lp in enumerate(fleet.loops):
-        _bode_pair(axes[:, 2], w, freqresp(lp.Omega, w), lp.name, _COLORS[i % len(_COLORS)])
+        r1, r2 = te_responses(lf, w, true[src], true[tgt])
+        te1.append(BodeCurve(_pair(src, tgt), r1, _color(i)))
+        te2.append(BodeCurve(_pair(src, tgt), r2, _color(i)))
+    omega = [BodeCurve(lp.name, loop_maps(lp, w)["Omega"], _color(i)) for i, lp in enumerate(fleet.loops)]
     pct = f"{100 * TE_GAIN_ERROR:.0f} %"
-    _finish_bode(axes, [f"Te1 (true plants {pct} stronger than models)",
-                        f"Te2 (true plants {pct} stronger than models)",
-                        "Omega: disturbance -> DOB estimate"], ts)
-    return _done(fig)
+    return _bode_columns(Figure(figsize=(14, 6.5)), ts, w,
+                         [(f"Te1 (true plants {pct} stronger than models)", te1),
+                          (f"Te2 (true plants {pct} stronger than models)", te2),
+                          ("Omega: disturbance -> DOB estimate", omega)])
 
 
 def identified_bounds(fleet: Fleet, w: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -292,9 +364,10 @@ def _identified_models(fleet: Fleet) -> Figure | None:
     fig, axes = _subplots(1, 2, (11, 3.8))
     for i, (name, (g, bound)) in enumerate(models.items()):
         c = _COLORS[i % len(_COLORS)]
-        mag = _db(g)
+        mag = magnitude_db(g)
         axes[0].semilogx(w, mag, color=c, label=name)
-        axes[0].fill_between(w, mag + _db(np.maximum(1 - bound, 1e-6)), mag + _db(1 + bound), color=c, alpha=0.25)
+        axes[0].fill_between(w, mag + magnitude_db(np.maximum(1 - bound, 1e-6)), mag + magnitude_db(1 + bound),
+                             color=c, alpha=0.25)
         axes[1].loglog(w, bound, color=c, label=name)
     axes[0].set_title("identified plants with 3-sigma uncertainty band")
     axes[0].set_ylabel("magnitude (dB)")

@@ -12,7 +12,7 @@ and quick commands start without loading cvxpy, CasADi and Dask.
 | :func:`reproduce_to_folder` | ``reproduce`` | results.json, theorem.json, fleet.toml, figures, README.md |
 | :func:`identify_to_json` | ``identify`` | model.json (+ a figure folder) |
 | :func:`identify_fleet_to_folder` | ``identify-fleet`` | flights, models, figures, identified_fleet.toml |
-| :func:`design_to_folder` | ``design`` | filters.json, filters.h/.c, README.md, lifted.npz, learning_signal.csv |
+| :func:`design_to_folder` | ``design`` | filters.json, filters.h/.c, README.md, bode.png, lifted.npz, learning_signal.csv |
 | :func:`learn_to_folder` | ``learn`` | learning_signal.csv/.bin/.h, learning.json |
 | :func:`check_to_json` | ``check`` | the check as JSON: exact worst case, paper's condition |
 | :func:`compare_to_folder` | ``compare`` | compare.json, compare.txt, compare_ratios.png |
@@ -573,6 +573,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     """
     from ilcdob.design.c_export import check_c_prefix, design_files
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
+    from ilcdob.design.figure import pair_bode_figure
     from ilcdob.design.laws import check_law
     from ilcdob.design.pair import METHODS, design_pair, design_with_band, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
@@ -672,6 +673,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
             data.t, {"e_ref_source": design.reference.source_error, "correction": design.reference.correction},
             {"e_ref_source": "m", "correction": "m/s^2"},
             source=f"reference terms of {source} -> {target} for {trial}").to_csv
+    others["bode.png"] = pair_bode_figure(flt, source, target, design.band, method)
     files, written = design_files(filters, list(others), prefix=c_prefix, float_variant=c_float)
     _write_folder(out, _provenance("design", argv, digest, law), others, files, overwrite=overwrite)
     return design, written

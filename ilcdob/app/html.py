@@ -3,9 +3,11 @@
 ``ilcdob report DIR [DIR ...] --out report.html`` reads every ``DIR`` and writes one HTML
 file that opens offline: figures are embedded as base64 PNG ``data:`` URIs, the style sheet
 is inline, and the page refers to no external URL. Each section is rendered when its input
-is among the folders and otherwise says which input it lacks; no number in the report is
-made up or defaulted, every one is read from an input file or computed from the fleet those
-files name.
+is among the folders; the sections none of the folders feeds are left out and named once,
+below the table of contents. No number in the report is made up or defaulted, every one is
+read from an input file or computed from the fleet those files name. Fields are shown with
+human labels and units (``share_improved`` 1 as "improved" 100 %, RMSE in mm, as the CLI's
+text tables), the JSON key in the column's tooltip.
 
 Inputs, detected by file name in each folder
 --------------------------------------------
@@ -64,6 +66,7 @@ import base64
 import io
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -97,11 +100,18 @@ _LABEL_KEYS = ("method", "name", "label", "id", "key")
 _PAIR_KEYS = (("source", "target"), ("from", "to"))
 _MAX_TEXT = 60
 
+_BODE_NOTE = (" Magnitude in dB and phase in degrees, wrapped to (-180, 180], against frequency in rad/s up to "
+              "Nyquist (grey line); curves that coincide (within 1 %, 0.09 dB) are drawn once, their legend entry "
+              "naming them all.")
 _BODE_FIGURES = {
-    "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB).",
-    "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown.",
+    "bode_loops.png": "Bode plots of G_r and G_d of every system (dotted: G_d without DOB)." + _BODE_NOTE,
+    "bode_learning.png": "Bode plots of the learning filters L1 and L2 of every pair flown (L1 depends on the "
+                         "pair's source only when every Q is the same, and L2 = (1 - Q_j)/(1 - Q_j-1) is then 1)."
+                         + _BODE_NOTE,
     "bode_te.png": "Te1, Te2 (error propagation with learning under the model error stated in the "
-                   "figure) and Omega (disturbance -> DOB estimate).",
+                   "figure) and Omega (disturbance -> DOB estimate; with exact models about Q, so the same for "
+                   "every system with the same Q)."
+                   + _BODE_NOTE,
 }
 
 
@@ -661,6 +671,53 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+#: Human labels of the fields of ``compare.json`` and ``campaign.json`` (as the CLI's text tables
+#: name them, with units); other fields get :func:`_label`'s generic form.
+_LABELS = {
+    "scenario": "scenario", "source": "learns from (j-1)", "target": "learning system (j)", "samples": "samples",
+    "delta_set": "Delta set", "law": "learning law", "method": "method", "order": "order",
+    "design_time_s": "design time (s)", "rmse_nominal": "RMSE nominal (mm)", "ratio_nominal": "ratio nominal",
+    "rmse_worst": "RMSE worst (mm)", "ratio_worst": "ratio worst", "ratio_median": "ratio median",
+    "improved_share": "improved", "share_improved": "improved", "seed": "seed", "uncertainty": "uncertainty",
+    "scale": "uncertainty scale", "robust_models": "robust design models", "rho": "rho (robust guarantee)",
+    "duration": "trial duration (s)", "runs_per_method": "runs per method", "rejected_plants": "rejected plants",
+    "resumed_samples": "resumed samples", "workers": "worker processes", "wall_time_s": "wall time (s)",
+    "sample_time_s": "time per sample (s)", "sample_cpu_s": "CPU per sample (s)", "ratio": "ratio",
+    "runs": "runs", "failed": "failed runs", "median": "median", "p95": "95th percentile", "worst": "worst",
+}
+#: Fields that are shares in [0, 1], shown in % ("improved 100 %").
+_SHARES = ("improved_share", "share_improved")
+#: Fields in m shown in mm (the CLI's compare table does the same).
+_MILLIMETRES = ("rmse_nominal", "rmse_worst")
+#: Unit suffixes of field names -> the unit shown in the label.
+_UNIT_SUFFIXES = (("_rad_s", "rad/s"), ("_m_s2", "m/s^2"), ("_mm", "mm"), ("_s", "s"), ("_m", "m"))
+
+
+def _label(key: str) -> str:
+    """A JSON field as a column label: :data:`_LABELS`, else words with the unit of its suffix
+    (``settle_time_s`` -> ``settle time (s)``); dotted names label each part (``ratio.median``)."""
+    if key in _LABELS:
+        return _LABELS[key]
+    if "." in key:
+        return " ".join(_label(part) for part in key.split("."))
+    for suffix, unit in _UNIT_SUFFIXES:
+        if key.endswith(suffix) and len(key) > len(suffix):
+            return f"{key[:-len(suffix)].replace('_', ' ')} ({unit})"
+    return key.replace("_", " ")
+
+
+def _cell(key: str, value: Any) -> str:
+    """A field's value as shown: shares in %, RMSE in mm, nothing (null) as ``-``, else :func:`_fmt`."""
+    last = key.rsplit(".", 1)[-1]
+    if value is None:
+        return "-"
+    if _is_real(value) and last in _SHARES:
+        return f"{100 * value:.4g} %"
+    if _is_real(value) and last in _MILLIMETRES:
+        return f"{1e3 * value:.4g}"
+    return _fmt(value)
+
+
 def _table(header: list[str], rows: list[list[str]], cls: str = "") -> str:
     """An HTML table; cells are escaped here."""
     head = "".join(f"<th>{html_text(h)}</th>" for h in header)
@@ -803,6 +860,34 @@ def _rmse_table(data: dict) -> str:
     return _table(header, rows)
 
 
+#: Learning iterations whose RMSE agree to this share coincide (:func:`_same_learning`).
+_SAME_RMSE = 1e-3
+
+
+def _same_learning(data: dict) -> str:
+    """A sentence naming, per scenario, the systems whose learning iterations all leave the same tracking
+    RMSE (within :data:`_SAME_RMSE`), as with exact models; empty when there are none."""
+    found = []
+    for sc in data["scenarios"]:
+        names = []
+        for name in sc.get("order") or list(sc["systems"]):
+            learn = [v for v in sc["systems"][name].get("rmse_learning", []) if v is not None]
+            if len(learn) >= 2 and max(learn) - min(learn) <= _SAME_RMSE * max(learn):
+                names.append(name)
+        if names:
+            found.append((sc.get("id", "?"), names, len(sc["systems"])))
+    if not found:
+        return ""
+    n = _fmt(data.get("iterations"))
+    if len(found) == len(data["scenarios"]) and all(len(names) == total for _, names, total in found):
+        where = "every system of every scenario"
+    else:
+        where = "; ".join(f"scenario {sid}: {', '.join(names)}" for sid, names, _ in found)
+    return (f"<p>The learning iterations coincide for {html_text(where)}: all {html_text(n)} leave the same "
+            f"tracking RMSE (within {100 * _SAME_RMSE:g} %). The figures draw iterations whose curves coincide "
+            "as one line and say so.</p>")
+
+
 def _plant_section(res: JsonInput) -> str:
     data = res.data
     folder = res.folder
@@ -817,7 +902,7 @@ def _plant_section(res: JsonInput) -> str:
              f"{html_text(_fmt(data.get('iterations')))} learning iteration(s), sample time "
              f"{html_text(_fmt(data.get('sample_time')))} s. Tracking RMSE in mm (no DOB, only DOB, learning "
              "iterations) and RMSE of the total disturbance estimate (d_hat + d_f) against the true disturbance "
-             "in m/s^2.</p>", _rmse_table(data),
+             "in m/s^2.</p>", _rmse_table(data), _same_learning(data),
              _file_figure(folder, "rmse_bars.png", "Tracking RMSE (m, log scale) per scenario and system: no DOB, "
                           "only DOB and every learning iteration")]
     for sc in data["scenarios"]:
@@ -956,9 +1041,10 @@ def _json_section(j: JsonInput, what: str) -> str:
     data = j.data
     parts = [f"<h3>{html_text(str(j.path))}</h3>"]
     if isinstance(data, dict):
-        meta = [[k, _fmt(v)] for k, v in data.items() if v is None or isinstance(v, (str, int, float, bool))]
+        meta = [[_label(k), _cell(k, v)] for k, v in data.items()
+                if v is None or isinstance(v, (str, int, float, bool))]
         if meta:
-            parts.append(_table(["field", "value"], meta, "meta"))
+            parts.append(_table(["setting", "value"], meta, "meta"))
     tables = json_tables(data)
     if not tables:
         text = json.dumps(data, indent=1)
@@ -966,18 +1052,31 @@ def _json_section(j: JsonInput, what: str) -> str:
         parts.append(_missing(f"{j.path} holds no table of {what} (rows = methods with numeric fields); its content "
                               "is shown as is.", "an object of methods, e.g. {\"methods\": {name: {field: number}}}"))
         parts.append(f'<pre class="plain">{html_text(cut)}</pre>')
+    paths = [t.path for t in tables]
     for t in tables:
         note = f" ({t.omitted} list values not tabulated)" if t.omitted else ""
-        parts.append(f"<p class=\"where\">{html_text(t.path or '(top level)')}{html_text(note)}</p>")
+        where = _where(t.path, paths)
+        if where or note:
+            parts.append(f'<p class="where">{html_text(where)}<span class="omitted">{html_text(note)}</span></p>')
         parts.append(_method_table(t))
     return "\n".join(parts)
+
+
+def _where(path: str, paths: list[str]) -> str:
+    """Heading of the method table at ``path`` among the document's tables ``paths``: the campaign's
+    per-scenario tables by their scenario, its top-level table as "all scenarios"; other paths as they are."""
+    if path == "methods":
+        return "all scenarios" if any(p.startswith("scenarios.") for p in paths) else ""
+    if path.startswith("scenarios.") and path.endswith(".methods"):
+        return path[len("scenarios."):-len(".methods")]
+    return path or "(top level)"
 
 
 def _method_table(t: JsonTable) -> str:
     """A method table as HTML; a row without result (:attr:`JsonTable.failed`) shows its reason
     across the value columns instead of empty cells."""
     reasons = dict(t.failed)
-    head = "".join(f"<th>{html_text(h)}</th>" for h in ["method", *t.columns])
+    head = "<th>method</th>" + "".join(f'<th title="{html_text(h)}">{html_text(_label(h))}</th>' for h in t.columns)
     body = []
     for label, values in t.rows:
         if label in reasons:
@@ -985,7 +1084,7 @@ def _method_table(t: JsonTable) -> str:
                         f"<strong>no result</strong>: {html_text(reasons[label])}</td></tr>")
         else:
             body.append("<tr>" + "".join(f"<td>{html_text(c)}</td>" for c in
-                                         [label, *(_fmt(values[k]) if k in values else "-" for k in t.columns)])
+                                         [label, *(_cell(k, values[k]) if k in values else "-" for k in t.columns)])
                         + "</tr>")
     return f"<table><thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody></table>"
 
@@ -1021,9 +1120,19 @@ figcaption { font-size: 0.85em; color: #555; }
 tr.failed td { color: #8a2a00; background: #fff4e5; text-align: left; }
 .missing { background: #fff4e5; border-left: 4px solid #e8a33d; padding: 0.4em 0.8em; }
 .status-ok { color: #1a7f37; } .status-none { color: #b35900; font-weight: bold; }
-.where { font-family: monospace; font-size: 0.85em; color: #555; margin-bottom: 0; }
+.where { font-size: 0.9em; font-weight: bold; color: #444; margin-bottom: 0; }
+.where .omitted { font-weight: normal; color: #666; } table.meta td { text-align: left; }
+.not-included { font-size: 0.9em; color: #555; }
 pre.plain { font-size: 0.8em; background: #f7f7f7; padding: 0.5em; overflow-x: auto; }
 """
+
+
+def _left_out(section: _Section) -> str:
+    """``Heading (`command`)`` of a section left out of the report: its heading without the parenthesis,
+    and the command its input comes from (the first quoted command of its ``expected``)."""
+    command = re.search(r"`([^`]+)`", section.expected)
+    return (f"{html_text(section.heading.split(' (')[0])}"
+            + (f" (<code>{html_text(command.group(1))}</code>)" if command else f" ({html_text(section.expected)})"))
 
 
 def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -> str:
@@ -1118,15 +1227,19 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
         if inputs.campaign else "",
         [str(j.path) for j in inputs.campaign], f"campaign.json from `{KNOWN_FILES['campaign.json']}`"))
 
-    # assemble
+    # assemble: a section without any input (nothing run for it) is left out and named once
+    shown = [s for s in sections if s.sources or s.body.strip()]
+    left_out = [s for s in sections if s not in shown]
     status_rows = []
-    for s in sections:
+    for s in shown:
         if s.sources:
             status = f'<span class="status-ok">rendered</span> from {html_text(", ".join(s.sources))}'
         else:
-            status = f'<span class="status-none">no input</span>: expected {html_text(s.expected)}'
+            status = f'<span class="status-none">input missing</span>: expected {html_text(s.expected)}'
         status_rows.append(f'<tr><td><a href="#{html_text(s.sid)}">{html_text(s.heading)}</a></td>'
                            f"<td>{status}</td></tr>")
+    not_included = ('<p class="not-included">Not included, as none of the folders holds their input: '
+                    + "; ".join(_left_out(s) for s in left_out) + ".</p>") if left_out else ""
     out = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
            '<meta name="viewport" content="width=device-width, initial-scale=1">',
            f"<title>{html_text(options.title)}</title><style>{_CSS}</style></head><body>",
@@ -1138,14 +1251,9 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
            + "".join(f"<li>{html_text(p)}</li>" for p in provenance) + "</ul>",
            '<h2 id="contents">Sections and their inputs</h2>',
            '<table class="wide"><thead><tr><th>section</th><th>input</th></tr></thead><tbody>',
-           *status_rows, "</tbody></table>"]
-    for s in sections:
+           *status_rows, "</tbody></table>", not_included]
+    for s in shown:
         out.append(f'<h2 id="{html_text(s.sid)}">{html_text(s.heading)}</h2>')
-        if s.sources:
-            out.append(s.body)
-        else:
-            out.append(s.body if s.body.strip() else "")
-            out.append(_missing("no input for this section among the report's folders, so it shows no numbers.",
-                                s.expected))
+        out.append(s.body)
     out.append("</body></html>")
     return "\n".join(out) + "\n"
