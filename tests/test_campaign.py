@@ -91,6 +91,7 @@ def test_killed_campaign_resumes_to_the_statistics_of_an_uninterrupted_run(tmp_p
     assert "methods" in paths and any(p.startswith("scenarios.") for p in paths)
 
 
+@pytest.mark.slow  # 15 s; the command-line kill-and-resume test above covers the store by default
 def test_killed_library_campaign_resumes_to_an_uninterrupted_run(fleet, tmp_path):
     """``run_campaign`` keeps the sample store up to date: killed mid-run (client and workers), it resumes
     with only the missing samples and gives the statistics and report of an uninterrupted run."""

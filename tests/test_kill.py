@@ -58,6 +58,7 @@ def _folder_command_survives_kills(tmp_path: Path, args: list[str]) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
 
 
+@pytest.mark.slow  # 20 s; design and identify cover the staging path by default, the fault probe every command
 def test_reproduce_survives_sigkill(tmp_path):
     _folder_command_survives_kills(tmp_path, ["reproduce", "--scenarios", "1,4", "--iterations", "1"])
 

@@ -457,8 +457,6 @@ def _main(argv: list[str]) -> int:
     except (IlcdobError, OSError) as exc:
         console.error(_os_message(exc, getattr(args, "out", None)), tb=traceback.format_exc() if args.debug else None)
         return 2
-    except KeyboardInterrupt:
-        raise
     except Exception as exc:  # a bug, not bad input: one line (--debug: the traceback), exit 3
         console.internal_error(exc, tb=traceback.format_exc() if args.debug else None)
         return 3
