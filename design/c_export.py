@@ -76,8 +76,8 @@ from ilcdob.signals import as_signal
 
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
 
-__all__ = ["CCode", "c_code", "check_filters", "MAX_ADVANCE", "default_c_prefix", "check_c_prefix",
-           "reference_trial", "emulate_c_filter", "float_error", "design_readme", "design_files", "signal_header",
+__all__ = ["CCode", "c_code", "check_filters", "check_filter_entry", "MAX_ADVANCE", "default_c_prefix",
+           "check_c_prefix", "reference_trial", "emulate_c_filter", "float_error", "design_readme", "design_files", "signal_header",
            "FILTER_KEYS"]
 
 #: The filters of ``filters.json`` that get C functions, and their lower-case C names.
@@ -626,8 +626,22 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
                      sos is not None and band.get("start") == "fold")
 
 
-def _filter_entry(coeffs: object, key: str) -> None:
-    """One filter of ``filters.json`` checked: ``advance``, then ``sos`` (and ``lookahead``) or ``num``/``den``."""
+def check_filter_entry(coeffs: object, key: str) -> None:
+    """One filter of ``filters.json`` checked: ``advance``, then ``sos`` (and ``lookahead``) or ``num``/``den``.
+
+    Parameters
+    ----------
+    coeffs : object
+        The entry (``filters["L1"]``, ...).
+    key : str
+        Its name, first in messages.
+
+    Raises
+    ------
+    SpecError
+        Not a mapping, ``advance`` not an integer in ``[0, MAX_ADVANCE]``, sections or
+        polynomials that are not finite numbers of the right shape, or bad look-ahead taps.
+    """
     if not isinstance(coeffs, dict):
         raise SpecError(f"`{key}`: got {coeffs!r:.80}, expected a mapping with `advance` and `sos` or `num`/`den`")
     adv = _count(coeffs.get("advance"), f"{key}.advance", 0)
@@ -684,7 +698,7 @@ def check_filters(filters: object, source: str) -> dict[str, Any]:
             raise SpecError(f"`sample_time`: got {ts!r:.80}, expected the sample time, a number > 0 (s)")
         for key in FILTER_KEYS:
             if key in filters:
-                _filter_entry(filters[key], key)
+                check_filter_entry(filters[key], key)
         _learning_parts(filters)
     except SpecError as exc:
         raise SpecError(f"{source}: {exc}") from None

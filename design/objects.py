@@ -46,7 +46,7 @@ from ilcdob.inputs import read_json
 from ilcdob.loop import freqresp as _sys_freqresp
 from ilcdob.matfile import check_mat_path, write_mat
 
-from .c_export import FILTER_KEYS, _filter_entry, check_filters
+from .c_export import FILTER_KEYS, check_filter_entry, check_filters
 from .export import DIRECT_FORM_RTOL, apply_coefficients, direct_form_grid, lookahead_taps
 
 __all__ = ["LearningFilterTF", "filter_tf", "filters_tf", "load_design", "design_to_mat", "DESIGN_FILE"]
@@ -267,7 +267,7 @@ def filter_tf(coeffs: Mapping[str, Any], ts: float, name: str = "L1", unit: str 
         raise SpecError(f"`name`: got {name!r:.80}, expected the filter's key in filters.json, e.g. 'L1'")
     if not isinstance(unit, str):
         raise SpecError(f"`{name}` unit: got {unit!r:.80}, expected a string such as '(m/s^2)/m'")
-    _filter_entry(coeffs, name)
+    check_filter_entry(coeffs, name)
     coeffs = dict(coeffs)
     factors = []
     if coeffs.get("sos"):

@@ -730,15 +730,15 @@ class TrialColumns(LogClock):
         if self.learning is not None:
             fields["d_f"] = self.learning
         data = self.load_fields([path], fields)[0]
-        e = data["e"] if self.error is not None else data["r"] - data["y"]
-        for name, values, unit in (("error", e, "m"), ("learning", data["d_f"] if self.learning else None, "m/s^2")):
-            big = None if values is None else np.flatnonzero(np.abs(values) > MAX_TRIAL_VALUE)
-            if big is not None and big.size:
+        e = np.asarray(data["e"] if self.error is not None else data["r"] - data["y"], float)
+        df = np.asarray(data["d_f"], float) if self.learning is not None else np.zeros(len(data))
+        for name, values, unit in (("error", e, "m"), ("learning", df, "m/s^2")):
+            big = np.flatnonzero(np.abs(values) > MAX_TRIAL_VALUE)
+            if big.size:
                 raise SignalError(f"{path}: the {name} is {float(values[big[0]]):.4g} {unit} at sample {big[0]} "
                                   f"({big.size} sample(s) beyond {MAX_TRIAL_VALUE:g} {unit}); a flown trial's values "
                                   "are far smaller: check the column and its units")
-        return data, np.asarray(e, float), (np.asarray(data["d_f"], float) if self.learning is not None
-                                            else np.zeros(len(data)))
+        return data, e, df
 
 
 def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *, source: str | None = None,
