@@ -48,6 +48,18 @@ Without a band it is ``W{L1{e} + L2{d_f_prev}}``. The caller provides ``work``,
 ``df_prev``. It returns 0, or ``PREFIX_LEARN_EMPTY`` (n = 0) or ``PREFIX_LEARN_NULL`` (a
 NULL pointer) without writing anything.
 
+A robust-set design (:mod:`.robust_set`, ``filters.json`` keys ``law_maps``, ``F`` and
+``trial_ends``) has no ``L1``/``L2`` of its own: its ``learn`` runs, in their place, the law of
+:meth:`~ilcdob.design.robust_set.RobustSetDesign.apply` ::
+
+    R{e, d_f} = (1 - Q_j){Fr{d_hat}},   d_hat = -Ginv{e + Gf{d_f}}
+
+with ``Gf`` and ``1 - Q_j`` run as state space from rest, ``Ginv = Gd_hat_{j-1}^{-1}`` as the
+apply function ``PREFIX_ginv_apply`` above, ``d_hat`` continued past the trial's end along its
+Hann-weighted trend (:func:`~ilcdob.design.robust_set.end_continuation`) and the FIR ``Fr``'s
+output before ``t = 0`` folded onto the first samples; band, ``W`` and fold around it as above.
+Its scratch is ``3 (n + 2 pad) + advance(Fr)`` doubles, and it uses ``cos`` (``-lm``).
+
 With ``float_variant`` the source also has ``PREFIX_l1_apply_f`` (``float`` data,
 coefficients and arithmetic) for single-precision FPUs. Its error relative to the double
 version is measured when the code is written, by running the same float arithmetic in
@@ -86,6 +98,10 @@ FILTER_KEYS = ("L1", "L2")
 #: Most samples of look-ahead (``advance``) a filter of ``filters.json`` may state: 1000 s at
 #: 1 kHz, far beyond any learning filter, and small enough to allocate.
 MAX_ADVANCE = 1_000_000
+
+#: Most states of a state-space map of ``filters.json`` (``law_maps``): a loop map of a dozen
+#: blocks has a few dozen.
+_MAX_STATES = 512
 
 _FIT_MAX = 16   # samples the continuation is fitted to (extend_smoothly's n_fit)
 _FIT_DEG = 3    # its degree
@@ -661,13 +677,72 @@ def check_filter_entry(coeffs: object, key: str) -> None:
     lookahead_taps(coeffs, f"{key}.lookahead")
 
 
+@dataclass(frozen=True)
+class _RobustSet:
+    """The parts of a robust-set ``filters.json`` its learning law runs (:func:`_robust_parts`)."""
+
+    h: np.ndarray                # F's taps
+    advance: int                 # F's look-ahead, samples
+    fade: int                    # samples at the end blended into the trend
+    ginv: dict[str, Any]         # Gd_hat_{j-1}^{-1}, coefficient form
+    gf: tuple[np.ndarray, ...]   # Gf_hat_{j-1}: A, B, C, D (state space)
+    omq: tuple[np.ndarray, ...]  # 1 - Q_j: A, B, C, D
+
+
+def _state_space(value: object, key: str) -> tuple[np.ndarray, ...]:
+    """A state-space entry ``{"A", "B", "C", "D"}`` as finite arrays of consistent shape, else :class:`SpecError`."""
+    if not isinstance(value, dict) or any(k not in value for k in "ABCD"):
+        raise SpecError(f"`{key}`: got {value!r:.80}, expected a mapping with A (n x n), B, C (n numbers) and D")
+    try:
+        a, b, c, d = (np.asarray(value[k], dtype=float) for k in "ABCD")
+    except (TypeError, ValueError):
+        raise SpecError(f"`{key}`: A, B, C and D must be numbers (nested lists)") from None
+    ns = b.size
+    if a.shape not in ((ns, ns), (0,), (1, 0)) or c.size != ns or d.size != 1 or ns > _MAX_STATES:
+        raise SpecError(f"`{key}`: got A of shape {a.shape}, {b.size} B, {c.size} C and {d.size} D values; expected "
+                        f"A of n x n, n B and n C values (n <= {_MAX_STATES}) and one D")
+    if not all(np.all(np.isfinite(x)) for x in (a, b, c, d)):
+        raise SpecError(f"`{key}`: non-finite value(s); expected finite numbers")
+    return a.reshape(ns, ns), b.reshape(-1), c.reshape(-1), d.reshape(-1)
+
+
+def _robust_parts(filters: dict[str, Any]) -> _RobustSet | None:
+    """The robust-set law's parts (``law_maps``, ``F``, ``trial_ends``), checked; None for other designs.
+
+    Raises
+    ------
+    SpecError
+        An entry of the wrong type, shape or value, naming its key.
+    """
+    maps = filters.get("law_maps")
+    if maps is None:
+        return None
+    if not isinstance(maps, dict):
+        raise SpecError(f"`law_maps`: got {maps!r:.80}, expected a mapping with source_gf, inverse_gd, one_minus_q")
+    fir, ends = filters.get("F"), filters.get("trial_ends")
+    if not isinstance(fir, dict):
+        raise SpecError(f"`F`: got {fir!r:.80}, expected the robustness FIR {{'num': [...], 'advance': samples}}")
+    check_filter_entry({**fir, "den": [1.0]}, "F")
+    h = np.asarray(fir["num"], dtype=float)
+    if h.ndim != 1 or not h.size:
+        raise SpecError(f"`F.num`: got {h.size} taps of shape {h.shape}, expected a list of at least one tap")
+    if not isinstance(ends, dict):
+        raise SpecError(f"`trial_ends`: got {ends!r:.80}, expected a mapping with `fade_samples`")
+    fade = _count(ends.get("fade_samples"), "trial_ends.fade_samples", 0)
+    check_filter_entry(maps.get("inverse_gd"), "law_maps.inverse_gd")
+    return _RobustSet(h, int(fir["advance"]), fade, maps["inverse_gd"],
+                      _state_space(maps.get("source_gf"), "law_maps.source_gf"),
+                      _state_space(maps.get("one_minus_q"), "law_maps.one_minus_q"))
+
+
 def check_filters(filters: object, source: str) -> dict[str, Any]:
     """The content of a ``filters.json`` read from a file, checked before it is used.
 
     Checks every entry the learning law (:func:`~ilcdob.design.export.apply_learning`) and
     the C code (:func:`c_code`) read: ``from``/``to`` names, ``sample_time`` (s), ``L1`` and
     ``L2`` (``advance`` at most :data:`MAX_ADVANCE`, finite sections or polynomials,
-    look-ahead taps), ``band`` and ``disturbance``.
+    look-ahead taps), ``band`` and ``disturbance``, and a robust-set design's ``law_maps``,
+    ``F`` and ``trial_ends``.
 
     Parameters
     ----------
@@ -700,15 +775,19 @@ def check_filters(filters: object, source: str) -> dict[str, Any]:
             if key in filters:
                 check_filter_entry(filters[key], key)
         _learning_parts(filters)
+        _robust_parts(filters)
     except SpecError as exc:
         raise SpecError(f"{source}: {exc}") from None
     return filters
 
 
-def _learn_c(prefix: str, lp: _Learning) -> str:
-    """Coefficient tables, helpers and ``<prefix>learn`` (double only)."""
+def _learn_c(prefix: str, lp: _Learning, rp: _RobustSet | None = None) -> str:
+    """Coefficient tables, helpers and ``<prefix>learn`` (double only); ``rp``: the robust-set law
+    in place of ``L1{.} + L2{.}``."""
     macro = prefix.upper()
     out = ["\n/* ------------------------------------------------------------------ the learning law */\n"]
+    if rp is not None:
+        out.append(_robust_c(prefix, rp))
     if lp.sos is not None:
         ns = lp.sos.shape[0]
         what = f"Butterworth order {lp.order}, " if lp.order else ""
@@ -825,21 +904,29 @@ static void {prefix}w_pass(double *x, size_t n)
               f"        return {macro}LEARN_NULL;\n")
     note = "   /* e and df_prev are read before df_next is written */"
     w_step = f"    {prefix}w_pass(a, len);\n" if lp.w_sos is not None else ""
+    if rp is not None:
+        combine = f"    {prefix}rs_core(a, b, len, work + 2 * len);\n"
+    else:
+        combine = (f"    {prefix}l1_apply(a, a, len);\n    {prefix}l2_apply(b, b, len);\n"
+                   f"    for (k = 0; k < len; ++k)\n        a[k] = a[k] + b[k];\n")
     if lp.sos is not None:
         body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
                 f"    len = n + 2 * (size_t){macro}PAD;\n    a = work;\n    b = work + len;\n"
-                f"    {prefix}horizon(e, n, a);{note}\n"
-                f"    {prefix}band_pass(a, len);\n    {prefix}l1_apply(a, a, len);\n"
-                f"    {prefix}horizon(df_prev, n, b);\n"
-                f"    {prefix}band_pass(b, len);\n    {prefix}l2_apply(b, b, len);\n"
-                f"    for (k = 0; k < len; ++k)\n        a[k] = a[k] + b[k];\n"
-                f"{w_step}"
+                f"    {prefix}horizon(e, n, a);{note}\n    {prefix}horizon(df_prev, n, b);\n"
+                f"    {prefix}band_pass(a, len);\n    {prefix}band_pass(b, len);\n"
+                f"{combine}{w_step}"
                 f"    {prefix}band_pass(a, len);\n"
                 f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n"
                 + (f"    /* fold: the part before t = 0, time-reversed, onto the first samples */\n"
                    f"    for (k = 0; k < n && k < (size_t){macro}PAD; ++k)\n"
                    f"        df_next[k] += a[{macro}PAD - 1 - k];\n" if lp.fold else "")
                 + "    return 0;\n")
+    elif rp is not None:  # no band: W{rs_core(e, df_prev)} on copies
+        body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
+                f"    len = n;\n    a = work;\n    b = work + n;\n"
+                f"    for (k = 0; k < n; ++k) {{\n        a[k] = e[k];{note}\n        b[k] = df_prev[k];\n    }}\n"
+                f"{combine}{w_step}"
+                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n    return 0;\n")
     else:  # no band: W{L1{e} + L2{df_prev}} (W when present)
         body = (f"    double *a, *b;\n    size_t {'len, ' if w_step else ''}k;\n\n{checks}"
                 + ("    len = n;\n" if w_step else "")
@@ -850,6 +937,146 @@ static void {prefix}w_pass(double *x, size_t n)
                 f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n    return 0;\n")
     out.append(f"\nint {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, "
                f"double *work)\n{{\n{body}}}\n")
+    return "".join(out)
+
+
+def _state_space_c(prefix: str, name: str, what: str, ss: tuple[np.ndarray, ...]) -> str:
+    """Tables and an in-place runner ``<prefix><name>_run(x, n)`` of one state-space map, from rest."""
+    a, b, c, d = ss
+    ns = b.size
+    fn = f"{prefix}{name}_run"
+    if ns == 0:
+        return (f"\n/* {what}: a gain. */\nstatic void {fn}(double *x, size_t n)\n{{\n    size_t k;\n\n"
+                f"    for (k = 0; k < n; ++k)\n        x[k] = {_DOUBLE.num(d[0])} * x[k];\n}}\n")
+    tables = "".join(_array_c(_DOUBLE, f"{prefix}{name}_{k}", v) for k, v in (("a", a), ("b", b), ("c", c)))
+    return f"""
+/* {what}: state space of {ns} states, run from rest over x[0..n) in place:
+   y(k) = D u(k) + sum_i c_i s_i(k),  s_i(k + 1) = b_i u(k) + sum_j a_ij s_j(k)
+   (what scipy.signal.dlsim computes, to rounding). */
+{tables}
+static void {fn}(double *x, size_t n)
+{{
+    double s[{ns}] = {{0.0}}, t[{ns}];
+    size_t k, i, j;
+
+    for (k = 0; k < n; ++k) {{
+        const double u = x[k];
+        double y = {_DOUBLE.num(d[0])} * u;
+        for (i = 0; i < {ns}; ++i)
+            y = y + {prefix}{name}_c[i] * s[i];
+        for (i = 0; i < {ns}; ++i) {{
+            double v = {prefix}{name}_b[i] * u;
+            for (j = 0; j < {ns}; ++j)
+                v = v + {prefix}{name}_a[i][j] * s[j];
+            t[i] = v;
+        }}
+        for (i = 0; i < {ns}; ++i)
+            s[i] = t[i];
+        x[k] = y;
+    }}
+}}
+"""
+
+
+def _robust_c(prefix: str, rp: _RobustSet) -> str:
+    """The robust-set law's maps and ``<prefix>rs_core`` (``(1 - Q_j){F{d_hat}}`` on a signal pair)."""
+    macro = prefix.upper()
+    out = [_state_space_c(prefix, "gf", "Gf_hat of the source's model (learning signal -> error)", rp.gf),
+           _state_space_c(prefix, "omq", "1 - Q of the target (the part of a disturbance its DOB leaves)", rp.omq),
+           f"\n/* F, the robustness filter: FIR of {rp.h.size} taps, out(k) = sum_i h_i in(k + {macro}F_ADVANCE - i). */\n",
+           _array_c(_DOUBLE, f"{prefix}rs_h", rp.h)]
+    if rp.advance:
+        out.append(f"""
+/* d[0..n) continued {macro}F_ADVANCE samples past its end into d[n..n + F_ADVANCE) along its trend
+   (ilcdob.design.robust_set.end_continuation): the least-squares line through the FIT =
+   min(2 F_ADVANCE, n - m) samples before the last m = min({macro}FADE, n), weighted by the Hann
+   window w_i = 0.5 - 0.5 cos(2 pi (i + 1)/(FIT + 1)) (numpy.hanning(FIT + 2)[1:-1]), on the
+   centred abscissa; the last m samples blended into it, d + f_k (line - d)... exactly
+   line + f_k (d - line), f_k = 0.5 (1 + cos(pi (k + 1)/(m + 1))). One sample: a constant; none: zero. */
+static void {prefix}rs_trend(double *d, size_t n)
+{{
+    const double pi = 3.14159265358979323846;
+    const size_t m = n < {macro}FADE ? n : {macro}FADE;
+    const size_t fit = 2 * (size_t){macro}F_ADVANCE < n - m ? 2 * (size_t){macro}F_ADVANCE : n - m;
+    double mean = 0.0, slope = 0.0, centre = 0.0;
+    size_t i;
+
+    if (fit >= 2) {{
+        const double *x = d + (n - m - fit);
+        const double half = 0.5 * (double)(fit - 1);
+        double s_w = 0.0, s_wt = 0.0, s_wx = 0.0, s_wtt = 0.0, s_wtx = 0.0, t_bar;
+        for (i = 0; i < fit; ++i) {{
+            const double w = 0.5 - 0.5 * cos(2.0 * pi * (double)(i + 1) / (double)(fit + 1));
+            const double t = (double)i - half;
+            s_w = s_w + w;
+            s_wt = s_wt + w * t;
+            s_wx = s_wx + w * x[i];
+        }}
+        t_bar = s_wt / s_w;
+        mean = s_wx / s_w;
+        for (i = 0; i < fit; ++i) {{
+            const double w = 0.5 - 0.5 * cos(2.0 * pi * (double)(i + 1) / (double)(fit + 1));
+            const double t = (double)i - half - t_bar;
+            s_wtt = s_wtt + w * t * t;
+            s_wtx = s_wtx + w * t * (x[i] - mean);
+        }}
+        slope = s_wtx / s_wtt;
+        centre = (double)(n - m - fit) + half + t_bar;
+    }} else if (fit == 1) {{
+        mean = d[n - m - 1];
+    }}
+    for (i = 0; i < m; ++i) {{
+        const size_t k = n - m + i;
+        const double line = mean + slope * ((double)k - centre);
+        const double f = 0.5 * (1.0 + cos(pi * (double)(i + 1) / (double)(m + 1)));
+        d[k] = line + f * (d[k] - line);
+    }}
+    for (i = 0; i < {macro}F_ADVANCE; ++i)
+        d[n + i] = mean + slope * ((double)(n + i) - centre);
+}}
+""")
+    out.append(f"""
+/* Sample i of F's output over d[0..len), zero outside: sum_j h_j d(i - j) (numpy.convolve). */
+static double {prefix}rs_conv(const double *d, size_t len, size_t i)
+{{
+    const size_t first = i + 1 > len ? i + 1 - len : 0;
+    const size_t last = i < {rp.h.size - 1} ? i : {rp.h.size - 1};
+    double sum = 0.0;
+    size_t j;
+
+    for (j = first; j <= last; ++j)
+        sum = sum + {prefix}rs_h[j] * d[i - j];
+    return sum;
+}}
+
+/* The robust-set law on a signal pair of len >= 1 samples (the trial, or the band's extended
+   horizon): a = e, b = d_f of the source in; a = (1 - Q_j){{F{{d_hat}}}} out, with
+   d_hat = -Ginv{{e + Gf{{d_f}}}} (ilcdob.design.robust_set.RobustSetDesign.apply). b is
+   overwritten; d holds len + {macro}F_ADVANCE doubles. */
+static void {prefix}rs_core(double *a, double *b, size_t len, double *d)
+{{
+    size_t k;
+
+    {prefix}gf_run(b, len);
+    for (k = 0; k < len; ++k)
+        a[k] = a[k] + b[k];
+    {prefix}ginv_apply(a, d, len);
+    for (k = 0; k < len; ++k)
+        d[k] = -d[k];
+""" + (f"""\
+    {prefix}rs_trend(d, len);
+    for (k = 0; k < len; ++k) {{
+        a[k] = {prefix}rs_conv(d, len + {macro}F_ADVANCE, {macro}F_ADVANCE + k);
+        if (k < {macro}F_ADVANCE)   /* F's output before t = 0, folded onto the first samples */
+            a[k] = a[k] + {prefix}rs_conv(d, len + {macro}F_ADVANCE, {macro}F_ADVANCE - 1 - k);
+    }}
+""" if rp.advance else f"""\
+    for (k = 0; k < len; ++k)
+        a[k] = {prefix}rs_conv(d, len, k);
+""") + f"""\
+    {prefix}omq_run(a, len);
+}}
+""")
     return "".join(out)
 
 
@@ -868,6 +1095,10 @@ class CCode:
         variant on :func:`reference_trial` (empty without the float variant).
     pad : int
         Samples the learning law adds at each end of the trial (``band.pad``; 0 without a band).
+    filters : tuple of str
+        The filters with an apply function of their own (``l1``, ``l2``; ``ginv`` for robust-set).
+    work : str
+        ``LEARN_WORK(n)`` in doubles, as a formula (default ``2 * (n + 2 * pad)``).
     """
 
     prefix: str
@@ -875,15 +1106,18 @@ class CCode:
     source: str
     float_errors: dict[str, float] = field(default_factory=dict)
     pad: int = 0
+    filters: tuple[str, ...] = tuple(k.lower() for k in FILTER_KEYS)
+    work: str = ""
 
     @property
     def info(self) -> dict[str, Any]:
         """What ``filters.json`` records about the C code (key ``c``)."""
         p, m = self.prefix, self.prefix.upper()
         out: dict[str, Any] = {"header": "filters.h", "source": "filters.c", "prefix": p,
-                               "functions": [f"{p}learn", *(f"{p}{k.lower()}_apply" for k in FILTER_KEYS)],
+                               "functions": [f"{p}learn", *(f"{p}{k}_apply" for k in self.filters)],
                                "learn": {"function": f"{p}learn", "computes": "ilcdob.design.export.apply_learning",
-                                         "work": f"{m}LEARN_WORK(n) = 2 * (n + 2 * {self.pad}) doubles",
+                                         "work": f"{m}LEARN_WORK(n) = {self.work or f'2 * (n + 2 * {self.pad})'} "
+                                                 "doubles",
                                          "returns": f"0; {m}LEARN_EMPTY = 1 (n == 0) or {m}LEARN_NULL = 2 "
                                                     "(a NULL pointer), nothing written"}}
         if self.float_errors:
@@ -903,14 +1137,19 @@ def _limit(filters: dict[str, Any]) -> float | None:
     return float(value)
 
 
-def _law_comment(macro: str, lp: _Learning) -> str:
-    """The lines of the header describing what ``learn`` computes."""
+def _law_comment(macro: str, lp: _Learning, robust: list[str] | None = None) -> str:
+    """The lines of the header describing what ``learn`` computes; ``robust``: the lines defining
+    the robust-set law ``R``, which then replaces ``L1{.} + L2{.}``."""
+    def core(x: str, y: str) -> str:
+        return f"R{{{x}, {y}}}" if robust is not None else f"L1{{{x}}} + L2{{{y}}}"
+
     if lp.sos is not None:
         order = f"order {lp.order} " if lp.order else ""
         ends = "fold" if lp.fold else "crop"
-        lines = [f"    d_next = {ends}(F{{W{{L1{{F{{H{{e}}}}}} + L2{{F{{H{{d_f}}}}}}}}}})" if lp.w_sos is not None
-                 else f"    d_next = {ends}(F{{L1{{F{{H{{e}}}}}} + L2{{F{{H{{d_f}}}}}}}})",
+        inner = core("F{H{e}}", "F{H{d_f}}")
+        lines = [f"    d_next = {ends}(F{{W{{{inner}}}}})" if lp.w_sos is not None else f"    d_next = {ends}(F{{{inner}}})",
                  "exactly as ilcdob.design.export.apply_learning does (to rounding), where",
+                 *(robust or []),
                  f"  F  is the learning band: a Butterworth {order}low-pass with corner {lp.cutoff:.6g} rad/s",
                  f"     ({macro}BAND_CUTOFF), run forwards from its steady state at the first sample, then",
                  "     backwards from its steady state at the last (zero phase);",
@@ -918,17 +1157,41 @@ def _law_comment(macro: str, lp: _Learning) -> str:
                  f"     the least-squares line through its last {macro}END_FIT samples;"]
         if lp.w_sos is not None:
             lines.append("  W  is the airframe correction (the disturbance acts on the airframe), from rest;")
-        lines += ["  L1, L2 run as the functions below, on the extended signals;",
+        lines += ["  R  runs on the extended signals;" if robust is not None else
+                  "  L1, L2 run as the functions below, on the extended signals;",
                   "  fold keeps the trial's n samples and adds, time-reversed, the learning signal computed"
                   f" before t = 0 to the first {macro}PAD of them." if lp.fold else "  crop keeps the trial's n samples."]
     else:
-        lines = ["    d_next = W{L1{e} + L2{d_f}}" if lp.w_sos is not None else "    d_next = L1{e} + L2{d_f}",
-                 "exactly as ilcdob.design.export.apply_learning does (to rounding): no learning band",
-                 f"(no filter, {macro}BAND_CUTOFF 0.0), L1 and L2 act on the trial as recorded"
+        lines = [f"    d_next = W{{{core('e', 'd_f')}}}" if lp.w_sos is not None else f"    d_next = {core('e', 'd_f')}",
+                 "exactly as ilcdob.design.export.apply_learning does (to rounding)"
+                 + (", where" if robust is not None else ":"), *(robust or []),
+                 f"no learning band (no filter, {macro}BAND_CUTOFF 0.0): "
+                 + ("R" if robust is not None else "L1 and L2") + " act on the trial as recorded"
                  + (";" if lp.w_sos is not None else ".")]
         if lp.w_sos is not None:
             lines.append("W is the airframe correction (the disturbance acts on the airframe), from rest.")
     return "".join(f" * {line}\n" for line in lines)
+
+
+def _law_macros(filters: dict[str, Any], macro: str, lp: _Learning) -> tuple[str, str]:
+    """The header's band and limit macros, and its note on the acceleration limit."""
+    limit = _limit(filters)
+    limit_note = ""
+    if limit is not None:
+        limit_note = (f" * learn does not apply the learning vehicle's acceleration limit ({macro}ACCELERATION_LIMIT,\n"
+                      " * filters.json `limit`): check d_next (with the exact-reference correction added, if any)\n"
+                      " * against it before flying it.\n")
+    if lp.sos is not None:
+        macros = (f"#define {macro}BAND_CUTOFF {lp.cutoff!r} /* rad/s, corner of the learning band F */\n"
+                  f"#define {macro}PAD {lp.pad} /* samples added at each end of the trial */\n"
+                  f"#define {macro}END_FIT {lp.end_fit} /* samples the line continuing the trial is fitted to */\n")
+    else:
+        macros = (f"#define {macro}BAND_CUTOFF 0.0 /* no learning band: the law acts on the trial as recorded */\n"
+                  f"#define {macro}PAD 0 /* no band: nothing added to the trial */\n")
+    if limit is not None:
+        macros += (f"#define {macro}ACCELERATION_LIMIT {limit!r} /* m/s^2, of the learning vehicle: |d_next| must "
+                   "stay below it */\n")
+    return macros, limit_note
 
 
 def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bool = False) -> CCode:
@@ -955,13 +1218,21 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
         A missing key, a bad prefix, or a filter, ``band`` or ``disturbance.W`` entry of the
         wrong shape or value (the message names the key).
     """
-    missing = [k for k in ("from", "to", "method", "sample_time", *FILTER_KEYS) if k not in filters]
+    rp = _robust_parts(filters)
+    missing = [k for k in ("from", "to", "method", "sample_time", *(FILTER_KEYS if rp is None else ()))
+               if k not in filters]
     if missing:
         raise SpecError(f"filters: missing key(s) {missing} for the C code; method "
-                        f"{filters.get('method')!r} has no L1/L2 filters (only closed-form and fir do)")
+                        f"{filters.get('method')!r} has no L1/L2 filters (closed-form and fir have them; robust-set "
+                        "has its `law_maps`)")
     prefix = check_c_prefix(default_c_prefix(str(filters["from"]), str(filters["to"]), str(filters.get("axis", "x")))
                             if prefix is None else prefix)
     lp = _learning_parts(filters)
+    if rp is not None:
+        if float_variant:
+            raise SpecError("float variant: a robust-set design has no L1/L2 functions to give in float, and its "
+                            "learning law runs in double only; leave out --c-float")
+        return _robust_c_code(filters, prefix, lp, rp)
     macro = prefix.upper()
     guard = f"{macro}FILTERS_H"
     pair = c_comment(f"{filters['from']} -> {filters['to']}")
@@ -985,23 +1256,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
             + ", ".join(f"{errors[k]:.2e} ({k})" for k in FILTER_KEYS)
             + f"\n *   on {_REFERENCE_TEXT}\n *   (float32 emulation of this arithmetic when the file was written).\n"
             f" *   The learning law ({prefix}learn) has no float variant: it runs in double only.\n")
-    limit = _limit(filters)
-    limit_note = ""
-    if limit is not None:
-        limit_note = (f" * learn does not apply the learning vehicle's acceleration limit ({macro}ACCELERATION_LIMIT,\n"
-                      " * filters.json `limit`): check d_next (with the exact-reference correction added, if any)\n"
-                      " * against it before flying it.\n")
-    limit_macro = "" if limit is None else (f"#define {macro}ACCELERATION_LIMIT {limit!r} /* m/s^2, of the "
-                                            "learning vehicle: |d_next| must stay below it */\n")
-    if lp.sos is not None:
-        band_macros = (f"#define {macro}BAND_CUTOFF {lp.cutoff!r} /* rad/s, corner of the learning band F */\n"
-                       f"#define {macro}PAD {lp.pad} /* samples added at each end of the trial */\n"
-                       f"#define {macro}END_FIT {lp.end_fit} /* samples the line continuing the trial is "
-                       "fitted to */\n")
-    else:
-        band_macros = (f"#define {macro}BAND_CUTOFF 0.0 /* no learning band: L1, L2 act on the trial as "
-                       "recorded */\n"
-                       f"#define {macro}PAD 0 /* no band: nothing added to the trial */\n")
+    band_macros, limit_note = _law_macros(filters, macro, lp)
     header = f"""\
 /* Learning filters {pair} (method {c_comment(filters['method'])}), written by `ilcdob design`.
  *
@@ -1044,7 +1299,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
 #define {macro}L2_ADVANCE {adv['L2']} /* samples of look-ahead of L2 */
 #define {macro}L1_LOOKAHEAD_TAPS {taps['L1']} /* taps of L1's look-ahead FIR (0: none) */
 #define {macro}L2_LOOKAHEAD_TAPS {taps['L2']} /* taps of L2's look-ahead FIR (0: none) */
-{band_macros}{limit_macro}#define {macro}LEARN_WORK(n) (2 * ((n) + 2 * {macro}PAD)) /* doubles of scratch for learn */
+{band_macros}#define {macro}LEARN_WORK(n) (2 * ((n) + 2 * {macro}PAD)) /* doubles of scratch for learn */
 #define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
 #define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
 
@@ -1079,6 +1334,89 @@ int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_
     return CCode(prefix=prefix, header=header, source="".join(parts), float_errors=errors, pad=lp.pad)
 
 
+def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: _RobustSet) -> CCode:
+    """``filters.h`` and ``filters.c`` of a robust-set design: ``learn`` and ``ginv_apply`` (:func:`c_code`)."""
+    macro = prefix.upper()
+    guard = f"{macro}FILTERS_H"
+    pair = c_comment(f"{filters['from']} -> {filters['to']}")
+    src, tgt = c_comment(str(filters["from"])), c_comment(str(filters["to"]))
+    ts = float(filters["sample_time"])
+    ginv_adv, ginv_taps = int(rp.ginv["advance"]), _lookahead_size(rp.ginv)
+    band_macros, limit_note = _law_macros(filters, macro, lp)
+    guarantee = filters.get("rho_guaranteed")
+    robust = [
+        "  R{e, d_f} = (1 - Q){Fr{d_hat}},  d_hat = -Ginv{e + Gf{d_f}}: the robust-set law",
+        "     (ilcdob.design.robust_set.RobustSetDesign.apply); Gf = Gf_hat and Ginv = Gd_hat^-1",
+        f"     of {src}'s model (Ginv: {prefix}ginv_apply below, non-causal), Q of {tgt}; Fr the",
+        f"     robustness FIR of {macro}F_TAPS taps looking {macro}F_ADVANCE samples ahead; d_hat is",
+        "     continued past the end along its trend (the Hann-weighted least-squares line through",
+        f"     the 2 {macro}F_ADVANCE samples before its last {macro}FADE, blended into over those)",
+        "     and Fr's output before t = 0 is added, time-reversed, to the first samples"
+        + (f"; per frequency |e_j| <= {guarantee:.4g} |e'_j| for every plant of the Delta set"
+           if isinstance(guarantee, (int, float)) else "") + ";"]
+    work = f"3 * (n + 2 * {lp.pad}) + {rp.advance}"
+    header = f"""\
+/* Robust-set learning law {pair}, written by `ilcdob design`.
+ *
+ * Between two flights, the learning signal d_next of the next vehicle is computed from the
+ * previous vehicle's recorded trial, its tracking error e (m) and the learning signal it
+ * flew, d_f (m/s^2; zeros if none), n samples each, every {macro}SAMPLE_TIME seconds from
+ * the start of the trial, by one call:
+ *
+ *     static double work[{macro}LEARN_WORK(N_MAX)];      (scratch, N_MAX >= n)
+ *     if ({prefix}learn(e, d_f, d_next, n, work) != 0) {{ n == 0 or a NULL pointer }}
+ *
+ * then d_next (m/s^2) is fed forward on the next flight, sample k at time k Ts. It is
+{_law_comment(macro, lp, robust)} * work holds {macro}LEARN_WORK(n) doubles and overlaps none of e, d_f, d_next; d_next
+ * may be e or d_f (both are read before d_next is written). learn returns 0, or without
+ * writing anything {macro}LEARN_EMPTY (n == 0) or {macro}LEARN_NULL (a NULL pointer).
+{limit_note} *
+ * {prefix}ginv_apply runs Ginv alone over a whole trial of n samples (y may be u), as
+ * ilcdob.design.export.apply_coefficients does: it looks {macro}GINV_ADVANCE samples ahead, the
+ * input taken as zero before the trial and continued past its end by the least-squares
+ * cubic through its last 16 samples. Uses cos() of the C math library (link with -lm).
+ * Compile with -ffp-contract=off to reproduce the Python arithmetic operation by operation;
+ * contraction changes the results only at the level of rounding.
+ */
+#ifndef {guard}
+#define {guard}
+
+#include <stddef.h>
+
+#define {macro}SAMPLE_TIME {ts!r} /* s */
+#define {macro}F_TAPS {rp.h.size} /* taps of the robustness FIR */
+#define {macro}F_ADVANCE {rp.advance} /* samples of look-ahead of the robustness FIR */
+#define {macro}FADE {rp.fade} /* samples at the trial's end blended into the trend */
+#define {macro}GINV_ADVANCE {ginv_adv} /* samples of look-ahead of Ginv */
+#define {macro}GINV_LOOKAHEAD_TAPS {ginv_taps} /* taps of Ginv's look-ahead FIR (0: none) */
+{band_macros}#define {macro}LEARN_WORK(n) ({work.replace("n + ", "(n) + ")}) /* doubles of scratch for learn */
+#define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
+#define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
+
+#ifdef __cplusplus
+extern "C" {{
+#endif
+
+/* The learning law: previous vehicle's trial (e in m, df_prev in m/s^2) -> df_next (m/s^2). */
+int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, double *work);
+/* Ginv = Gd_hat^-1 of the previous vehicle's model: tracking error (m) -> disturbance (m/s^2), sign as Gd^-1. */
+void {prefix}ginv_apply(const double *u, double *y, size_t n);
+
+#ifdef __cplusplus
+}}
+#endif
+
+#endif /* {guard} */
+"""
+    parts = [f"/* Robust-set learning law {pair}: see filters.h. Written by `ilcdob design`. */\n"
+             '#include <math.h>\n#include "filters.h"\n']
+    if ginv_adv:
+        parts.append("\n" + _tail_c(prefix, _DOUBLE))
+    parts.append("\n" + _filter_c(prefix, "Ginv", rp.ginv, _DOUBLE))
+    parts.append(_learn_c(prefix, lp, rp))
+    return CCode(prefix=prefix, header=header, source="".join(parts), pad=lp.pad, filters=("ginv",), work=work)
+
+
 # --------------------------------------------------------------------------- design folder
 
 
@@ -1091,9 +1429,9 @@ _FILE_TEXT = {
                     "multiplied in, same `advance`) only where they reproduce the sections, else "
                     "`num_den_omitted` says why)",
     "filters.h": "C99 declarations of the function computing the learning signal from a recorded trial (`learn`: "
-                 "L1 and L2 within the learning band, with the airframe correction when there is one) and of the "
-                 "functions running L1 and L2 alone, with the sample time, the band and the look-ahead of each "
-                 "filter",
+                 "the design's law within the learning band, with the airframe correction when there is one) and "
+                 "of the functions running its filters alone (L1 and L2; robust-set: Ginv), with the sample time, "
+                 "the band and the look-ahead of each filter",
     "filters.c": "their implementation (no allocation; compile it with your firmware or ground tool)",
     "lifted.npz": "numpy arrays: for norm-optimal the lifted matrices L1, L2 (N x N, d_f,j = L1 e_j-1 + "
                   "L2 d_f,j-1); for robust the learning signal d_f, the predicted improvement ratios and errors",
@@ -1176,6 +1514,24 @@ def _structure_readme(filters: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _robust_readme(filters: dict[str, Any], prefix: str) -> list[str]:
+    """README lines defining the robust-set law ``R`` that ``learn`` runs."""
+    fir, guarantee = filters["F"], filters.get("rho_guaranteed")
+    ginv = filters["law_maps"]["inverse_gd"]
+    return [f"R is the robust-set law: R{{e, d_f}} = (1 - Q_j){{Fr{{d_hat}}}} with d_hat = -Ginv{{e + Gf{{d_f}}}} "
+            f"the disturbance reconstructed by {filters['from']}'s model (Gf = Gf_hat, Ginv = Gd_hat^-1, "
+            f"`law_maps` in `filters.json`), Q_j the Q of {filters['to']}'s DOB and Fr the robustness FIR of "
+            f"{len(fir['num'])} taps looking {fir['advance']} samples ahead (`F`). d_hat is continued past the "
+            f"trial's end along its trend (`trial_ends`) and Fr's output before t = 0 is folded onto the first "
+            "samples."
+            + (f" Per frequency it guarantees |e_j| <= {guarantee:.4g} |e'_j| for every plant of the Delta set "
+               f"({filters.get('guaranteed_over', 'see filters.json')})." if isinstance(guarantee, (int, float))
+               else ""),
+            "", f"`{prefix}ginv_apply` runs Ginv alone (it looks ahead {ginv['advance']} samples; the trial is "
+            "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does). The code uses "
+            "`cos()` of the C math library (link with `-lm`)."]
+
+
 def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | None = None) -> str:
     """The ``README.md`` of a design folder holding ``files``.
 
@@ -1209,6 +1565,10 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
             law = f"W{{{law}}}"
         if lp.sos is not None:
             law = f"crop(F{{{law}}})"
+        robust = "law_maps" in filters
+        if robust:
+            law = law.replace("L1{F{H{e}}} + L2{F{H{d_f}}}", "R{F{H{e}}, F{H{d_f}}}").replace("L1{e} + L2{d_f}",
+                                                                                            "R{e, d_f}")
         lines += [f"After a flight of {src}, take its recorded tracking error e (m) and the learning signal it "
                   f"flew, d_f (m/s^2; zeros if none), n samples every {ts:g} s from the start of the trial. Then",
                   "",
@@ -1222,15 +1582,18 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
                   f"and feed `d_next` forward (m/s^2) on the next flight of {tgt}, sample k at time k Ts. "
                   f"`{p}learn` computes d_next = {law} over the whole trial at once, exactly as "
                   "`ilcdob.design.export.apply_learning` does in Python (to rounding); no allocation, "
-                  f"`work` holds `{m}LEARN_WORK(n)` = 2 (n + 2 x {lp.pad}) doubles.",
-                  "", *_band_readme(filters, lp), "",
-                  f"The filters alone are `{p}l1_apply` and `{p}l2_apply` (they look ahead "
-                  f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
-                  "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does)"
-                  + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
-                     or lp.w_sos is not None else "; their sum is what `learn` returns."),
-                  "", *_structure_readme(filters)]
-        lines += _inversion_readme(filters)
+                  f"`work` holds `{m}LEARN_WORK(n)` = {code.work or f'2 * (n + 2 * {lp.pad})'} doubles.",
+                  "", *_band_readme(filters, lp), ""]
+        if robust:
+            lines += _robust_readme(filters, p)
+        else:
+            lines += [f"The filters alone are `{p}l1_apply` and `{p}l2_apply` (they look ahead "
+                      f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
+                      "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does)"
+                      + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
+                         or lp.w_sos is not None else "; their sum is what `learn` returns."),
+                      "", *_structure_readme(filters)]
+            lines += _inversion_readme(filters)
         if filters.get("law") == "exact-reference":
             lines += ["", f"Learning law exact-reference (`ilcdob.design.laws`): pass `e - e_ref_source` instead "
                       f"of `e` to `{p}learn` and add `correction` to `d_next`, both from `reference_terms.csv` "
@@ -1276,7 +1639,7 @@ def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: st
     data = dict(filters)
     files: dict[str, Any] = {}
     code = None
-    if all(k in filters for k in FILTER_KEYS):
+    if all(k in filters for k in FILTER_KEYS) or "law_maps" in filters:
         code = c_code(filters, prefix, float_variant)
         data["c"] = code.info
         files = {"filters.h": code.header, "filters.c": code.source}

@@ -53,7 +53,7 @@ direct form is exact and canonical. :func:`coefficients_freqresp` evaluates any 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 from scipy import signal
@@ -62,11 +62,18 @@ from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 
 from .band import fold_start, learning_horizon
+from .closed_form import inverse_gd_filter, one_minus
 from .noncausal import LOOKAHEAD_MAX, ZPKFilter, lookahead
+from .robust_set import fir_on_trial
+
+if TYPE_CHECKING:
+    import control as ct
+
+    from .robust_set import RobustSetDesign
 
 __all__ = ["zpk_to_coefficients", "inversion_note", "order_sections", "section_growth", "order_grid",
            "apply_coefficients", "apply_lookahead", "lookahead_taps", "coefficients_freqresp", "apply_learning",
-           "direct_form_grid", "direct_form_disagreement", "DIRECT_FORM_RTOL"]
+           "state_space_to_dict", "apply_state_space", "robust_set_maps", "direct_form_grid", "direct_form_disagreement", "DIRECT_FORM_RTOL"]
 
 #: Largest relative disagreement of ``num``/``den`` with ``sos`` for ``num``/``den`` to be written.
 DIRECT_FORM_RTOL = 1e-6
@@ -484,6 +491,95 @@ def _forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndar
     return y[::-1]
 
 
+def state_space_to_dict(sys: ct.StateSpace) -> dict[str, Any]:
+    """A discrete SISO state-space system as ``filters.json`` records it: ``{"A", "B", "C", "D"}``.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Discrete-time, one input and one output.
+
+    Returns
+    -------
+    dict
+        ``A`` (n x n), ``B`` (n x 1), ``C`` (1 x n) as nested lists, ``D`` a number; run by
+        :func:`apply_state_space`.
+    """
+    return {"A": np.asarray(sys.A, float).tolist(), "B": np.asarray(sys.B, float).tolist(),
+            "C": np.asarray(sys.C, float).tolist(), "D": float(np.asarray(sys.D, float).reshape(-1)[0])}
+
+
+def apply_state_space(ss: dict[str, Any], x: object) -> np.ndarray:
+    """Run a state-space entry of ``filters.json`` causally over a trial, from rest.
+
+    ``s(k + 1) = A s(k) + B u(k)``, ``y(k) = C s(k) + D u(k)``, ``s(0) = 0`` (``scipy.signal.dlsim``).
+
+    Parameters
+    ----------
+    ss : dict
+        ``{"A", "B", "C", "D"}`` (:func:`state_space_to_dict`).
+    x : array_like
+        The input trial.
+
+    Returns
+    -------
+    numpy.ndarray
+        The output, same length as ``x``.
+    """
+    x = as_signal(x, "x")
+    if x.size == 0:
+        return x
+    a, b, c = (np.atleast_2d(np.asarray(ss[k], float)) for k in ("A", "B", "C"))
+    _, y, _ = signal.dlsim((a, b.reshape(-1, 1), c.reshape(1, -1), np.array([[float(ss["D"])]]), 1.0), x)
+    return np.asarray(y, dtype=float).reshape(-1)
+
+
+def robust_set_maps(design: RobustSetDesign) -> dict[str, Any]:
+    """The maps a robust-set design's learning law runs on a trial (``filters.json`` key ``law_maps``).
+
+    Parameters
+    ----------
+    design : RobustSetDesign
+        A design with its closed-form filters (:func:`~.robust_set.design_robust_set`).
+
+    Returns
+    -------
+    dict
+        ``source_gf``: ``Gf_hat_{j-1}`` of the source's model (state space, from rest);
+        ``inverse_gd``: ``Gd_hat_{j-1}^{-1}`` in coefficient form (:func:`zpk_to_coefficients`, a
+        non-causal filter); ``one_minus_q``: ``1 - Q_j`` of the target (state space); ``rule``.
+    """
+    lf = design.filters
+    return {"source_gf": state_space_to_dict(lf.source.nominal.G_f),
+            "inverse_gd": zpk_to_coefficients(inverse_gd_filter(lf.source, model=True)),
+            "one_minus_q": state_space_to_dict(one_minus(lf.target.Q)),
+            "rule": "on a trial (e, d_f_prev): e' = e + source_gf{d_f_prev} (state space from rest), d_hat = "
+                    "-inverse_gd{e'} (coefficient form, continued past the end by the cubic), F on d_hat as "
+                    "`trial_ends` says, then one_minus_q (state space from rest)"}
+
+
+def _robust_set_core(filters: dict[str, Any], e: np.ndarray, df: np.ndarray) -> np.ndarray:
+    """``(1 - Q_j){F{d_hat}}`` of a robust-set ``filters.json`` (:meth:`~.robust_set.RobustSetDesign.apply`)."""
+    maps = filters["law_maps"]
+    e_virtual = e + apply_state_space(maps["source_gf"], df) if np.any(df) else e
+    d_hat = -apply_coefficients(maps["inverse_gd"], e_virtual)
+    fir = filters["F"]
+    y = fir_on_trial(d_hat, np.asarray(fir["num"], float), int(fir["advance"]),
+                     int(filters["trial_ends"]["fade_samples"]))
+    return apply_state_space(maps["one_minus_q"], y)
+
+
+def _learning_core(filters: dict[str, Any]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """The method's law on (extended) signals: ``L1{e} + L2{d_f}``, or the robust-set law."""
+    if all(k in filters for k in ("law_maps", "F", "trial_ends")):
+        return lambda e, df: _robust_set_core(filters, e, df)
+    missing = [k for k in ("L1", "L2") if k not in filters]
+    if missing:
+        raise SpecError(f"filters: missing key(s) {missing}; method {filters.get('method')!r} has no L1/L2 filters "
+                        "(and no robust-set `law_maps`)")
+    return lambda e, df: apply_coefficients(filters["L1"], e) + apply_coefficients(filters["L2"], df)
+
+
 def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> np.ndarray:
     """The learning law of a ``filters.json`` computed from its coefficients alone.
 
@@ -500,10 +596,16 @@ def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> 
     :func:`~ilcdob.design.band.fold_start`; "crop" only keeps them). Without a band (no
     ``band.sos``) it is ``W{L1{e} + L2{d_f_prev}}``.
 
+    A robust-set design (``law_maps``, ``F``, ``trial_ends``) has ``(1 - Q_j){F{d_hat}}`` in
+    place of ``L1{.} + L2{.}``, with ``d_hat = -Gd_hat_{j-1}^{-1}{e + Gf_hat_{j-1}{d_f_prev}}``
+    (:meth:`~ilcdob.design.robust_set.RobustSetDesign.apply`, trial ends "extended"; the maps
+    of :func:`robust_set_maps`).
+
     Parameters
     ----------
     filters : dict
-        ``filters.json`` content with ``L1`` and ``L2`` (closed-form and FIR designs).
+        ``filters.json`` content with ``L1`` and ``L2`` (closed-form and FIR designs) or with
+        ``law_maps``, ``F`` and ``trial_ends`` (robust-set designs).
     e_prev : array, m
         The previous vehicle's tracking error (for ``exact-reference``: with its reference
         error removed).
@@ -515,21 +617,19 @@ def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> 
     numpy.ndarray
         The learning signal, m/s^2 (for ``exact-reference``: before the reference correction).
     """
-    missing = [k for k in ("L1", "L2") if k not in filters]
-    if missing:
-        raise SpecError(f"filters: missing key(s) {missing}; method {filters.get('method')!r} has no L1/L2 filters")
     e = as_signal(e_prev, "e_prev")
     df = as_signal(df_prev, "df_prev", e.size)
+    core = _learning_core(filters)
     band = filters.get("band") or {}
     w_sos = (filters.get("disturbance") or {}).get("W", {}).get("sos")
     if band.get("sos") is None:
-        y = apply_coefficients(filters["L1"], e) + apply_coefficients(filters["L2"], df)
+        y = core(e, df)
         return signal.sosfilt(np.asarray(w_sos, float), y) if w_sos is not None else y
     sos, zi = np.asarray(band["sos"], float), np.asarray(band["zi"], float)
     pad, n_fit, ts = int(band["pad"]), int(band["end_fit"]), float(filters["sample_time"])
     x1 = _forward_backward(sos, zi, learning_horizon(e, ts, pad, n_fit))
     x2 = _forward_backward(sos, zi, learning_horizon(df, ts, pad, n_fit))
-    y = apply_coefficients(filters["L1"], x1) + apply_coefficients(filters["L2"], x2)
+    y = core(x1, x2)
     if w_sos is not None:
         y = signal.sosfilt(np.asarray(w_sos, float), y)
     z = _forward_backward(sos, zi, y)

@@ -37,7 +37,7 @@ from .closed_form import LearningFilters, closed_form_filters
 
 __all__ = ["BodeCurve", "COINCIDE_RTOL", "TE_GAIN_ERROR", "frequency_grid", "magnitude_db", "wrapped_phase",
            "coinciding", "group_label", "draw_bode", "finish_bode_axes", "mark_band", "with_gain_error",
-           "loop_maps", "te_responses", "te_loops", "pair_bode_figure"]
+           "loop_maps", "te_loops", "pair_bode_figure"]
 
 #: Relative tolerance, at every frequency, under which two frequency responses coincide on a Bode
 #: plot (drawn once): 1 %, i.e. 0.09 dB and 0.6 degrees, below a pixel of the figures. (Omega of
@@ -333,42 +333,6 @@ def loop_maps(loop: LoopSystem, w: np.ndarray) -> dict[str, np.ndarray]:
     return {**b, "G_d": b["P"] * (1 - b["Q"]) / d, "G_f": -b["P"] / d, "Omega": (b["M"] + b["Q"] * b["C"]) * b["P"] / d}
 
 
-def te_responses(filters: LearningFilters, w: np.ndarray, source_true: LoopSystem,
-                 target_true: LoopSystem) -> tuple[np.ndarray, np.ndarray]:
-    """``Te1 = Gd_j Gd_j-1^-1 - Gf_j L1`` and ``Te2 = Te1 Gf_j-1`` with the true loops, without cancellation.
-
-    With exact models the two terms of ``Te1`` cancel (Case I), and under a small model error
-    they cancel to many digits at low frequency (``Te1`` near -170 dB for a 10 % gain error at
-    0.01 rad/s): evaluated as written, a relative error of 1e-9 in either term is the whole
-    result. Since ``L1 = -(1 - Q_j) Gd_hat_j-1^-1 + dL1`` (``dL1``: what the filter as applied
-    differs from the Theorem's formula by, e.g. where a sampling zero is inverted with zero phase
-    error) and the loops of j-1 share C, Q and M, the same ``Te1`` is
-
-        Te1 = Gd_j (1/P_j-1 - 1/P_hat_j-1) - Gf_j dL1,
-
-    which is evaluated here from the blocks' responses (:func:`loop_maps`).
-
-    Parameters
-    ----------
-    filters : LearningFilters
-        The closed-form pair (its source loop is the model of j-1).
-    w : numpy.ndarray
-        Frequencies, rad/s.
-    source_true, target_true : LoopSystem
-        The true loops of j-1 and j (same controller, Q and M as the models').
-
-    Returns
-    -------
-    te1, te2 : numpy.ndarray
-        Complex responses.
-    """
-    model = loop_maps(filters.source, w)
-    src, tgt = loop_maps(source_true, w), loop_maps(target_true, w)
-    l1_formula = -(1 - tgt["Q"]) * (1 / model["P"] + (model["M"] + model["C"]) / (1 - model["Q"]))
-    te1 = tgt["G_d"] * (1 / src["P"] - 1 / model["P"]) - tgt["G_f"] * (filters.l1_response(w) - l1_formula)
-    return te1, te1 * src["G_f"]
-
-
 def te_loops(fleet: Fleet, source: str, target: str) -> tuple[LoopSystem | None, LoopSystem | None, str]:
     """The true loops ``Te1`` and ``Te2`` are drawn for, and how they were chosen.
 
@@ -464,7 +428,7 @@ def pair_bode_figure(fleet: Fleet, source: str, target: str, band: LearningBand 
     l2 = [] if lf is None else [BodeCurve(pair, lf.l2_response(w), _COLORS[0])]
     te1 = te2 = []
     if lf is not None and src_true is not None:
-        r1, r2 = te_responses(lf, w, src_true, tgt_true)
+        r1, r2 = lf.te_responses(w, src_true, tgt_true)
         te1, te2 = [BodeCurve(pair, r1, _COLORS[2])], [BodeCurve(pair, r2, _COLORS[2])]
     te_missing = missing or (None if src_true is not None else basis)
     on = f" ({basis})" if src_true is not None else ""

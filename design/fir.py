@@ -50,7 +50,8 @@ least total excess of ``|Te1|`` over ``1 - margin`` on the design grid (within t
 promise), and the fit then keeps ``1 - margin`` at every (model, check-grid frequency) where that
 least-excess point keeps it, and the no-harm bound elsewhere. The bands where the
 margin is given up are stated (:attr:`FIRDesign.relaxed_bands`, ``filters.json``) and a
-:class:`FIRGuaranteeWarning` says so. ``unattainable="refuse"`` raises instead.
+:class:`FIRGuaranteeWarning` says so. ``unattainable="refuse"`` raises instead (on the command
+line: ``ilcdob design --method fir --fir-unattainable refuse``).
 
 DC and the integrator of L1. ``L1 = -(1 - Q_j) Gd_{j-1}^{-1}`` keeps the PID integrator of
 system j-1 (a pole at z = 1, visible below about ``ki/kp`` rad/s), which a FIR, with its
@@ -282,6 +283,10 @@ class FIRFilter:
         object.__setattr__(self, "h", h)
         object.__setattr__(self, "advance", int(self.advance))
 
+    def __repr__(self) -> str:
+        return (f"<FIRFilter {self.n_taps} taps, advance {self.advance}, Ts {self.ts:g} s, fit error "
+                f"{self.fit_error:.3g}, max relative error {self.max_rel_error:.3g}>")
+
     @property
     def n_taps(self) -> int:
         """Number of coefficients ``n``."""
@@ -442,6 +447,14 @@ class FIRDesign:
     unattainable_bands: tuple[tuple[float, float], ...] = ()
     relaxed_bands: tuple[tuple[float, float], ...] = ()
     check_w: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def __repr__(self) -> str:
+        taps = f"{self.L1.n_taps} taps" if self.L1.n_taps == self.L2.n_taps else \
+            f"L1 {self.L1.n_taps} taps, L2 {self.L2.n_taps} taps"
+        status = self.solver_status or "no status"
+        return (f"<FIRDesign {self.source!r} -> {self.target!r}: {taps}; worst |Te1| {self.worst_te1:.3g} at "
+                f"{self.worst_w:.3g} rad/s (limit {1.0 - self.options.margin:.3g}); {status}; "
+                f"{len(self.unattainable_bands)} unattainable, {len(self.relaxed_bands)} relaxed band(s)>")
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
         """Learning signal of system j: ``L1{e_{j-1}} + L2{d_f,{j-1}}`` (the Theorem, paper Sec. III).
@@ -1012,7 +1025,8 @@ def _design_fir(prev_loop: LoopSystem, next_loop: LoopSystem, delta_prev: DeltaS
                       f"{_format_bands(_bands(check, relaxed))} rad/s: {cause}. There the design keeps the no-harm "
                       "promise (for every sampled model, the error with learning is at most the margin times system "
                       "j-1's or at most its own error without learning). Next step: a smaller uncertainty to keep the "
-                      "margin, or FIROptions(unattainable='refuse') to stop instead", FIRGuaranteeWarning,
+                      "margin, or FIROptions(unattainable='refuse') (command line: --fir-unattainable refuse) to stop "
+                      "instead", FIRGuaranteeWarning,
                       stacklevel=3)
     w_low = np.logspace(-3, np.log10(options.w_min), 40)
     const_low = np.array([freqresp(t.G_d, w_low) / freqresp(s.G_d, w_low)
@@ -1051,10 +1065,11 @@ def _refusal(name: str, options: FIROptions, w: np.ndarray, unattainable: np.nda
                 f"disagree too much; even the best response there leaves worst |Te1| = {worst:.4g} at w = "
                 f"{w[i]:.4g} rad/s for {which}, and no FIR does better whatever its taps or advance. Next step: a "
                 f"smaller uncertainty (the Delta sets' bound or scale){margin}, or FIROptions(unattainable='no-harm') "
-                "to keep the margin where it can be met and only the no-harm promise elsewhere")
+                "(command line: --fir-unattainable no-harm, the default) to keep the margin where it can be met "
+                "and only the no-harm promise elsewhere")
     worst, _, i, which = _worst(te_least, w)
     return (f"{head} ({options.solver}); some filter meets it at every grid frequency, but no FIR of n_taps = "
             f"{options.n_taps} with advance {options.advance} does: at the least excess, worst |Te1| = {worst:.4g} "
             f"at w = {w[i]:.4g} rad/s for {which}. Next step: more taps (n_taps = {options.n_taps}), a "
             f"larger advance ({options.advance}), a larger w_min ({options.w_min} rad/s), a smaller margin "
-            f"({options.margin}), or FIROptions(unattainable='no-harm')")
+            f"({options.margin}), or FIROptions(unattainable='no-harm') (command line: --fir-unattainable no-harm)")

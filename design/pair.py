@@ -39,7 +39,7 @@ from ilcdob.specs import LimitSpec
 from .band import LearningBand, check_bandwidth, choose_band
 from .closed_form import LearningFilters, closed_form_filters, simulate_map
 from .delta import DeltaSet, delta_bound, delta_set
-from .export import zpk_to_coefficients
+from .export import robust_set_maps, zpk_to_coefficients
 from .fir import FIROptions, design_fir
 from .flown import airframe_path_filter, check_disturbance
 from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
@@ -517,9 +517,12 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
                    "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},
                    "learning": "d_f,j = F{L1{e_{j-1}} + L2{d_f,{j-1}}}, computed on a trial as (1 - Q_j){F{d_hat}} "
                                "with d_hat the disturbance reconstructed by the model (F: FIR, output(k) = "
-                               "sum_i num[i] input(k + advance - i)); the trial's ends as `trial_ends` says; "
-                               "no C code",
+                               "sum_i num[i] input(k + advance - i)); the trial's ends as `trial_ends` says"
+                               + ("; the maps it runs under `law_maps` (C code: filters.c)" if rs.trial == "extended"
+                                  else "; no C code (the projected law solves a least-squares problem per trial)"),
                    "delta_set": {source: deltas[source].source}, **rs.to_dict()}
+        if rs.trial == "extended":
+            filters["law_maps"] = robust_set_maps(rs)
         return PairDesign(method, filters, rs.apply)
     if method == "robust":
         opts = robust or RobustOptions()

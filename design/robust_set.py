@@ -135,7 +135,7 @@ if TYPE_CHECKING:
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
            "uncertainty_cones", "worst_case_ratio", "ratio_for_delta", "design_robust_set", "bound_on_grid",
-           "admissible", "end_continuation", "trend_weights", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
+           "admissible", "end_continuation", "fir_on_trial", "trend_weights", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
 
 _OK = ("optimal", "optimal_inaccurate")
 #: Choices of :attr:`RobustSetOptions.delta_set`.
@@ -564,6 +564,36 @@ def end_continuation(d_hat: np.ndarray, advance: int, fade: int) -> np.ndarray:
     return out
 
 
+def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> np.ndarray:
+    """The robustness FIR over a trial of the reconstructed disturbance (:meth:`RobustSetDesign.apply`, extended).
+
+    ``d_hat`` is continued past the trial along its trend (:func:`end_continuation`), taken as zero
+    before it, and filtered by ``output(k) = sum_i h[i] d_hat(k + advance - i)``; the output before
+    ``t = 0`` is added, time-reversed, to the trial's first samples (:func:`~.band.fold_start`).
+
+    Parameters
+    ----------
+    d_hat : numpy.ndarray
+        The reconstructed disturbance, ``n`` samples, m/s^2.
+    h : numpy.ndarray
+        The FIR's taps.
+    advance : int
+        Its look-ahead, samples.
+    fade : int
+        Samples at the end blended into the trend (:attr:`RobustSetDesign.end_fade`).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``n`` samples.
+    """
+    n = d_hat.size
+    if advance:
+        d_hat = end_continuation(d_hat, advance, fade)
+    full = np.convolve(d_hat, h)  # F's output at times -advance, -advance + 1, ...
+    return fold_start(full[:advance + n], advance, n) if advance else full[:n].copy()
+
+
 def admissible(source: LoopSystem, source_true: LoopSystem, w_bound: np.ndarray, bound: np.ndarray,
                margin: float = 0.5, n: int = 3000) -> tuple[bool, str]:
     """Whether a true plant of system j-1 lies in the set the design guarantees (module docstring).
@@ -740,11 +770,7 @@ class RobustSetDesign:
             y = fftconvolve(markov_parameters(self.filters.target.nominal.G_d, n), d_hat)[:n]  # as the lifted map
             m = min(a, n)  # F on y extended as an odd function before t = 0 (its output starts near 0)
             return -self.trial_inverse(n).solve(np.convolve(np.concatenate([-y[:m][::-1], y]), h)[a + m:a + m + n])
-        if a:
-            d_hat = end_continuation(d_hat, a, self.end_fade)
-        full = np.convolve(d_hat, h)  # F's output at times -a, -a + 1, ...; d_hat = 0 before the trial
-        smoothed = fold_start(full[:a + n], a, n) if a else full[:n].copy()
-        return simulate_map(one_minus(self.filters.target.Q), smoothed)
+        return simulate_map(one_minus(self.filters.target.Q), fir_on_trial(d_hat, h, a, self.end_fade))
 
     def projected(self, n: int) -> bool:
         """Whether a trial of ``n`` samples is treated by least squares (:meth:`apply`); warns when it is too long.

@@ -194,8 +194,26 @@ class IdentifiedModel:
 
     @property
     def transfer_function(self) -> ct.TransferFunction:
-        """``num(s)/den(s)`` as a continuous-time python-control system (the delay is in ``delay``)."""
-        return ct.tf(list(self.num), list(self.den))
+        """``num(s)/den(s)`` as a continuous-time python-control system, its signals named.
+
+        Same convention as ``TFEstimate.model`` of :mod:`ilcdob.identification`:
+        ``inputs``/``outputs`` are :attr:`input` and :attr:`output`, each ``.`` replaced by
+        ``_`` (python-control reserves ``.`` for ``system.signal``); when a name was not
+        reported (""), python-control's default (``u[0]``, ``y[0]``) is kept. The system is
+        named after the stem of :attr:`source` (``uav4.json`` -> ``uav4``, ``.`` replaced by
+        ``_``), or python-control's default for a model built in memory. The input delay is
+        not part of the dynamics (python-control has no delay; no Pade approximation is
+        made): it is attached as the attribute ``input_delay`` (s, equal to :attr:`delay`),
+        so the model is ``G(jw) exp(-jw input_delay)``; any operation on the object (series,
+        feedback, sampling) drops it.
+        """
+        def label(text: str) -> list[str] | None:
+            return [text.replace(".", "_")] if text else None
+
+        name = None if self.source == "<memory>" else Path(self.source).stem.replace(".", "_") or None
+        sys = ct.tf(list(self.num), list(self.den), inputs=label(self.input), outputs=label(self.output), name=name)
+        sys.input_delay = self.delay
+        return sys
 
     @property
     def std(self) -> np.ndarray:

@@ -163,7 +163,7 @@ def _build_learn(cc: str, folder: Path, filters: dict, prefix: str = "p_") -> Pa
     (folder / "learn.c").write_text(_learn_driver(prefix))
     exe = folder / "learn"
     res = subprocess.run([cc, *CFLAGS, f"-I{folder}", str(folder / "learn.c"), str(folder / "filters.c"), "-o",
-                          str(exe)], capture_output=True, text=True)
+                          str(exe), "-lm"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     return exe
 

@@ -210,8 +210,9 @@ def test_a_console_that_cannot_encode_a_character_gets_its_escape(tmp_path, monk
     (["--bound", "0.2"], ["`--bound` 0.2", "closed-form does not use it"]),
     (["--method", "norm-optimal", "--bound", "0.2"], ["`--bound` 0.2", "norm-optimal does not use it"]),
     (["--method", "fir", "--n", "300"], ["`--n` 300", "only norm-optimal does"]),
-    (["--method", "norm-optimal", "--c-float"], ["`--c-float`", "C code"]),
-    (["--method", "robust-set", "--c-prefix", "abc_"], ["`--c-prefix` 'abc_'", "C code"]),
+    (["--method", "norm-optimal", "--c-float"], ["`--c-float`", "L1/L2 filters"]),
+    (["--method", "robust", "--c-prefix", "abc_"], ["`--c-prefix` 'abc_'", "C code"]),
+    (["--method", "robust-set", "--c-float"], ["`--c-float`", "L1/L2 filters to give in float"]),
 ])
 def test_design_options_the_method_does_not_use_are_refused(tmp_path, capsys, monkeypatch, extra, words):
     _no_work(monkeypatch)

@@ -24,6 +24,7 @@ from ilcdob.design.objects import LearningFilterTF, design_to_mat, filter_tf, fi
 from ilcdob.design.closed_form import closed_form_filters
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.errors import ModelFileError, NumericalError, SpecError
+from ilcdob.identified import model_from_dict
 from ilcdob.identification import FitOptions, tfest
 from ilcdob.identification.oe import simulate_zoh
 from ilcdob.loop import freqresp
@@ -233,3 +234,47 @@ def test_mat_export_refuses_bad_input_and_never_leaves_half_a_file(estimate, tmp
 def test_the_package_is_marked_typed():
     marker = importlib.resources.files("ilcdob") / "py.typed"
     assert marker.is_file() and marker.read_bytes() == b""
+
+
+def test_identified_model_transfer_function_keeps_signal_names_and_delay(estimate, tmp_path):
+    _, est = estimate
+    ulog = dataclasses.replace(est, input="vehicle_acceleration.xyz[0]", output="vehicle_local_position.x")
+    path = tmp_path / "uav4.json"
+    path.write_text(json.dumps(ulog.to_dict()), encoding="utf-8")  # as `ilcdob identify` writes model.json
+    model = ilcdob.load_model(path)
+    g = model.transfer_function
+    assert isinstance(g, ct.TransferFunction) and g.dt == 0
+    assert g.input_labels == ["vehicle_acceleration_xyz[0]"] and g.output_labels == ["vehicle_local_position_x"]
+    assert g.name == "uav4"
+    assert g.input_delay == model.delay == est.delay and est.delay > 0.04
+    # the response with the delay applied by hand: num/den by numpy at s = jw, times e^{-jw delay}
+    w = np.geomspace(0.1, 50.0, 25)
+    s = 1j * w
+    want = np.polyval(model.num, s) / np.polyval(model.den, s) * np.exp(-s * model.delay)
+    np.testing.assert_allclose(np.asarray(g(s)).ravel() * np.exp(-s * g.input_delay), want, rtol=1e-12)
+    np.testing.assert_allclose(want, est.frequency_response(w), rtol=1e-9)
+    # signals not reported: python-control's own labels, never empty ones; a model built in memory: its default name
+    data = ulog.to_dict()
+    del data["signals"]
+    bare = model_from_dict(json.loads(json.dumps(data))).transfer_function
+    assert bare.input_labels == ["u[0]"] and bare.output_labels == ["y[0]"] and bare.input_delay == est.delay
+    assert bare.name.startswith("sys[")
+
+
+def test_fir_design_repr_is_one_line_of_the_facts():
+    from ilcdob.design.fir import FIRGuaranteeWarning, FIROptions, design_fir
+
+    fleet = ilcdob.default_fleet()
+    deltas = fleet_delta_sets(fleet, ["UAV1", "UAV2"], k=2, bound=0.6)
+    with pytest.warns(FIRGuaranteeWarning):
+        design = design_fir(fleet.loop("UAV1"), fleet.loop("UAV2"), deltas["UAV1"], deltas["UAV2"],
+                            FIROptions(n_taps=40, advance=6))
+    assert design.unattainable_bands and design.relaxed_bands
+    text = repr(design)
+    assert "\n" not in text and len(text) < 200, text
+    for needle in ("'UAV1' -> 'UAV2'", "40 taps", f"worst |Te1| {design.worst_te1:.3g} at {design.worst_w:.3g} rad/s",
+                   design.solver_status, f"{len(design.unattainable_bands)} unattainable",
+                   f"{len(design.relaxed_bands)} relaxed"):
+        assert needle in text, (needle, text)
+    l1 = repr(design.L1)
+    assert "\n" not in l1 and len(l1) < 200 and "40 taps" in l1 and "advance 6" in l1 and "0.02 s" in l1, l1

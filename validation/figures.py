@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 
 from ilcdob.design import LearningFilters
 from ilcdob.design.figure import (TE_GAIN_ERROR, BodeCurve, draw_bode, finish_bode_axes, frequency_grid, loop_maps,
-                                  magnitude_db, te_responses, with_gain_error)
+                                  magnitude_db, with_gain_error)
 from ilcdob.fleet import Fleet
 from ilcdob.loop import freqresp
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
@@ -321,7 +321,7 @@ def _bode_te(fleet: Fleet, filters: dict[tuple[str, str], LearningFilters]) -> F
     true = {lp.name: with_gain_error(lp, 1 + TE_GAIN_ERROR) for lp in fleet.loops}
     te1, te2 = [], []
     for i, ((src, tgt), lf) in enumerate(sorted(filters.items())):
-        r1, r2 = te_responses(lf, w, true[src], true[tgt])
+        r1, r2 = lf.te_responses(w, true[src], true[tgt])
         te1.append(BodeCurve(_pair(src, tgt), r1, _color(i)))
         te2.append(BodeCurve(_pair(src, tgt), r2, _color(i)))
     omega = [BodeCurve(lp.name, loop_maps(lp, w)["Omega"], _color(i)) for i, lp in enumerate(fleet.loops)]

@@ -48,6 +48,9 @@ _EXAMPLES = {
 MAX_STARTS = 20
 #: Most Levenberg-Marquardt iterations per start of ``identify``.
 MAX_LM_ITERATIONS = 10_000
+#: Choices of ``design --fir-unattainable``: ``ilcdob.design.fir.UNATTAINABLE`` (not imported here, so that
+#: ``--help`` stays fast; a test keeps the two equal).
+FIR_UNATTAINABLE = ("no-harm", "refuse")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -264,6 +267,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fir, robust and robust-set only: multiplicative uncertainty bound (default: identified)")
     p.add_argument("--n", type=_pos, default=None,
                    help="norm-optimal only: trial length in samples (default: the trial's, else 500)")
+    p.add_argument("--fir-unattainable", choices=FIR_UNATTAINABLE, default=None,
+                   help="fir only: where no filter meets |Te1| <= 0.9 for every sampled model, keep only the no-harm "
+                        "promise there and warn (default: no-harm), or refuse the design (exit 2, bands named)")
     p.add_argument("--trial", default=None, help="CSV of the source's trial: time (s), error (m), learning (m/s^2)")
     p.add_argument("--c-prefix", default=None,
                    help="prefix of the C symbols (default: ilcdob_<from>_<to>_, then <axis>_ for y and z)")

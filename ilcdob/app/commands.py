@@ -489,7 +489,8 @@ def _csv_header(path: str | Path) -> list[str]:
 #: Options of ``ilcdob design`` that only some methods use -> those methods (another method refuses them).
 DESIGN_OPTION_METHODS: dict[str, tuple[str, ...]] = {
     "--rho": ("robust", "robust-set"), "--samples": ("fir", "robust"), "--bound": ("fir", "robust", "robust-set"),
-    "--n": ("norm-optimal",), "--c-prefix": ("closed-form", "fir"), "--c-float": ("closed-form", "fir")}
+    "--n": ("norm-optimal",), "--c-prefix": ("closed-form", "fir", "robust-set"),
+    "--c-float": ("closed-form", "fir"), "--fir-unattainable": ("fir",)}
 
 
 def _refuse_unused(method: str, given: dict[str, Any]) -> None:
@@ -499,7 +500,8 @@ def _refuse_unused(method: str, given: dict[str, Any]) -> None:
         if value is not None and method not in users:
             shown = "" if value is True else f" {value!r}"
             which = users[0] if len(users) == 1 else ", ".join(users[:-1]) + f" and {users[-1]}"
-            why = " (the methods with C code)" if option.startswith("--c-") else ""
+            why = {"--c-prefix": " (the methods with C code)",
+                   "--c-float": " (the methods with L1/L2 filters to give in float)"}.get(option, "")
             raise SpecError(f"`{option}`{shown}: --method {method} does not use it, only {which} "
                             f"{'does' if len(users) == 1 else 'do'}{why}; omit {option}, or choose "
                             f"{'that method' if len(users) == 1 else 'one of those methods'}")
@@ -511,7 +513,8 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                      n: int | None = None, law: str = "paper", trial: str | Path | None = None,
                      c_prefix: str | None = None, c_float: bool = False, bandwidth: object = "auto",
                      disturbance: str = "command", on_limit: str = "clip", overwrite: bool = False,
-                     argv: Sequence[str] | None = None, axis: str = "x") -> tuple[Any, dict[str, Any]]:
+                     argv: Sequence[str] | None = None, axis: str = "x",
+                     fir_unattainable: str | None = None) -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
     Parameters
@@ -541,9 +544,9 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         CSV of the source's trial: time (s), error (m), learning (m/s^2) [, reference (m),
         acceleration (m/s^2)].
     c_prefix : str, optional
-        closed-form and fir only (the methods with C code): prefix of the C symbols.
+        closed-form, fir and robust-set only (the methods with C code): prefix of the C symbols.
     c_float : bool
-        closed-form and fir only: also emit float C functions.
+        closed-form, fir and robust-set only: also emit float C functions.
     bandwidth : "auto", float or None
         The learning band's corner, rad/s (:mod:`ilcdob.design.band`): ``"auto"`` chooses it
         from the trial (or the fleet without one); None or ``"off"``: no filter.
@@ -559,6 +562,11 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     axis : {"x", "y", "z"}
         The axis designed (the fleet file's section; filters.json records it, and so the default C
         prefix of y and z designs ends in the axis, :func:`ilcdob.design.c_export.default_c_prefix`).
+    fir_unattainable : {"no-harm", "refuse"}, optional
+        fir only: where no filter meets the margin ``|Te1| <= 1 - margin`` for every sampled model,
+        keep only the no-harm promise there and warn (default, "no-harm"), or refuse the design
+        (``refuse``: :class:`~ilcdob.design.fir.FIRDesignError`, nothing written);
+        :attr:`ilcdob.design.fir.FIROptions.unattainable`.
 
     Returns
     -------
@@ -570,10 +578,13 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     SpecError
         Besides bad values: an option the method does not use (:data:`DESIGN_OPTION_METHODS`), refused
         rather than ignored.
+    ilcdob.design.fir.FIRDesignError
+        ``fir_unattainable="refuse"`` and the margin cannot be met (the message names the bands).
     """
     from ilcdob.design.c_export import check_c_prefix, design_files
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
     from ilcdob.design.figure import pair_bode_figure
+    from ilcdob.design.fir import UNATTAINABLE, FIROptions
     from ilcdob.design.laws import check_law
     from ilcdob.design.pair import METHODS, design_pair, design_with_band, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
@@ -591,7 +602,11 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     if method not in METHODS:
         raise SpecError(f"`--method`: got {method!r}, valid methods are {list(METHODS)}")
     _refuse_unused(method, {"--rho": rho, "--samples": samples, "--bound": bound, "--n": n, "--c-prefix": c_prefix,
-                            "--c-float": True if c_float else None})
+                            "--c-float": True if c_float else None, "--fir-unattainable": fir_unattainable})
+    if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
+        raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)} "
+                        "(no-harm: keep only the no-harm promise where the margin cannot be met, and warn; "
+                        "refuse: stop with the bands named)")
     if method == "robust-set" and rho is not None and not (np.isfinite(rho) and 0 < rho <= 1):
         raise SpecError(f"`--rho`: got {rho!r}, expected a guaranteed improvement factor in (0, 1] for --method "
                         "robust-set (|e_j| <= rho |e'_j| on every plant of the Delta set; 1: never worse than "
@@ -633,6 +648,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     if law == "exact-reference":
         reference = {"reference": data["r"], "acceleration": data["a"] if "a" in data.signals else None}
     design = design_pair(flt, source, target, method, n=n, deltas=deltas,
+                         fir=FIROptions(unattainable=fir_unattainable) if fir_unattainable is not None else None,
                          robust=RobustOptions(rho=rho) if method in ("robust", "robust-set") else None,
                          law=law, bandwidth=bandwidth, disturbance=disturbance, on_limit=on_limit,
                          **reference)
@@ -838,9 +854,10 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
             made = design_with_band(made, made.band_for(e, df_prev))
         filters = {**made.filters, "axis": axis or "x"}
         origin = f"designed here ({method})"
-    if filters.get("law", "paper") != "paper" or "L1" not in filters or "L2" not in filters:
+    if filters.get("law", "paper") != "paper" or not ("L1" in filters and "L2" in filters or "law_maps" in filters):
         raise SpecError(f"the filters ({origin}): method {filters.get('method')!r}, law {filters.get('law')!r}; "
-                        "`ilcdob learn` computes the paper's law from L1/L2 filters (closed-form or fir designs)")
+                        "`ilcdob learn` computes the paper's law from L1/L2 filters (closed-form or fir designs) "
+                        "or from a robust-set design's `law_maps`")
     ts = float(filters["sample_time"])
     if abs(data.ts - ts) > 1e-9:
         raise SignalError(f"{trial}: sample time {data.ts} s differs from the filters' {ts} s")

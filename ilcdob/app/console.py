@@ -244,16 +244,16 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
 
 def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
-    design, written = uc.design_to_folder(
+    _, written = uc.design_to_folder(
         a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho, samples=a.samples, bound=a.bound,
         n=a.n, law=a.law, trial=a.trial, c_prefix=a.c_prefix, c_float=a.c_float, bandwidth=a.bandwidth,
-        disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv, axis=a.axis)
+        disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv, axis=a.axis,
+        fir_unattainable=a.fir_unattainable)
     band = written.get("band", {})
     cutoff = band.get("cutoff_rad_s")
     con.note(f"ilcdob: learning band {'off' if cutoff is None else f'{cutoff:.4g} rad/s'} ({band.get('reason', '')})")
-    if "L1" not in design.filters and (a.c_prefix is not None or a.c_float):
-        con.note(f"ilcdob: note: method {a.method} has no L1/L2 filters; no C code written")
-    summary = {k: v for k, v in written.items() if k not in ("L1", "L2", "band", "disturbance")}
+    summary = {k: v for k, v in written.items()
+               if k not in ("L1", "L2", "band", "disturbance", "closed_form", "law_maps", "F")}
     summary["band"] = {k: written["band"][k] for k in ("cutoff_rad_s", "source", "reason")}
     summary["disturbance"] = written["disturbance"]["at"]
     print(json.dumps(summary))

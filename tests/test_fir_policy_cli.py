@@ -1,0 +1,81 @@
+"""``ilcdob design --method fir --fir-unattainable {no-harm,refuse}``: the FIR design's policy where the margin
+cannot be met, chosen on the command line.
+
+The case is UAV1 -> UAV2 of the built-in fleet with two Delta samples of ``|Delta| <= 0.6`` per system: there no
+filter of any order keeps ``|Te1| <= 0.9`` for both sampled models between about 3 and 22 rad/s (tests/test_fir.py
+shows the same with six samples, independently of any solver).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from ilcdob.app import cli, commands
+from ilcdob.app.cli import main
+from ilcdob.design.fir import UNATTAINABLE
+from ilcdob.errors import SpecError
+
+FIR = ["design", "--from", "UAV1", "--to", "UAV2", "--method", "fir", "--samples", "2", "--bound", "0.6"]
+#: A band as the messages write it: "3.17-22.3 rad/s" (several joined by ", ").
+BAND = re.compile(r"at \d+(\.\d+)?-\d+(\.\d+)?( rad/s|, )")
+
+
+def test_refuse_exits_2_naming_the_bands_and_writes_nothing(tmp_path, capsys):
+    rc = main(["--quiet", *FIR, "--fir-unattainable", "refuse", "--out", str(tmp_path / "d")])
+    out, err = capsys.readouterr()
+    assert rc == 2, err[-3000:]
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ilcdob: error: "), err[-3000:]
+    line = lines[0]
+    assert "'UAV1' -> 'UAV2'" in line and "not met by any filter" in line and BAND.search(line), line
+    assert "--fir-unattainable no-harm" in line, line  # the way back, named as the command line spells it
+    assert out == "" and not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("flag", [[], ["--fir-unattainable", "no-harm"]])
+def test_no_harm_default_writes_the_folder_and_warns_with_the_flag(tmp_path, capsys, flag):
+    out_dir = tmp_path / "d"
+    rc = main([*FIR, *flag, "--out", str(out_dir)])
+    out, err = capsys.readouterr()
+    assert rc == 0, err[-3000:]
+    warning = [line for line in err.splitlines() if line.startswith("ilcdob: warning: ")]
+    assert len(warning) == 1 and "given up at" in warning[0] and BAND.search(warning[0]), err
+    assert "--fir-unattainable refuse" in warning[0], warning[0]
+    robustness = json.loads((out_dir / "filters.json").read_text(encoding="utf-8"))["robustness"]
+    assert robustness["unattainable_bands"] and robustness["relaxed_bands"]
+    assert json.loads(out)["method"] == "fir"
+
+
+@pytest.mark.parametrize("method", ["closed-form", "robust-set", "norm-optimal"])
+def test_the_flag_with_a_method_that_does_not_use_it_is_refused(tmp_path, capsys, monkeypatch, method):
+    def no_work(*args, **kwargs):
+        raise AssertionError("the fleet was loaded: the option was not checked up front")
+
+    monkeypatch.setattr(commands, "fleet_and_hash", no_work)
+    rc = main(["--quiet", "design", "--from", "UAV1", "--to", "UAV2", "--method", method,
+               "--fir-unattainable", "refuse", "--out", str(tmp_path / "d")])
+    out, err = capsys.readouterr()
+    assert rc == 2, err[-3000:]
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ilcdob: error: `--fir-unattainable` 'refuse': "), err
+    assert f"--method {method} does not use it, only fir does" in lines[0], lines[0]
+    assert out == "" and not (tmp_path / "d").exists()
+
+
+def test_the_python_call_checks_the_policy_and_the_choices_are_the_designs():
+    with pytest.raises(SpecError, match=r"`--fir-unattainable`: got 'ignore', expected one of \['no-harm', 'refuse'\]"):
+        commands.design_to_folder("unused", "UAV1", "UAV2", method="fir", fir_unattainable="ignore")
+    assert cli.FIR_UNATTAINABLE == UNATTAINABLE
+
+
+def test_c_options_are_accepted_for_robust_set_and_still_refused_elsewhere():
+    commands._refuse_unused("robust-set", {"--c-prefix": "abc_"})
+    with pytest.raises(SpecError, match=r"`--c-float`: --method robust-set does not use it, only closed-form and "
+                                        r"fir do \(the methods with L1/L2 filters to give in float\)"):
+        commands._refuse_unused("robust-set", {"--c-float": True})
+    with pytest.raises(SpecError, match=r"`--c-prefix` 'abc_': --method norm-optimal does not use it, only "
+                                        r"closed-form, fir and robust-set do \(the methods with C code\)"):
+        commands._refuse_unused("norm-optimal", {"--c-prefix": "abc_"})
