@@ -379,17 +379,25 @@ def test_a_swallowed_ctrl_c_inside_ipopt_is_raised_again():
 
     from ilcdob.interrupts import honour_interrupts
 
-    n = 20000  # a solve of several seconds: the signal arrives inside it
+    # a chained Rosenbrock function with a limited-memory Hessian and no early acceptance: minutes of
+    # iterations (a problem that IPOPT ends in 0.5 s let the signal arrive after the solve on a fast run),
+    # capped at 60 s of CPU so that a lost signal fails the test instead of hanging it
+    n = 20000
     x = cs.MX.sym("x", n)
-    solver = cs.nlpsol("long", "ipopt", {"x": x, "f": cs.sumsqr(cs.sin(x) - 0.3) + cs.sum1(cs.exp(1e-3 * x))},
-                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 100000,
-                        "ipopt.tol": 1e-30})
+    solver = cs.nlpsol("long", "ipopt", {"x": x, "f": 100 * cs.sumsqr(x[1:] - x[:-1] ** 2) + cs.sumsqr(1 - x[:-1])},
+                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 10 ** 6,
+                        "ipopt.tol": 1e-30, "ipopt.acceptable_iter": 0, "ipopt.max_cpu_time": 60.0,
+                        "ipopt.hessian_approximation": "limited-memory"})
     timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
-    with pytest.raises(KeyboardInterrupt):
-        with honour_interrupts():
-            timer.start()
-            solver(x0=5.0 * np.ones(n))
-    timer.join()
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # Python's own Ctrl-C, whatever ran before
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with honour_interrupts():
+                timer.start()
+                solver(x0=-1.2 * np.ones(n))
+    finally:
+        timer.join()
+        signal.signal(signal.SIGINT, previous)
     assert solver.stats()["return_status"] == "NonIpopt_Exception_Thrown"  # what CasADi made of the Ctrl-C
 
 
