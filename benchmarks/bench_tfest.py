@@ -1,4 +1,11 @@
-"""Benchmark of the output-error engine (``ilcdob.identification.tfest``), four targets.
+"""Benchmark of the output-error engine (``ilcdob.identification.tfest``), five targets.
+
+0. The start search: the whole fit against its filtering floor (the filtering passes one SRIVC
+   refinement pass makes on the full record, :func:`_floor_passes`), with the former start search
+   (:func:`baseline_candidates`, every candidate solved on the whole record) and the shipped one
+   (ranked on the band-limited decimated record, batched), interleaved in one process, median CPU
+   time; on the 30,000-sample log of 1. and (``--long``) the 2,000,000-sample log of 4. Target:
+   the fit within 10 x its floor at 30,000 samples, the same parameters.
 
 1. Speed against a plain baseline: a 4-parameter fit on 30,000 samples (20 dB SNR), ilcdob's
    ``tfest`` with its default options (SRIVC + pole-grid starts, LM with filtered
@@ -15,13 +22,18 @@
 4. Peak resident memory of a 2-pole fit on one 2,000,000-sample log (1 kHz, 33 min), in a
    fresh subprocess. Target: <= 1.5 GB.
 
-Run:  python benchmarks/bench_tfest.py [--repeat 3] [--skip-memory]
+Run:  python benchmarks/bench_tfest.py [--repeat 3] [--skip-memory] [--search-only] [--long]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib
 import json
+import math
+import os
+import statistics
 import subprocess
 import sys
 import time
@@ -37,6 +49,51 @@ from ilcdob.identification.srivc import srivc
 from ilcdob.identification.synthetic import closed_loop_flight
 from ilcdob.identification.tfest import FitOptions, tfest
 from ilcdob.specs import PIDSpec, PlantSpec
+
+_tf = importlib.import_module("ilcdob.identification.tfest")
+
+
+def baseline_candidates(model, delay: float, say):
+    """The start search as it was before the decimated, batched ranking (the reference of the start-search
+    comparison): SRIVC on the record (chunked beyond ``RANKING_SAMPLES``), then every candidate solved
+    on it one at a time by ``_Model.evaluate``."""
+    full = model
+    model = _tf._chunked(full)
+    s = model.s
+    dens = []
+    try:
+        th = srivc(s, [(e.u, e.y) for e in model.exps], model.ts, delay=delay, iterations=4, tol=1e-4)
+        if np.all(np.isfinite(th)):
+            dens.append(th[: s.n_free_poles])
+    except (np.linalg.LinAlgError, ValueError):
+        say(0, 0, "SRIVC gave no estimate; starting from the pole grid only")
+    dens += _tf._grid_denominators(s, model.ts) + _tf._frequency_domain_denominators(s, model.exps, model.ts, delay)
+    extra = [delay] if model.estimate_delay else []
+    out = []
+    for a in dens:
+        p = model.evaluate(np.concatenate([a, extra]), delay)
+        if math.isfinite(p.sse):
+            p.cols = None
+            out.append(p)
+    out.sort(key=lambda p: p.sse)
+    ranking = {"decimation": 1, "samples": sum(e.n for e in model.exps)}
+    if model is full:
+        return out, ranking
+    best = [full.evaluate(p.alpha, delay) for p in _tf._distinct(out, max(full.opts.starts, 1))]
+    return sorted((p for p in best if math.isfinite(p.sse)), key=lambda p: p.sse), ranking
+
+
+@contextlib.contextmanager
+def search(which: str):
+    """``with search("baseline"):`` runs ``tfest`` with :func:`baseline_candidates`; ``"new"``: as shipped."""
+    if which not in ("baseline", "new"):
+        raise ValueError(f"search: got {which!r}, expected 'baseline' or 'new'")
+    shipped = _tf._candidates
+    _tf._candidates = baseline_candidates if which == "baseline" else shipped
+    try:
+        yield
+    finally:
+        _tf._candidates = shipped
 
 TS = 0.02
 N = 30_000
@@ -138,6 +195,80 @@ def seven_files(repeat: int = 1) -> dict[str, float]:
             "max_rel_err": float(np.max(np.abs(est.theta / theta - 1)))}
 
 
+def _floor_passes(u: np.ndarray, y: np.ndarray, structure: ModelStructure, theta: np.ndarray, ts: float) -> None:
+    """The filtering floor: the filtering passes of one SRIVC refinement pass on the full record, through
+    SRIVC's own functions -- the state-variable filter bank of the output (orders 0..n, first-order hold),
+    of the input (orders 0..m, zero-order hold), the model's simulated output (the instrument) and its
+    filter bank -- with the prefilter of ``theta`` (the discretisations included)."""
+    from ilcdob.identification import srivc as sv
+
+    n = structure.n_poles
+    lpoly = sv._stable_prefilter(theta, structure, 0.1 * np.pi / ts / 5)
+    bank = sv._bank(lpoly, ts)
+    sv._filter_bank(y, lpoly, bank, range(n + 1), "foh")
+    sv._filter_bank(u, lpoly, bank, range(structure.n_zeros + 1), "zoh")
+    sv._filter_bank(simulate_zoh(structure, theta, u, ts), lpoly, bank, range(n + 1), "foh")
+
+
+def _long_data(n: int = 2_000_000, ts: float = 0.001):
+    """The 2-pole log of the memory benchmark (1 kHz, 33 min)."""
+    s = ModelStructure(2, 0, 0)
+    theta = s.join([30.0], [1.0, 6.0, 30.0])
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.uniform(-1, 1, n // 2000 + 1), 2000)[:n] + 0.3 * np.sin(2 * np.pi * 1.3 * np.arange(n) * ts)
+    y = simulate_zoh(s, theta, u, ts) + 0.01 * rng.standard_normal(n)
+    return FlightData(np.arange(n) * ts, {"u": u, "y": y}), s, theta
+
+
+def start_search(repeat: int = 7, long: bool = False) -> list[dict]:
+    """The fit against its filtering floor (:func:`_floor_passes`), with the former start search
+    (:func:`baseline_candidates`) and the shipped one, interleaved (floor, baseline, shipped, floor, ...),
+    median CPU time (``time.process_time``; the fit runs single-threaded) of ``repeat`` rounds, on the
+    30,000-sample log of :func:`speed` and, with ``long``, the 2,000,000-sample log of :func:`memory`.
+    Also: the share of the fit spent choosing the starts, and how far the two fits' parameters lie apart
+    in the baseline's standard deviations."""
+    cases = [("30,000 samples, 2 poles 1 zero", _data(), STRUCTURE, TRUE, repeat)]
+    if long:
+        cases.append(("2,000,000 samples, 2 poles", *_long_data(), max(1, repeat // 3)))
+    rows = []
+    for name, data, structure, theta, rounds in cases:
+        u, y, ts = data["u"], data["y"], data.ts
+        times = {"floor": [], "baseline": [], "new": []}
+        share = {"baseline": [], "new": []}
+        ests = {}
+        for _ in range(rounds):
+            with _tf._blas_controller().limit(limits=1, user_api="blas"):
+                t0 = time.process_time()
+                _floor_passes(u, y, structure, theta, ts)
+                times["floor"].append(time.process_time() - t0)
+            for which in ("baseline", "new"):
+                with search(which):
+                    chosen, spent = _tf._candidates, [0.0]
+
+                    def timed(*args, chosen=chosen, spent=spent):
+                        t1 = time.process_time()
+                        try:
+                            return chosen(*args)
+                        finally:
+                            spent[0] += time.process_time() - t1
+                    _tf._candidates = timed
+                    t0 = time.process_time()
+                    ests[which] = tfest(data, "u", "y", structure, **QUIET)
+                    times[which].append(time.process_time() - t0)
+                    share[which].append(spent[0] / times[which][-1])
+        med = {k: statistics.median(v) for k, v in times.items()}
+        b, n = ests["baseline"], ests["new"]
+        rows.append({"case": name, "floor_s": med["floor"], "baseline_s": med["baseline"], "new_s": med["new"],
+                     "baseline_x_floor": med["baseline"] / med["floor"], "new_x_floor": med["new"] / med["floor"],
+                     "speedup": med["baseline"] / med["new"],
+                     "search_share_baseline": statistics.median(share["baseline"]),
+                     "search_share_new": statistics.median(share["new"]),
+                     "decimation": n.solver.get("ranking", {}).get("decimation", 1),
+                     "d_sigma": float(np.max(np.abs(n.theta - b.theta) / b.std)),
+                     "fit_baseline": b.fit_estimation, "fit_new": n.fit_estimation})
+    return rows
+
+
 _MEMORY_CHILD = r"""
 import json, resource, sys, time
 import numpy as np
@@ -170,7 +301,20 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--skip-memory", action="store_true", help="skip the 2,000,000-sample subprocess")
+    parser.add_argument("--search-only", action="store_true", help="only the start search against the filtering floor")
+    parser.add_argument("--long", action="store_true", help="the start search on the 2,000,000-sample log too")
     args = parser.parse_args()
+    print(f"start search, fit against its filtering floor (one SRIVC pass's filtering on the full record); median "
+          f"CPU time, interleaved; load {os.getloadavg()[0]:.2f}")
+    for r in start_search(max(args.repeat, 7), args.long):
+        print(f"  {r['case']}: floor {r['floor_s'] * 1e3:.2f} ms; baseline {r['baseline_s'] * 1e3:.1f} ms = "
+              f"{r['baseline_x_floor']:.1f} x floor (start search {100 * r['search_share_baseline']:.0f} %); shipped "
+              f"{r['new_s'] * 1e3:.1f} ms = {r['new_x_floor']:.1f} x floor (start search "
+              f"{100 * r['search_share_new']:.0f} %, ranked decimated {r['decimation']}x); speed-up "
+              f"{r['speedup']:.2f}; parameters {r['d_sigma']:.1e} sigma apart, fit {r['fit_baseline']:.4f} / "
+              f"{r['fit_new']:.4f} %")
+    if args.search_only:
+        sys.exit(0)
     r = speed(args.repeat)
     print(f"ilcdob tfest (LM, filtered sensitivities): {r['ilcdob_s']:.3f} s, max relative parameter error "
           f"{r['ilcdob_max_rel_err']:.2e}")

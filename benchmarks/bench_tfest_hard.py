@@ -24,14 +24,26 @@ Cases (built here, as in ``tests/test_tfest_hard.py``):
 * corrupt file: the same plant, four files, one with its output jumping 16 units over its last
   second (the truth column on a clean held-out file).
 
-Run:  python benchmarks/bench_tfest_hard.py
+Then the start search: every case above and five of ``tests/test_tfest_hard.py`` (coloured noise,
+slow drift with a trend, offsets and initial conditions, closed loop with delay and saturation, a
+logger dropout), at the tests' lengths and ``--scales`` times as long, fitted with the former start
+search (``bench_tfest.baseline_candidates``) and the shipped one, interleaved: held-out fit of each,
+the largest parameter difference in standard deviations, the criterion difference, the decimation
+of the ranking record and the CPU-time ratio.
+
+Run:  python benchmarks/bench_tfest_hard.py [--search-only] [--scales 1 8] [--repeat 3]
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib
+import os
+import statistics
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import control as ct
 import numpy as np
@@ -41,6 +53,8 @@ from scipy import signal as sps
 from ilcdob.identification.tfest import FitOptions, tfest
 from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_tfest: the baseline start search
 
 
 def _fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -98,10 +112,10 @@ def ilcdob_starts(flights: list[FlightData], structure: ModelStructure, opts: Fi
     tf = importlib.import_module("ilcdob.identification.tfest")
     exps, ts = tf._experiments(flights, "u", "y", structure, opts, tf._silent)
     model = tf._Model(structure, exps, ts, opts, False)
-    return [structure.split(p.theta) for p in tf._candidates(model, 0.0, tf._silent)[: opts.starts]]
+    return [structure.split(p.theta) for p in tf._candidates(model, 0.0, tf._silent)[0][: opts.starts]]
 
 
-def _flexible():
+def _flexible(scale: int = 1):
     m = np.diag([1.0, 0.5, 0.8])
     k = np.array([[44.0, -40.0, 0.0], [-40.0, 65.0, -25.0], [0.0, -25.0, 25.0]])
     c = np.array([[0.85, -0.05, 0.0], [-0.05, 0.09, -0.04], [0.0, -0.04, 0.04]])
@@ -112,26 +126,26 @@ def _flexible():
     ts, data = 0.01, []
     for seed in (0, 1):
         rng = np.random.default_rng(seed)
-        u = np.repeat(rng.standard_normal(301), 20)[:6000]
+        u = np.repeat(rng.standard_normal(300 * scale + 1), 20)[:6000 * scale]
         y = _simulate(num, den, u, ts, 0)
         data.append((u, y + 0.02 * np.std(y) * rng.standard_normal(u.size)))
     return "flexible (6 poles, 5 zeros)", ts, num, den, 0, data[:1], data[1:], ModelStructure(6, 5, 0), FitOptions(), \
         [0], True
 
 
-def _thermal():
+def _thermal(scale: int = 1):
     num, den, ts, data = np.array([1.0]), np.polymul([60.0, 1.0], [15.0, 1.0]), 2.0, []
     for seed in (0, 1):
         rng = np.random.default_rng(seed)
-        u = np.repeat(rng.choice([-1.0, 1.0], 61), 60)[:3600]
+        u = np.repeat(rng.choice([-1.0, 1.0], 60 * scale + 1), 60)[:3600 * scale]
         data.append((u, _simulate(num, den, u, ts, 6) + 0.01 * rng.standard_normal(u.size)))
     return ("thermal (2 poles, 12 s delay, Ts 2 s)", ts, num, den, 6, data[:1], data[1:], ModelStructure(2, 0, 0),
             FitOptions(delay="auto"), list(range(0, 16)), True)
 
 
-def _unstable():
+def _unstable(scale: int = 1):
     p = ct.tf([2.0], np.polymul([1.0, -0.5], [1.0, 3.0]))
-    ts, n, data = 0.01, 3000, []
+    ts, n, data = 0.01, 3000 * scale, []
     t = np.arange(n) * ts
     for seed in (0, 1):
         rng = np.random.default_rng(seed)
@@ -156,18 +170,19 @@ def _stable_files(seeds, rng, ts: float = 0.01, n: int = 3000):
     return num, den, out
 
 
-def _lagging():
-    num, den, data = _stable_files((3, 4), np.random.default_rng(3))
+def _lagging(scale: int = 1):
+    num, den, data = _stable_files((3, 4), np.random.default_rng(3), n=3000 * scale)
     late = [(u[:-5], y[5:]) for u, y in data]               # the input logged 5 samples late
     return ("lagging input (5 samples late)", 0.01, num, den, 0, late[:1], late[1:], ModelStructure(2, 1, 0),
             FitOptions(delay="auto", max_delay=0.15), list(range(0, 16)), True)
 
 
-def _corrupt():
+def _corrupt(scale: int = 1):
     rng = np.random.default_rng(21)
-    num, den, files = _stable_files(range(4), rng)
-    files[2] = (files[2][0], files[2][1] + np.where(np.arange(3000) >= 2900, 16.0, 0.0))
-    return ("corrupt file among four", 0.01, num, den, 0, files, _stable_files((7,), rng)[2],
+    n = 3000 * scale
+    num, den, files = _stable_files(range(4), rng, n=n)
+    files[2] = (files[2][0], files[2][1] + np.where(np.arange(n) >= n - 100, 16.0, 0.0))
+    return ("corrupt file among four", 0.01, num, den, 0, files, _stable_files((7,), rng, n=n)[2],
             ModelStructure(2, 1, 0), FitOptions(), [0], True)
 
 
@@ -177,7 +192,136 @@ def _held_out(num, den, lag, val, ts) -> float:
     return _fit_percent(y, np.concatenate([yh + np.mean(yv - yh) for yh, (_, yv) in zip(yhat, val)]))
 
 
-def main() -> None:
+# ---------------------------------------------------------------- the start search: baseline against shipped
+
+def _excite(n: int, seed: int, ts: float, doublets: bool = False) -> np.ndarray:
+    """Chirp plus random steps, or (integrating plants) a cosine chirp plus doublets (as in the tests)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * ts
+    if not doublets:
+        chirp = np.sin(2 * np.pi * (0.05 * t + 3.0 * t**2 / (2 * t[-1])))
+        return 0.7 * chirp + 0.5 * np.repeat(rng.choice([-1.0, 1.0], n // 150 + 1), 150)[:n]
+    unit = np.concatenate([np.ones(30), -np.ones(30), np.zeros(140)])
+    d = np.concatenate([sg * unit for sg in rng.choice([-1.0, 1.0], n // unit.size + 1)])[:n]
+    return 0.3 * np.cos(2 * np.pi * (0.3 * t + 2.0 * t**2 / (2 * t[-1]))) + 1.5 * d
+
+
+_STABLE = (ModelStructure(2, 1, 0), [2.0, 3.0], [1.0, 1.4, 4.0])
+_QUAD = (ModelStructure(3, 0, 2), [8.0], [1.0, 8.0, 0.0, 0.0])
+
+
+def _suite_case(name: str, scale: int):
+    """Cases of ``tests/test_tfest_hard.py`` (coloured noise, drift, offsets and initial conditions, closed
+    loop with delay and saturation, a logger dropout), ``scale`` times as long: ``(estimation, validation,
+    structure, options)``."""
+    from ilcdob.identification.oe import simulate_zoh
+    from ilcdob.identification.synthetic import closed_loop_flight
+    from ilcdob.specs import PIDSpec, PlantSpec
+
+    ts = 0.01
+    structure, num, den = _QUAD if name in ("closed loop, delay, saturation", "logger dropout") else _STABLE
+    theta = structure.join(num, den)
+
+    def flight(u, y, **meta):
+        return FlightData(np.arange(u.size) * ts, {"u": u, "y": y}, metadata=meta)
+
+    flights, opts = [], FitOptions()
+    if name == "coloured noise":
+        rng = np.random.default_rng(1)
+        for seed in (0, 1):
+            u = _excite(4000 * scale, seed, ts)
+            y0 = simulate_zoh(structure, theta, u, ts)
+            w = sps.lfilter([1.0], [1.0, -0.97], rng.standard_normal(u.size))
+            flights.append(flight(u, y0 + 0.15 * np.std(y0) * w / np.std(w)))
+    elif name == "slow drift (trend 3)":
+        rng = np.random.default_rng(2)
+        for seed in (0, 1):
+            u = _excite(5000 * scale, seed, ts)
+            t = np.arange(u.size) * ts
+            drift = 0.8 * t / t[-1] + 0.4 * np.sin(2 * np.pi * t / 90.0 + seed)
+            y = simulate_zoh(structure, theta, u, ts) + drift + 0.02 * rng.standard_normal(u.size)
+            flights.append(flight(u, y))
+        opts = FitOptions(trend=3)
+    elif name == "offsets, initial conditions":
+        rng = np.random.default_rng(3)
+        for seed, (x0, offset) in enumerate((([1.5, -2.0], 3.7), ([-0.8, 0.6], -1.2), ([0.3, 2.5], 0.4))):
+            u = _excite(3000 * scale, seed, ts)
+            y = simulate_zoh(structure, theta, u, ts, x0=np.array(x0)) + offset
+            flights.append(flight(u, y + 0.02 * rng.standard_normal(u.size)))
+        return flights[:2], flights[2:], structure, opts
+    elif name == "closed loop, delay, saturation":
+        rng = np.random.default_rng(6)
+        for seed in (0, 1):
+            n = 4000 * scale
+            t = np.arange(n) * ts
+            r = np.repeat(np.random.default_rng(seed).choice([-0.6, 0.6], n // 300 + 1), 300)[:n]
+            r = r + 0.2 * np.sin(2 * np.pi * (0.05 * t + 1.5 * t**2 / (2 * t[-1])))
+            noise = 2e-3 * rng.standard_normal(n)
+            u, y = closed_loop_flight(PlantSpec(num, den, 0.02), PIDSpec(3.0, 0.3, 0.12, 0.05), r, ts, noise, 1.2)
+            flights.append(flight(u, y + noise))
+        opts = FitOptions(delay="auto", max_delay=0.1)
+    elif name == "logger dropout":
+        rng = np.random.default_rng(9)
+        for seed in (0, 1):
+            n = 4000 * scale
+            u = _excite(n, seed, ts, doublets=True)
+            y = simulate_zoh(structure, theta, u, ts) + 1e-3 * rng.standard_normal(n)
+            flights.append(flight(u, y, gaps=[[15.0, 16.5]]))     # cut there: FlightData.pieces()
+    else:
+        raise ValueError(f"_suite_case: got {name!r}")
+    return flights[:1], flights[1:], structure, opts
+
+
+SUITE = ("coloured noise", "slow drift (trend 3)", "offsets, initial conditions", "closed loop, delay, saturation",
+         "logger dropout")
+
+
+def _all_cases(scale: int):
+    for case in (_flexible, _thermal, _unstable, _lagging, _corrupt):
+        name, ts, _, _, _, est_data, val_data, structure, opts, _, _ = case(scale)
+        yield (name, [FlightData(np.arange(u.size) * ts, {"u": u, "y": y}, source=f"file {i + 1}")
+                      for i, (u, y) in enumerate(est_data)],
+               [FlightData(np.arange(u.size) * ts, {"u": u, "y": y}) for u, y in val_data], structure, opts)
+    for name in SUITE:
+        yield (name, *_suite_case(name, scale))
+
+
+def compare_search(scales: list[int], repeat: int) -> list[dict]:
+    """Every case fitted with today's start search (``bench_tfest.baseline_candidates``) and the shipped one,
+    interleaved (baseline, shipped, baseline, ...), ``repeat`` times each: CPU time medians, held-out fit %,
+    the largest parameter difference in units of the baseline's standard deviations, the relative criterion
+    difference and the decimation the shipped search ranked on."""
+    from bench_tfest import search
+
+    rows = []
+    for scale in scales:
+        for name, est_data, val_data, structure, opts in _all_cases(scale):
+            times, ests = {"baseline": [], "new": []}, {}
+            for _ in range(repeat):
+                for which in ("baseline", "new"):
+                    with search(which), warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        t0 = time.process_time()
+                        ests[which] = tfest(est_data, "u", "y", structure, opts, validation=val_data, progress=None)
+                        times[which].append(time.process_time() - t0)
+            b, n = ests["baseline"], ests["new"]
+            tb = np.concatenate([b.theta, [b.delay]]) if b.delay_estimated else b.theta
+            tn = np.concatenate([n.theta, [n.delay]]) if n.delay_estimated else n.theta
+            with np.errstate(divide="ignore", invalid="ignore"):
+                d_sigma = float(np.max(np.abs(tn - tb) / b.std))
+            rows.append({"case": name, "scale": scale, "samples": sum(fd.t.size for fd in est_data),
+                         "decimation": n.solver.get("ranking", {}).get("decimation", 1),
+                         "fit_baseline": b.fit_validation, "fit_new": n.fit_validation, "theta_baseline": tb,
+                         "theta_new": tn, "d_sigma": d_sigma, "d_sse": n.sigma2 / b.sigma2 - 1.0,
+                         "t_baseline": statistics.median(times["baseline"]), "t_new": statistics.median(times["new"])})
+            r = rows[-1]
+            print(f"{name:<36} {scale:>2}x {r['samples']:>7} {r['decimation']:>4} {r['fit_baseline']:8.3f} "
+                  f"{r['fit_new']:8.3f} {r['d_sigma']:9.2e} {r['d_sse']:+9.1e} {r['t_baseline'] * 1e3:9.1f} "
+                  f"{r['t_new'] * 1e3:8.1f} {r['t_baseline'] / r['t_new']:6.2f}", flush=True)
+    return rows
+
+
+def plain_comparison() -> None:
     print(f"{'case':<34} {'truth':>6} {'ilcdob':>7} {'plain':>6} {'same':>6} {'t ilcdob':>9} {'t plain':>8} "
           f"{'t same':>7} {'ratio':>6} {'same':>5}")
     for case in (_flexible, _thermal, _unstable, _lagging, _corrupt):
@@ -202,6 +346,25 @@ def main() -> None:
               f"{times[0]:7.2f}s {times[1]:6.2f}s {ratios[0]:>6} {ratios[1]:>5}")
     print("ratio: plain time / ilcdob time where the plain fit comes within 0.5 points of ilcdob's held-out fit "
           "(n/a: it stops below)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--search-only", action="store_true", help="only the start-search comparison")
+    parser.add_argument("--scales", type=int, nargs="+", default=[1, 8],
+                        help="record lengths of the start-search comparison, in multiples of the tests' (1 8)")
+    parser.add_argument("--repeat", type=int, default=3, help="interleaved runs per search and case (3)")
+    args = parser.parse_args()
+    if not args.search_only:
+        plain_comparison()
+    print(f"\nstart search: baseline (every candidate solved on the whole record) against shipped (ranked on the "
+          f"band-limited decimated record, batched); median CPU time of {args.repeat} interleaved runs; "
+          f"load {os.getloadavg()[0]:.2f}")
+    print(f"{'case':<36} {'len':>3} {'samples':>7} {'dec':>4} {'fit base':>8} {'fit new':>8} {'dθ/σ':>9} "
+          f"{'dSSE':>9} {'t base ms':>9} {'t new ms':>8} {'ratio':>6}")
+    compare_search(args.scales, args.repeat)
+    print("fit: held-out fit %; dθ/σ: largest parameter (and delay) difference in the baseline's standard "
+          "deviations; dSSE: relative criterion difference (new / baseline - 1); ratio: baseline time / shipped time")
 
 
 if __name__ == "__main__":

@@ -69,6 +69,10 @@ _GAIN_CHECK_W = np.array([0.37, 1.3, 5.1, 17.0])  # rad/s, points where the zpk 
 def simulate_map(sys: ct.StateSpace, u: np.ndarray) -> np.ndarray:
     """Causal response of a discrete SISO system to an input trial, from rest.
 
+    The state-space recursion of ``sys`` in compiled code (:func:`ilcdob.statespace.simulate`:
+    a Schur solve refined against ``sys``'s own matrices), to the rounding of the
+    sample-by-sample recursion.
+
     Parameters
     ----------
     sys : control.StateSpace
@@ -80,9 +84,24 @@ def simulate_map(sys: ct.StateSpace, u: np.ndarray) -> np.ndarray:
     -------
     numpy.ndarray
         Output, same length as ``u``.
+
+    Raises
+    ------
+    SpecError
+        ``sys`` is not a discrete-time SISO state-space system.
+    SignalError
+        ``u`` is not a 1-D array of finite samples.
     """
-    resp = ct.forced_response(sys, U=np.asarray(u, dtype=float))
-    return np.asarray(resp.outputs, dtype=float).reshape(-1)
+    from ilcdob.statespace import simulate
+
+    if not isinstance(sys, ct.StateSpace) or not sys.isdtime(strict=True) or sys.ninputs != 1 or sys.noutputs != 1:
+        got = (f"a system with {sys.ninputs} input(s), {sys.noutputs} output(s), dt={sys.dt!r}"
+               if isinstance(sys, ct.StateSpace) else type(sys).__name__)
+        raise SpecError(f"`sys`: got {got}, expected a discrete-time SISO control.StateSpace (e.g. a loop map "
+                        "such as loop.G_f)")
+    arr = np.asarray(u, dtype=float)
+    u = as_signal(arr[0] if arr.ndim == 2 and arr.shape[0] == 1 else arr, "u")
+    return simulate(sys.A, sys.B, sys.C, sys.D, u)[0]
 
 
 def one_minus(sys: ct.StateSpace) -> ct.StateSpace:

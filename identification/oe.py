@@ -159,7 +159,8 @@ class Discretisation:
     sos, den : numpy.ndarray
         All-pole sections of ``poles`` and their product polynomial (:func:`allpole_sos`).
     sos2, den2 : numpy.ndarray
-        The same for every pole twice (the block-triangular sensitivity systems).
+        The same for every pole twice (the block-triangular sensitivity systems); without
+        ``derivatives``, no sections and ``[1.0]``.
     """
 
     phi: np.ndarray
@@ -247,7 +248,8 @@ def discretise(structure: ModelStructure, theta: np.ndarray, ts: float, delay: f
     roots = np.roots(free) if structure.n_free_poles else np.zeros(0)
     poles = np.concatenate([np.exp(roots * ts), np.ones(structure.n_integrators)])
     sos, dpoly = allpole_sos(poles)
-    sos2, dpoly2 = allpole_sos(np.concatenate([poles, poles]))
+    # the doubled sections serve the sensitivities only
+    sos2, dpoly2 = allpole_sos(np.concatenate([poles, poles])) if derivatives else (np.zeros((0, 6)), np.ones(1))
     return Discretisation(phi=phi, g0=g0, g1=g1, c=c, nd=nd, f=f, dphi=tuple(dphi), dg0=tuple(dg0),
                           dg1=tuple(dg1), g_delay=phi_r @ b, poles=poles, sos=sos, den=dpoly, sos2=sos2,
                           den2=dpoly2)

@@ -40,6 +40,8 @@ def delayed(u: np.ndarray, delay_samples: float) -> np.ndarray:
     numpy.ndarray
         ``u(k - delay_samples)``, zero before the start, same length.
     """
+    if delay_samples == 0:       # interpolation at the samples themselves: the signal (a copy)
+        return np.array(u, dtype=float)
     n = u.size
     k = np.arange(n) - delay_samples
     return np.interp(k, np.arange(n), u, left=0.0)

@@ -20,17 +20,19 @@ reasons are in ``docs/identification.md``):
   step (Gram matrices, per-experiment Schur elimination); Levenberg-Marquardt runs on the
   free denominator coefficients and the delay only, with Kaufman's Jacobian;
 * exact sensitivities computed by filtering (:mod:`.oe`): O(N) per parameter, in C;
-* starts from SRIVC (:mod:`.srivc`) and a grid of pole locations; LM runs from the best and
-  from the next distinct start within :data:`SECONDARY_START_RATIO` of it; unstable trial
-  models (a free pole with Re >= 0) are rejected when ``stable``;
+* starts from SRIVC (:mod:`.srivc`) and a grid of pole locations, ranked together on a record
+  decimated to the band the response lives in (:func:`_ranking_decimation`; long logs only) with
+  their filtering batched (:func:`_ranked`), the best few re-solved on the full record; LM runs
+  from the best and from the next distinct start within :data:`SECONDARY_START_RATIO` of it;
+  unstable trial models (a free pole with Re >= 0) are rejected when ``stable``;
 * ``delay="auto"``: the delay is a continuous parameter of the same LM (the fractional-delay
   ZOH is smooth in it), started from a profile over :data:`DELAY_SWEEP_POINTS` delays, each a
   single LM step warm-started from its neighbour (no fit from scratch per point);
 * an iteration or time limit returns the best iterate with a ``RuntimeWarning`` and its
   status in ``solver``;
 * memory: a few signal-length arrays per parameter (about 200 bytes per sample for a
-  2-pole model); logs beyond :data:`RANKING_SAMPLES` samples are ranked on evenly spaced
-  chunks while the starts are chosen.
+  2-pole model); ranking records beyond :data:`RANKING_SAMPLES` samples (after decimation)
+  are represented by evenly spaced chunks while the starts are chosen.
 
 Closed-loop data: the direct output-error fit is consistent when the output disturbance
 is white measurement noise and the plant is strictly proper (Ljung, System Identification,
@@ -50,13 +52,15 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from scipy import signal as sps
+from scipy.linalg import expm
 from threadpoolctl import ThreadpoolController
 
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure
 
-from .oe import Discretisation, delayed_input, discretise, response, zoh_inputs
+from .oe import Discretisation, allpole_sos, delay_split, delayed_input, discretise, response, zoh_inputs
 from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
@@ -549,16 +553,23 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
 # ---------------------------------------------------------------- initialisation
 
 def _grid_denominators(structure: ModelStructure, ts: float) -> list[np.ndarray]:
-    nf = structure.n_free_poles
+    return list(_pole_grid(structure.n_free_poles, ts))
+
+
+@functools.lru_cache(maxsize=32)
+def _pole_grid(nf: int, ts: float) -> tuple[np.ndarray, ...]:
+    """The grid of :func:`_grid_denominators` (read-only arrays, computed once per order and sample time)."""
     if nf == 0:
-        return [np.zeros(0)]
+        return (np.zeros(0),)
     nyq = np.pi / ts
     out = [np.real(np.poly(np.full(nf, -p)))[1:] for p in np.geomspace(0.3, 0.5 * nyq, 7)]
     if nf >= 2:  # lightly damped pairs
         for wn in np.geomspace(1.0, 0.3 * nyq, 4):
             rest = np.real(np.poly(np.full(nf - 2, -wn)))
             out.append(np.polymul([1.0, 0.6 * wn, wn**2], rest)[1:])
-    return out
+    for a in out:
+        a.flags.writeable = False
+    return tuple(out)
 
 
 def _empirical_response(exps: list[_Exp], ts: float, nper: int) -> tuple[np.ndarray, np.ndarray] | None:
@@ -648,9 +659,26 @@ STATISTICAL_TOL = 1e-3
 #: A further start runs only when its criterion is within this factor of the best start's.
 SECONDARY_START_RATIO = 4.0
 _CHUNK = 10_000
+#: The band the response lives in holds this share of the output power that the input
+#: explains (:func:`_ranking_decimation`).
+BAND_SHARE = 0.999
+#: The starts are ranked on a record decimated so that its Nyquist frequency stays at least
+#: this factor above that band.
+BAND_MARGIN = 1.0
+#: Largest decimation of the ranking record.
+MAX_DECIMATION = 32
+#: Fewest samples the decimated ranking record keeps in all (each experiment at least twice
+#: :func:`min_samples`): below about twice this a log is ranked whole, where the per-candidate
+#: overhead, not the filtering, is the cost of the search.
+MIN_RANKING_SAMPLES = 5_000
+_BAND_SEGMENTS = 64            # at most this many segments in all (evenly spaced over long logs)
+_RANKING_BYTES = 64e6          # signals kept at once while the candidates are ranked
 
 
-def _ranking_model(model: _Model) -> _Model:
+def _chunked(model: _Model) -> _Model:
+    """The model on evenly spaced :data:`_CHUNK`-sample chunks of its experiments when they hold more
+    than :data:`RANKING_SAMPLES` samples in all (each chunk with its own initial condition and trend);
+    else the model itself."""
     total = sum(e.n for e in model.exps)
     if total <= RANKING_SAMPLES:
         return model
@@ -666,33 +694,304 @@ def _ranking_model(model: _Model) -> _Model:
     return _Model(model.s, chunks, model.ts, model.opts, model.estimate_delay)
 
 
-def _candidates(model: _Model, delay: float, say: Progress) -> list[_Point]:
-    """Initial estimates at ``delay``: SRIVC and the pole grid, each with its linear
-    parameters solved, ranked on at most about :data:`RANKING_SAMPLES` samples; the best
-    are re-solved on all the data (best first)."""
+def _explained_power(exps: list[_Exp], nseg: int) -> np.ndarray | None:
+    """Cumulative output power that the input explains, ``|S_yu|^2 / S_uu`` over the frequency bins above
+    DC of ``nseg``-sample Hann segments (at most :data:`_BAND_SEGMENTS`, evenly spaced, from every
+    experiment), normalised to end at 1; None without a segment or explained power."""
+    total = sum(e.n // nseg for e in exps)
+    if total == 0:
+        return None
+    keep = min(1.0, _BAND_SEGMENTS / total)
+    win = np.hanning(nseg)
+    s_uu = np.zeros(nseg // 2 + 1)
+    s_yu = np.zeros(nseg // 2 + 1, complex)
+    for e in exps:
+        k = e.n // nseg
+        if k == 0:
+            continue
+        rows = np.unique(np.linspace(0, k - 1, max(1, round(k * keep))).astype(int))
+        fu, fy = (np.fft.rfft((seg - seg.mean(axis=1, keepdims=True)) * win, axis=1)
+                  for seg in (x[: k * nseg].reshape(k, nseg)[rows] for x in (e.u, e.y)))
+        s_uu += np.sum(fu.real**2 + fu.imag**2, axis=0)
+        s_yu += np.sum(np.conj(fu) * fy, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cum = np.cumsum(np.where(s_uu[1:] > 0, np.abs(s_yu[1:]) ** 2 / s_uu[1:], 0.0))
+    if not (math.isfinite(cum[-1]) and cum[-1] > 0):
+        return None
+    return cum / cum[-1]
+
+
+def _ranking_decimation(model: _Model) -> int:
+    """How far the record can be decimated for ranking the starts without losing the band its response
+    lives in.
+
+    The band: the lowest frequency below which :data:`BAND_SHARE` of the output power that the input
+    explains lies (:func:`_explained_power`: noise that the input does not explain, white or coloured,
+    hardly counts). The segments are a sixteenth of the longest experiment (a power of two, 256 to 4096
+    samples): a slow response is resolved on a long log, and a segment shorter than the response's memory
+    spreads explained power over the spectrum (which only makes the factor smaller). The decimated Nyquist
+    frequency stays :data:`BAND_MARGIN` times above the band; the factor is capped by
+    :data:`MAX_DECIMATION`, by :data:`MIN_RANKING_SAMPLES` and by twice :func:`min_samples` per
+    experiment; 1 (no decimation) when the input explains nothing.
+    """
+    n_total = sum(e.n for e in model.exps)
+    cap = min(MAX_DECIMATION, n_total // MIN_RANKING_SAMPLES,
+              min(e.n for e in model.exps) // (2 * min_samples(model.s)))
+    if cap < 2:
+        return 1
+    nseg = int(2 ** np.clip(math.floor(math.log2(max(e.n for e in model.exps) / 16)), 8, 12))
+    cum = _explained_power(model.exps, nseg)
+    if cum is None:
+        return 1
+    edge = int(np.searchsorted(cum, BAND_SHARE)) + 2     # upper edge of the band's last bin, in bins
+    return max(1, min(int(nseg / (2.0 * BAND_MARGIN * edge)), cap))
+
+
+def _decimated(model: _Model, factor: int) -> _Model:
+    """The model on its experiments decimated by ``factor`` (sample time ``factor ts``): the input
+    averaged over each block of ``factor`` samples (the mean of the held input over the block, so the
+    coarse zero-order hold carries the same area), the output sampled at each block's first instant."""
+    if factor <= 1:
+        return model
+    exps = []
+    for e in model.exps:
+        m = e.n // factor
+        exps.append(_Exp(e.u[: m * factor].reshape(m, factor).mean(axis=1), e.y[: m * factor: factor].copy(),
+                         _trend_basis(m, model.s, model.opts), e.source))
+    return _Model(model.s, exps, model.ts * factor, model.opts, model.estimate_delay)
+
+
+def _stacked_pinv(g: np.ndarray) -> np.ndarray:
+    """:func:`_scaled_pinv` of a stack of Gram matrices (``... x k x k``)."""
+    if g.shape[-1] == 0:
+        return g
+    sc = np.sqrt(np.maximum(np.abs(np.diagonal(g, axis1=-2, axis2=-1)), 1e-300))
+    outer = sc[..., :, None] * sc[..., None, :]
+    return np.linalg.pinv(g / outer, rcond=1e-13, hermitian=True) / outer
+
+
+def _stacked_eliminate(grams: list[np.ndarray], nb: int, n_local: list[int]):
+    """:func:`_eliminate` for a stack of candidates with one right-hand side (the output): ``grams[e]`` is
+    ``candidates x k x k`` per experiment. Returns ``(coef_x, coef_l)``: ``candidates x nb`` and, per
+    experiment, ``candidates x n_local[e]``."""
+    s_xx = s_xw = 0.0
+    elim = []
+    for g, nl in zip(grams, n_local):
+        x, l, w = slice(0, nb), slice(nb, nb + nl), slice(nb + nl, None)
+        inv = _stacked_pinv(g[:, l, l])
+        glx, glw = g[:, l, x], g[:, l, w]
+        glx_t = np.swapaxes(glx, -1, -2)
+        s_xx = s_xx + g[:, x, x] - glx_t @ inv @ glx
+        s_xw = s_xw + g[:, x, w] - glx_t @ inv @ glw
+        elim.append((inv, glx, glw))
+    coef_x = _stacked_pinv(s_xx) @ s_xw
+    coef_l = [(inv @ (glw - glx @ coef_x))[:, :, 0] for inv, glx, glw in elim]
+    return coef_x[:, :, 0], coef_l
+
+
+def _allpole(sections: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``x`` (rows) through the all-pole sections ``[1, 0, 0, 1, a1, a2]`` of :func:`.oe.allpole_sos`, one
+    ``lfilter`` per section (a tenth of ``sosfilt``'s call overhead, which dominates on short rows)."""
+    for sec in sections:
+        x = sps.lfilter(_ONE, sec[3:], x, axis=-1)
+    return x
+
+
+_ONE = np.ones(1)
+
+
+def _ranked(model: _Model, dens: list[np.ndarray], delay: float) -> list[_Point]:
+    """The criterion of each candidate free denominator on ``model`` at ``delay``, best first, unusable
+    candidates (non-finite, unstable under ``stable``, diverging) left out.
+
+    The criterion and signals are those of :meth:`_Model.evaluate` (numerator and free-response rows by
+    filtering, the trends; the linear parameters eliminated; the residual computed explicitly), computed
+    for all the candidates together where that is cheaper than one at a time: one batched matrix
+    exponential, the Markov parameters of every candidate in one recursion, each candidate's FIR pass as
+    one product with the shifted input, the linear parameters eliminated for the whole stack
+    (:func:`_stacked_eliminate`). Only the all-pole passes (:func:`_allpole`) and the residuals run per
+    candidate. The points carry the numerator but no initial conditions or signals: re-solve the ones
+    used (:meth:`_Model.evaluate`).
+    """
+    s, n, nf, nb = model.s, model.n, model.nf, model.nb
+    given = [a for a in (np.asarray(d, dtype=float).reshape(-1) for d in dens)
+             if a.size == nf and np.all(np.isfinite(a))]
+    if not given:
+        return []
+    all_roots = np.zeros((len(given), 0))
+    if nf:                                      # the roots as np.roots finds them: companion eigenvalues
+        comp = np.zeros((len(given), nf, nf))
+        comp[:, 1:, :-1] = np.eye(nf - 1)
+        comp[:, 0, :] = -np.array(given)
+        all_roots = np.linalg.eigvals(comp)
+    keep = np.all(all_roots.real < 0, axis=1) if model.opts.stable and nf else np.ones(len(given), dtype=bool)
+    usable = [a for a, k in zip(given, keep) if k]
+    roots = [r for r, k in zip(all_roots, keep) if k]
+    if not usable:
+        return []
+    count, ts = len(usable), model.ts
+    nd, f = delay_split(delay, ts)
+    den = np.concatenate([np.ones((count, 1)), np.array(usable).reshape(count, nf),
+                          np.zeros((count, s.n_integrators))], axis=1)
+    big = np.zeros((count, n + 1, n + 1))          # [[A_c, e_n], [0, 0]] (companion form, :func:`.oe.discretise`)
+    big[:, : n - 1, 1:n] = np.eye(n - 1)
+    big[:, n - 1, :n] = -den[:, :0:-1]
+    big[:, n - 1, n] = 1.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        e_r = expm(big * (ts - f))
+        phi, gains = e_r[:, :n, :n], [e_r[:, :n, n]]
+        if f > 0:
+            e_f = expm(big * f)
+            gains.append(np.einsum("cij,cj->ci", phi, e_f[:, :n, n]))
+            phi = phi @ e_f[:, :n, :n]
+    sections, zden, radius = [], np.empty((count, n + 1)), np.empty(count)
+    for c, r in enumerate(roots):
+        poles = np.concatenate([np.exp(r * ts), np.ones(s.n_integrators)])
+        sos_c, zden[c] = allpole_sos(poles)
+        sections.append(sos_c)
+        radius[c] = float(np.max(np.abs(poles)))
+    # Toeplitz of each discrete denominator: (conv(den, h))[:n + 1] = toe @ h
+    toe = np.zeros((count, n + 1, n + 1))
+    for j in range(n + 1):
+        toe[:, j:, j] = zden[:, : n + 1 - j]
+
+    def markov(vec: np.ndarray, pick: np.ndarray, mat: np.ndarray, steps: int) -> np.ndarray:
+        """``[vec, mat vec, mat^2 vec, ...]`` of every candidate, the states ``pick`` (``count x pick x steps``)."""
+        out = np.empty((count, pick.size, steps))
+        for k in range(steps):
+            out[:, :, k] = vec[:, pick]
+            vec = np.einsum("cij,cj->ci", mat, vec)
+        return out
+
+    num_rows = np.arange(nb - 1, -1, -1)
+    coef = np.zeros((count, nb, n + 2))            # FIR on u[k-nd-j], j = 0 .. n + 1
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i, g in enumerate(gains):
+            h = np.concatenate([np.zeros((count, nb, 1)), markov(g, num_rows, phi, n)], axis=2)
+            coef[:, :, i:i + n + 1] += np.einsum("cji,cri->crj", toe, h)
+        free = None
+        if model.n_beta:
+            h = markov(np.tile(model.e1, (count, 1)), np.arange(n), np.swapaxes(phi, 1, 2), n + 1)
+            free = np.einsum("cji,cri->crj", toe, h)
+    ok = np.all(np.isfinite(coef.reshape(count, -1)), axis=1) & np.all(np.isfinite(phi.reshape(count, -1)), axis=1)
+    if free is not None:
+        ok &= np.all(np.isfinite(free.reshape(count, -1)), axis=1)
+    extra = [delay] if model.estimate_delay else []
+    n_sig = nb + model.n_beta
+    group = max(1, int(_RANKING_BYTES // (8 * n_sig * sum(e.n for e in model.exps) + 1)))
+    live = np.flatnonzero(ok)
+    points = []
+    for first in range(0, live.size, group):
+        batch = live[first:first + group]
+        grams, signals = [], []
+        for e, nl in zip(model.exps, model.n_local):
+            m = e.n
+            ud = delayed_input(e.u, nd)
+            shifted = np.zeros((n + 2, m))
+            for j in range(n + 2):
+                shifted[j, j:] = ud[: m - j]
+            rows = np.zeros((nb + nl + 1, m))
+            rows[n_sig: nb + nl] = e.trend.T
+            rows[-1] = e.y
+            g_e = np.zeros((batch.size, rows.shape[0], rows.shape[0]))
+            s_e = []
+            for i, c in enumerate(batch):
+                with np.errstate(over="ignore", invalid="ignore"):
+                    rows[:nb] = _allpole(sections[c], coef[c] @ shifted)
+                    if model.n_beta:
+                        span = m if radius[c] >= 1.0 else min(
+                            m, int(math.ceil(math.log(1e-14) / math.log(radius[c]))) + n)
+                        drive = np.zeros((n, span))
+                        k = min(n + 1, span)
+                        drive[:, :k] = free[c][:, :k]
+                        rows[nb:n_sig] = 0.0
+                        rows[nb:n_sig, :span] = _allpole(sections[c], drive)
+                    g_e[i] = rows @ rows.T
+                s_e.append(rows[:n_sig].copy())
+            grams.append(g_e)
+            signals.append(s_e)
+        good = np.ones(batch.size, dtype=bool)
+        for g_e in grams:
+            good &= np.all(np.isfinite(g_e.reshape(batch.size, -1)), axis=1)
+        sel = np.flatnonzero(good)
+        if sel.size == 0:
+            continue
+        try:
+            solved = [(sel, _stacked_eliminate([g[sel] for g in grams], nb, model.n_local))]
+        except np.linalg.LinAlgError:
+            solved = []
+            for i in sel:
+                try:
+                    solved.append((np.array([i]), _stacked_eliminate([g[i:i + 1] for g in grams], nb, model.n_local)))
+                except np.linalg.LinAlgError:
+                    pass
+        for which, (coef_x, coef_l) in solved:
+            for j, i in enumerate(which):
+                sse = 0.0
+                with np.errstate(over="ignore", invalid="ignore"):
+                    for e, sig, loc in zip(model.exps, signals, coef_l):
+                        r = e.y - coef_x[j] @ sig[i][:nb] - loc[j][: model.n_beta] @ sig[i][nb:] \
+                            - loc[j][model.n_beta:] @ e.trend.T
+                        sse += float(r @ r)
+                if math.isfinite(sse):
+                    a = usable[batch[i]]
+                    points.append(_Point(np.concatenate([a, extra]), np.concatenate([a, coef_x[j]]), delay, [], sse))
+    return sorted(points, key=lambda p: p.sse)
+
+
+#: Starts whose criterion on the ranking record exceeds the best one's by more than this factor times
+#: :data:`SECONDARY_START_RATIO` are not re-solved on the full record (they would not run).
+RANKING_SLACK = 2.0
+#: Starts ranked within this relative distance of the previous one are re-solved too, and the order
+#: settled on the full record (the ranking criterion is approximate: decimation, rounding).
+RANKING_TIE = 1e-2
+
+
+def _candidates(model: _Model, delay: float, say: Progress) -> tuple[list[_Point], dict]:
+    """Initial estimates at ``delay``, best first, and how they were ranked (``decimation``: the
+    factor; ``samples``: the ranking record's length). SRIVC and the pole grid (and, from four free poles,
+    fits to the empirical frequency response), ranked together (:func:`_ranked`) on the record
+    decimated to the band its response lives in (:func:`_ranking_decimation`) and, beyond
+    :data:`RANKING_SAMPLES` samples, on evenly spaced chunks of it. The best ``FitOptions.starts``
+    distinct ones within ``RANKING_SLACK * SECONDARY_START_RATIO`` of the best (and those within
+    :data:`RANKING_TIE` of the one before) are re-solved on all the data and returned in the order of
+    their criterion there. SRIVC and the frequency-domain fits use the full-rate record (its chunks
+    beyond :data:`RANKING_SAMPLES`), the grid its sample time: an instrumental-variable estimate of sharp
+    resonances suffers from a coarse hold far more than the ranking does (a three-mass system, 6 poles, on
+    a record decimated 7x: SRIVC unstable)."""
     full = model
-    model = _ranking_model(full)
+    factor = _ranking_decimation(full)
+    model = _chunked(_decimated(full, factor))
     s = model.s
     dens = []
+    whole = _chunked(full)
     try:
-        th = srivc(s, [(e.u, e.y) for e in model.exps], model.ts, delay=delay, iterations=4, tol=1e-4)
+        th = srivc(s, [(e.u, e.y) for e in whole.exps], whole.ts, delay=delay, iterations=4, tol=1e-4)
         if np.all(np.isfinite(th)):
             dens.append(th[: s.n_free_poles])
     except (np.linalg.LinAlgError, ValueError):
         say(0, 0, "SRIVC gave no estimate; starting from the pole grid only")
-    dens += _grid_denominators(s, model.ts) + _frequency_domain_denominators(s, model.exps, model.ts, delay)
-    extra = [delay] if model.estimate_delay else []
-    out = []
-    for a in dens:
-        p = model.evaluate(np.concatenate([a, extra]), delay)
-        if math.isfinite(p.sse):
-            p.cols = None        # the signals are recomputed for the few starts that are used
-            out.append(p)
-    out.sort(key=lambda p: p.sse)
-    if model is full:
-        return out
-    best = [full.evaluate(p.alpha, delay) for p in _distinct(out, max(full.opts.starts, 1))]
-    return sorted((p for p in best if math.isfinite(p.sse)), key=lambda p: p.sse)
+    dens += _grid_denominators(s, full.ts) + _frequency_domain_denominators(s, whole.exps, full.ts, delay)
+    want = max(full.opts.starts, 1)
+    solved: list[_Point] = []
+    ranked: list[_Point] = []            # distinct so far (:func:`_distinct`, taken one at a time)
+    for p in _ranked(model, dens, delay):
+        if not _differs(p, ranked):
+            continue
+        tie = bool(ranked) and p.sse <= (1.0 + RANKING_TIE) * ranked[-1].sse
+        far = bool(ranked) and p.sse > RANKING_SLACK * SECONDARY_START_RATIO * ranked[0].sse
+        ranked.append(p)
+        if solved and not tie and (len(solved) >= want or far):
+            break
+        q = full.evaluate(p.alpha, delay)
+        if math.isfinite(q.sse):
+            if model is full:
+                # ranked whole: the LM recomputes the start's signals with the derivatives' discretisation,
+                # as the exhaustive search did, so that the fit stays bit-identical to it
+                q.cols = None
+            solved.append(q)
+    return (_distinct(sorted(solved, key=lambda p: p.sse), want),
+            {"decimation": factor, "samples": sum(e.n for e in model.exps)})
 
 
 #: Damping ratio below which a converged pole pair is searched in frequency (:func:`_retune_resonances`).
@@ -799,11 +1098,16 @@ def _pair_frequency(a: np.ndarray, near: complex, default: float) -> float:
     return abs(min(roots, key=lambda q: abs(q - near))) if roots else default
 
 
+def _differs(c: _Point, chosen: list[_Point]) -> bool:
+    """Whether ``c``'s denominator differs by more than 1 % from every one in ``chosen``."""
+    return all(np.linalg.norm(c.alpha - o.alpha) > 1e-2 * (np.linalg.norm(o.alpha) + 1e-12) for o in chosen)
+
+
 def _distinct(cands: list[_Point], k: int) -> list[_Point]:
     """The ``k`` best candidates whose denominators differ by more than 1 %."""
     chosen: list[_Point] = []
     for c in cands:
-        if all(np.linalg.norm(c.alpha - o.alpha) > 1e-2 * (np.linalg.norm(o.alpha) + 1e-12) for o in chosen):
+        if _differs(c, chosen):
             chosen.append(c)
         if len(chosen) == k:
             break
@@ -918,7 +1222,8 @@ def tfest(data: FlightData | list[FlightData], input: str, output: str, structur
     -------
     TFEstimate
         With ``solver`` holding the status (``converged``, ``max_iter``, ``time_limit``),
-        iterations, starts and wall time.
+        iterations, starts, wall time and, when the starts were searched, how they were ranked
+        (``ranking``: ``decimation`` factor and ``samples`` of the ranking record).
 
     Warns
     -----
@@ -972,9 +1277,9 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
         if not math.isfinite(start.sse):
             raise SpecError(f"`initial`: the model {list(opts.initial)} cannot start the fit (unstable or "
                             "diverging on these data)")
-        cands = [start]
+        cands, ranking = [start], {}
     else:
-        cands = _candidates(model, delay0, say)
+        cands, ranking = _candidates(model, delay0, say)
     if not cands:
         raise IlcdobError("no initial estimate could be formed (every candidate model diverged); check that "
                           "the input excites the system and that the structure suits the data")
@@ -1053,6 +1358,7 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
                               input=input, output=output, trend=opts.trend, fitted=fitted,
                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
                                       "status": best.status, "iterations": best.iterations, "starts": runs,
+                                      **({"ranking": ranking} if ranking else {}),
                                       **({"max_delay": opts.max_delay} if estimate_delay else {}), **pull,
                                       **({"gross_errors": left_out} if left_out else {}),
                                       "seconds": time.perf_counter() - t_start})

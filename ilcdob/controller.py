@@ -14,18 +14,25 @@ measured position ``y_m``::
 received: when the vehicle limits it (tilt, thrust), pass the applied value to
 :meth:`OuterLoopController.update`. Without the DOB (``dob=False``) ``u2 = u1``.
 
+While the vehicle applies the commands as computed, the law is a discrete LTI system of its
+inputs ``(r, y_m, a_ff, d_f)``; :meth:`OuterLoopController.state_space` gives it (the same
+equations, in matrices: :class:`LawStateSpace`), for simulations that run a linear plant over
+a whole trial at once.
+
 Units: positions in m, accelerations (commands, ``d_hat``, ``d_f``, ``a_ff``) in m/s^2; the
 object runs at the loop's sample time ``loop.ts``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from .errors import SpecError
 from .loop import LoopSystem
 
-__all__ = ["OuterLoopController"]
+__all__ = ["OuterLoopController", "LawStateSpace"]
 
 
 class _Block:
@@ -45,6 +52,77 @@ class _Block:
     def update(self, u: float) -> None:
         x = self.x
         self.x = [sum(aij * xj for aij, xj in zip(row, x)) + bi * u for row, bi in zip(self.a, self.b)]
+
+
+@dataclass(frozen=True)
+class LawStateSpace:
+    """The control law of :class:`OuterLoopController` from rest as a discrete state-space system
+    ``x[k+1] = a x[k] + b v[k]``, ``(u2, d_hat)[k] = c x[k] + d v[k]`` (:meth:`OuterLoopController.state_space`).
+
+    Attributes
+    ----------
+    a, b, c, d : numpy.ndarray
+        The matrices; states: the PID's, then (with the DOB) Q's and M's.
+    dob : bool
+        With the DOB (else ``d_hat = 0`` and the learning input is unused).
+    blocks : tuple
+        ``(A, B, C, D)`` of the PID, Q and M as the controller steps them (``B``, ``C`` vectors,
+        ``D`` a float), for :meth:`evaluate`.
+    inputs : tuple of str
+        ``("r", "y_m", "a_ff", "d_f")``: reference and measured position (m), feedforward and
+        learning signal (m/s^2).
+    outputs : tuple of str
+        ``("u2", "d_hat")``, m/s^2.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+    dob: bool
+    blocks: tuple = field(repr=False, default=())
+    inputs: tuple[str, ...] = ("r", "y_m", "a_ff", "d_f")
+    outputs: tuple[str, ...] = ("u2", "d_hat")
+
+    def evaluate(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The law's step for a run of samples, computed block by block as :meth:`OuterLoopController.step`
+        does (the matrices hold products of the blocks' entries, rounded; this does not use them).
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            States, one column per sample (the order of :attr:`a`).
+        v : numpy.ndarray or sequence of arrays
+            Inputs ``(r, y_m, a_ff, d_f)`` (rows), one column per sample.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            The next states (columns) and the outputs ``(u2, d_hat)`` (rows).
+        """
+        (ac, bc, cc, dc), (aq, bq, cq, _), (am, bm, cm, dm) = self.blocks
+        nc, nq = len(bc), len(bq)
+        xc, xq, xm = x[:nc], x[nc:nc + nq], x[nc + nq:]
+        r, ym, aff, df = v
+        e = r - ym
+        u1 = (cc @ xc + dc * e) + aff
+        nxt = np.empty_like(x)
+        np.matmul(ac, xc, out=nxt[:nc])
+        nxt[:nc] += bc[:, None] * e
+        if not self.dob:
+            return nxt, np.vstack([u1, np.zeros_like(u1)])
+        d_hat = (cm @ xm + dm * ym) - cq @ xq
+        u2 = u1 - d_hat - df
+        np.matmul(aq, xq, out=nxt[nc:nc + nq])
+        nxt[nc:nc + nq] += bq[:, None] * u2
+        np.matmul(am, xm, out=nxt[nc + nq:])
+        nxt[nc + nq:] += bm[:, None] * ym
+        return nxt, np.vstack([u2, d_hat])
+
+
+def _matrices(sys_) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    return (np.asarray(sys_.A, float), np.asarray(sys_.B, float)[:, 0], np.asarray(sys_.C, float)[0],
+            float(np.asarray(sys_.D).ravel()[0]))
 
 
 class OuterLoopController:
@@ -163,3 +241,38 @@ class OuterLoopController:
         u2 = self.command(reference, measurement, feedforward=feedforward, learning=learning)
         self.update()
         return u2
+
+    def state_space(self) -> LawStateSpace:
+        """The law (module docstring) as a discrete LTI system from rest, for a vehicle that applies
+        every command as computed (:meth:`step`); the controller's own state is not used.
+
+        Per sample, with ``e = r - y_m`` and the blocks' ``(A, B, C, D)``::
+
+            u2    = Cc xc + Dc e + a_ff - d_hat - d_f
+            d_hat = Cm xm + Dm y_m - Cq xq              (with the DOB; 0 without)
+            xc+   = Ac xc + Bc e,  xq+ = Aq xq + Bq u2,  xm+ = Am xm + Bm y_m
+
+        Returns
+        -------
+        LawStateSpace
+            Inputs ``(r, y_m, a_ff, d_f)``, outputs ``(u2, d_hat)``; without the DOB the ``d_f``
+            column and the ``d_hat`` row are zero (a learning signal is refused there).
+        """
+        blocks = tuple(_matrices(s) for s in (self.loop.C, self.loop.Q, self.loop.M))
+        (ac, bc, cc, dc), (aq, bq, cq, _), (am, bm, cm, dm) = blocks
+        if not self.dob:
+            c = np.vstack([cc, np.zeros_like(cc)])
+            d = np.array([[dc, -dc, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+            return LawStateSpace(a=ac.copy(), b=np.outer(bc, [1.0, -1.0, 0.0, 0.0]), c=c, d=d, dob=False,
+                                 blocks=blocks)
+        nc, nq, nm = len(bc), len(bq), len(bm)
+        z = np.zeros
+        c = np.vstack([np.concatenate([cc, cq, -cm]), np.concatenate([z(nc), -cq, cm])])
+        d = np.array([[dc, -(dc + dm), 1.0, -1.0], [0.0, dm, 0.0, 0.0]])
+        a = np.zeros((nc + nq + nm,) * 2)
+        a[:nc, :nc] = ac
+        a[nc:nc + nq, nc:nc + nq] = aq
+        a[nc + nq:, nc + nq:] = am
+        a[nc:nc + nq] += np.outer(bq, c[0])  # Q is driven by u2
+        b = np.vstack([np.outer(bc, [1.0, -1.0, 0.0, 0.0]), np.outer(bq, d[0]), np.outer(bm, [0.0, 1.0, 0.0, 0.0])])
+        return LawStateSpace(a=a, b=b, c=c, d=d, dob=True, blocks=blocks)
