@@ -61,11 +61,11 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
 from .band import AMPLIFICATION_TOL, LearningBand
-from .delta import DeltaSet
+from .delta import DeltaSet, delta_bound
 from .robust_set import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
 
 __all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", "learning_pairs",
-           "exact_worst_ratio", "exact_ratio_for_delta", "EXACT_TOL", "REFINE"]
+           "exact_worst_ratio", "exact_ratio_for_delta", "bound_delta_sets", "EXACT_TOL", "REFINE"]
 
 _SOURCES = ("bound", "samples")
 
@@ -496,6 +496,54 @@ def learning_pairs(names: list[str], order: list[str] | tuple[str, ...]) -> list
     return [(order[i - 1], order[i]) for i in range(1, len(order))] + [(order[-1], order[0])]
 
 
+def bound_delta_sets(fleet, names: list[str] | tuple[str, ...] | None = None) -> dict[str, DeltaSet]:
+    """Delta sets of the named systems holding their bound only, without sampled plants.
+
+    :func:`theorem_check` with ``source="bound"`` and the learning band's model edge
+    (:func:`ilcdob.design.pair.pair_band`) read a Delta set's ``w`` and ``bound`` and nothing
+    else. Those are :func:`~ilcdob.design.delta.delta_bound` of the system, the same arrays
+    :func:`~ilcdob.design.delta.delta_set` (and :func:`~ilcdob.design.pair.fleet_delta_sets`)
+    attach to its samples for any sample count, seed or order of the systems, so a check on
+    these sets is the check on the sampled sets, without building a closed loop per sampled
+    plant. The sets have no loops (``loops == ()``): :meth:`DeltaSet.deltas` and
+    ``theorem_check(..., source="samples")`` need the sampled sets.
+
+    Parameters
+    ----------
+    fleet : ilcdob.Fleet
+        The fleet.
+    names : sequence of str, optional
+        Systems, each once (default: every system of the fleet).
+
+    Returns
+    -------
+    dict of str to DeltaSet
+        Name -> the system's bound on ``w`` (``nominal``: the loop of its model, ``rejected`` 0).
+
+    Raises
+    ------
+    SpecError
+        An unknown or repeated name; a system with neither an identification nor a bound in
+        the fleet file.
+    """
+    names = list(fleet.names if names is None else names)
+    unknown = [n for n in names if n not in fleet.names]
+    if unknown or len(set(names)) != len(names):
+        raise SpecError(f"`names`: got {names!r}, expected system names of the fleet, each once; the fleet has "
+                        f"{list(fleet.names)}")
+    specs = {s.name: s for s in fleet.systems}
+    out = {}
+    for name in names:
+        found = delta_bound(specs[name], fleet.sample_time)
+        if found is None:
+            raise SpecError(f"system {name!r}: no identification in the fleet and no `uncertainty` bound, so no "
+                            "Delta set; identify it (ilcdob identify-fleet) or state `uncertainty = { bound = 0.2 }` "
+                            "in the fleet file")
+        w, bound, source = found
+        out[name] = DeltaSet(name, fleet.loop(name).nominal, (), w, bound, 0, source)
+    return out
+
+
 def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict[str, DeltaSet],
                   w: np.ndarray | None = None, source: str = "bound",
                   bands: dict[tuple[str, str], LearningBand | None] | None = None,
@@ -563,6 +611,10 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
             delta = bb if w is None else on(ww)
             W = on(we)
         else:
+            if not ds.loops:
+                raise SpecError(f"`deltas[{src!r}]`: holds the bound only (no sampled plants), so source='samples' "
+                                "has nothing to take |Delta| from; draw the set with ilcdob.design.delta_set(...) or "
+                                "use source='bound'")
             delta = np.max(np.abs(ds.deltas(ww)), axis=0)
             W = delta if w is not None else np.max(np.abs(ds.deltas(we)), axis=0)
         rhs = theorem_rhs(loop, ww)

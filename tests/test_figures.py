@@ -384,3 +384,116 @@ def test_design_figure_says_what_it_cannot_draw(monkeypatch):
     assert len(_lines(axes["L1 magnitude"])) == 1  # the rest is drawn
     text = " ".join(t.get_text() for t in axes["description"].texts)
     assert "Te1, Te2 not drawn" in text and "design method fir" in text
+
+
+# ---- rendering: one draw per figure, in parallel worker processes ------------------------------------
+
+
+def _savefig_png(fig) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return buf.getvalue()
+
+
+def _one(res, name: str):
+    """Figure ``name`` of ``res``, built alone."""
+    return reproduction_figures(res, pending=True)[name].build()
+
+
+def _counting_draws(monkeypatch) -> list[object]:
+    """Every ``Figure.draw`` call from now on, recorded (rendered or not)."""
+    from matplotlib.figure import Figure
+
+    calls: list[object] = []
+    draw = Figure.draw
+
+    def counted(self, renderer):
+        calls.append(self)
+        return draw(self, renderer)
+
+    monkeypatch.setattr(Figure, "draw", counted)
+    return calls
+
+
+@pytest.mark.parametrize("name", ["rmse_bars.png", "bode_loops.png"])  # constrained layout; tight layout
+def test_figure_png_draws_once_the_bytes_of_savefig(run, name, monkeypatch):
+    from ilcdob.validation.figures import figure_png
+
+    res = run[0]
+    want = _savefig_png(_one(res, name))
+    fig = _one(res, name)
+    calls = _counting_draws(monkeypatch)
+    assert figure_png(fig) == want
+    assert calls == [fig]  # savefig draws it twice: the layout pass, then the rendering
+    calls.clear()
+    _savefig_png(_one(res, name))
+    assert len(calls) == 2
+
+
+def test_render_figures_in_workers_keeps_the_bytes_and_the_order(run):
+    import multiprocessing
+
+    from ilcdob.validation.figures import PendingFigure, render_figures
+
+    res = run[0]
+    pending = reproduction_figures(res, pending=True)
+    assert all(isinstance(p, PendingFigure) for p in pending.values())
+    assert list(pending) == list(run[1])  # the same figures, by the same names, in the same order
+    names = ["rmse_bars.png", "identified_models.png", "bode_loops.png"]
+    content = {"a.txt": "text", names[0]: pending[names[0]], names[1]: pending[names[1]],
+               names[2]: _one(res, names[2]), "b.json": {"x": 1}}  # built, or built by the worker
+    out = render_figures(content, workers=2)
+    assert list(out) == list(content) and out["a.txt"] == "text" and out["b.json"] == {"x": 1}
+    for name in names:
+        assert out[name] == _savefig_png(_one(res, name)), name
+    assert not multiprocessing.active_children()  # every worker joined
+
+
+def test_submitted_figures_render_while_the_caller_goes_on(run):
+    import multiprocessing
+
+    from ilcdob.validation.figures import FigureRenderer, scenario_figures
+
+    res = run[0]
+    sr = res.scenarios[0]
+    with FigureRenderer(2) as renderer:
+        renderer.submit(scenario_figures(sr, ITERATIONS, pending=True))
+        assert len(multiprocessing.active_children()) == 1  # started now, one core left to the caller
+        with pytest.raises(ValueError, match=r"\['error_s4.png'\] submitted twice"):
+            renderer.submit({"error_s4.png": scenario_figures(sr, ITERATIONS, pending=True)["error_s4.png"]})
+        files = res.files(pending=True)  # finish renders those not submitted, takes the others as rendered
+        out = renderer.finish({name: files[name] for name in ("error_s4.png", "disturbance_s4.png",
+                                                              "identified_models.png", "README.md")})
+    assert list(out) == ["error_s4.png", "disturbance_s4.png", "identified_models.png", "README.md"]
+    assert out["error_s4.png"] == _savefig_png(_one(res, "error_s4.png"))
+    assert out["identified_models.png"] == _savefig_png(_one(res, "identified_models.png"))
+    assert isinstance(out["README.md"], str) and not multiprocessing.active_children()
+
+
+def test_a_figure_that_fails_in_a_worker_fails_the_call_and_stops_the_workers(run):
+    import multiprocessing
+
+    from ilcdob.validation.figures import PendingFigure, render_figures
+
+    def broken():
+        raise ValueError("no data for this figure")
+
+    content = {"bars.png": reproduction_figures(run[0], pending=True)["rmse_bars.png"],
+               "broken.png": PendingFigure(broken)}
+    with pytest.raises(ValueError, match="no data for this figure") as err:
+        render_figures(content, workers=2)
+    assert any("while rendering broken.png in a worker process" in note for note in err.value.__notes__)
+    assert not multiprocessing.active_children()
+    with pytest.raises(ValueError, match="no data for this figure"):  # the same in this process
+        render_figures(content, workers=1)
+
+
+@pytest.mark.parametrize("workers", [0, -2, 1.5, True, "2"])
+def test_render_workers_must_be_a_count(workers):
+    from ilcdob.errors import SpecError
+    from ilcdob.validation.figures import render_figures
+
+    with pytest.raises(SpecError, match=r"`workers` \(figure rendering processes\): got .*expected an integer >= 1"):
+        render_figures({}, workers=workers)

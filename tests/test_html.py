@@ -355,3 +355,63 @@ def test_every_figure_renders_in_chromium(full_report, tmp_path):
     states = {img.get("alt"): img.get("data-ok") for img in dom.images}
     assert states.pop("control") == "no"  # the probe does detect a broken image
     assert len(states) == 10 and set(states.values()) == {"yes"}, states
+
+
+# ---- the Theorem check that reproduce writes for the report (theorem.json) -----------------------------
+
+ORDERS = [["UAV1", "UAV2", "UAV3"], ["UAV1", "UAV3", "UAV2"]]  # the reproduction's (scenario 4 the second)
+
+
+def test_theorem_json_is_the_check_on_sampled_sets_without_sampling(fleet, monkeypatch):
+    """The report's check reads the Delta sets' bounds only: theorem.json is that of the sets of 8 sampled
+    plants it names, and no sampled plant's loop is built."""
+    import ilcdob
+    import ilcdob.design.delta as delta
+    from ilcdob.app.html import THEOREM_SAMPLES, _theorem_pair, report_files
+    from ilcdob.app.output import json_text
+    from ilcdob.design.pair import fleet_delta_sets, pair_band
+    from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
+
+    want = {"samples": THEOREM_SAMPLES, "seed": 0, "orders": []}
+    for order in ORDERS:  # the check as it was built: sampled sets per order
+        deltas = fleet_delta_sets(fleet, order, k=THEOREM_SAMPLES, seed=0)
+        bands = {(a, b): pair_band(fleet, a, b, deltas=deltas) for a, b in learning_pairs(fleet.names, order)}
+        checks = theorem_check(fleet, order, deltas, bands=bands)
+        want["orders"].append({"order": order, "table": format_theorem_table(checks),
+                               "pairs": [_theorem_pair(c) for c in checks]})
+
+    def no_sampling(*args, **kwargs):
+        raise AssertionError("a sampled plant's loop was built")
+
+    monkeypatch.setattr(delta, "build_loop", no_sampling)
+    got = report_files(ilcdob.default_fleet(), ORDERS + [ORDERS[0]], figures=False)
+    assert json_text(got["theorem.json"], "theorem.json") == json_text(want, "theorem.json")
+
+
+def test_report_files_without_figures_builds_no_figure(fleet, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from ilcdob.app.html import report_files
+    from ilcdob.validation.figures import PendingFigure
+
+    assert isinstance(report_files(fleet, ORDERS)["theorem.png"], Figure)
+    assert isinstance(report_files(fleet, ORDERS, pending=True)["theorem.png"], PendingFigure)
+
+    def no_figure(self, *args, **kwargs):
+        raise AssertionError("a figure was built for --no-figures")
+
+    monkeypatch.setattr(Figure, "__init__", no_figure)
+    files = report_files(fleet, ORDERS, figures=False)
+    assert list(files) == ["fleet.json", "theorem.json"]
+
+
+def test_bound_only_delta_sets_refuse_what_needs_samples(fleet):
+    from ilcdob.design.theorem import bound_delta_sets, theorem_check
+    from ilcdob.errors import SpecError
+
+    sets = bound_delta_sets(fleet)
+    assert list(sets) == fleet.names and all(s.loops == () and s.source == "identification" for s in sets.values())
+    with pytest.raises(SpecError, match=r"`deltas\['UAV1'\]`: holds the bound only .*source='bound'"):
+        theorem_check(fleet, None, sets, source="samples")
+    with pytest.raises(SpecError, match=r"`names`: got \['UAV1', 'UAV9'\], expected system names of the fleet"):
+        bound_delta_sets(fleet, ["UAV1", "UAV9"])

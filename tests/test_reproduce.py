@@ -267,3 +267,42 @@ def test_cli_order_option(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "`--order`: unknown system(s) 'UAV4'" in err and "UAV1" in err
     assert not (tmp_path / "bad").exists()
+
+
+def test_the_folder_holds_the_figures_savefig_makes_rendered_in_worker_processes(tmp_path):
+    """``reproduce`` builds and renders its figures in worker processes: the PNG files are those that
+    ``savefig`` makes of :meth:`files`' figures (and of the report's ``theorem.png``), and no worker is
+    left running."""
+    import io
+    import multiprocessing
+
+    from ilcdob.app.commands import reproduce_to_folder
+    from ilcdob.app.html import report_files
+
+    out = tmp_path / "run"
+    res = reproduce_to_folder(out, scenarios=[1], iterations=1, figure_workers=2)
+    assert not multiprocessing.active_children()
+    pending = {**res.files(pending=True), **report_files(res.fleet, [sr.order for sr in res.scenarios],
+                                                         pending=True)}
+    assert sorted(p.name for p in out.glob("*.png")) == sorted(n for n in pending if n.endswith(".png"))
+    for name in ("error_s1.png", "theorem.png"):  # constrained layout, submitted as flown; tight layout, at the end
+        buf = io.BytesIO()
+        pending[name].build().savefig(buf, format="png", dpi=110)
+        assert (out / name).read_bytes() == buf.getvalue(), name
+
+
+def test_each_scenario_is_handed_over_as_soon_as_it_is_flown(fleet):
+    events = []
+    res = reproduce(fleet, [4, 1], 1, progress=lambda done, total, what: events.append(("progress", done)),
+                    on_scenario=lambda sr: events.append(("flown", sr)))
+    assert [e[0] for e in events] == ["flown", "progress"] * 2
+    assert [events[0][1], events[2][1]] == res.scenarios  # before the next scenario is flown
+
+
+def test_a_bad_figure_worker_count_fails_before_the_run(tmp_path):
+    from ilcdob.app.commands import reproduce_to_folder
+
+    with pytest.raises(SpecError, match=r"`figure_workers` \(figure rendering processes\): got 0, expected an "
+                                        r"integer >= 1, or None for one per usable core"):
+        reproduce_to_folder(tmp_path / "run", scenarios=[1], iterations=1, figure_workers=0)
+    assert not (tmp_path / "run").exists()

@@ -19,12 +19,33 @@ end, is drawn there too).
 
 :func:`reproduction_figures` returns them by file name; nothing here writes a file (the
 figures are laid out for PNG at 110 dpi, :data:`FIGURE_DPI`).
+
+Rendering. Drawing the figures as PNG costs more than building them and, for the linear plant,
+more than the simulations. :func:`figure_png` draws a figure once: it lays it out (a
+constrained layout at :data:`FIGURE_DPI`; a tight layout was done when the figure was built)
+and renders it with the layout engine removed, where ``savefig`` lays the figure out in a first
+full draw (rendering disabled) and renders it in a second; the PNG bytes are the same.
+:class:`FigureRenderer` builds and renders figures (built ones, or :class:`PendingFigure` to be
+built where they are rendered) in parallel: on Linux in forked worker processes, which take
+the next figure of their batch from a shared counter, build and render it and send the bytes
+back, so a reproduction can render each scenario's figures while it flies the next
+(:func:`scenario_figures`); elsewhere, or with one worker, in this process.
+:func:`render_figures` does it for a whole content map. A worker ignores Ctrl-C (the caller
+stops it) and ends with its caller (it is killed when the caller dies, and stops at the next
+figure when it cannot send); the caller's objects are frozen for the collector while it
+forks, so that the workers share their pages instead of copying them.
 """
 
 from __future__ import annotations
 
+import io
+import os
+import sys
 import textwrap
+import traceback
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -33,6 +54,7 @@ from matplotlib.figure import Figure
 from ilcdob.design import LearningFilters
 from ilcdob.design.figure import (TE_GAIN_ERROR, BodeCurve, draw_bode, finish_bode_axes, frequency_grid, loop_maps,
                                   magnitude_db, with_gain_error)
+from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import freqresp
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
@@ -40,8 +62,9 @@ from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicativ
 if TYPE_CHECKING:
     from .reproduce import ReproductionResult
 
-__all__ = ["reproduction_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR", "FIGURE_DPI",
-           "ITERATIONS_RTOL", "ITERATIONS_APART"]
+__all__ = ["reproduction_figures", "scenario_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR",
+           "FIGURE_DPI", "ITERATIONS_RTOL", "ITERATIONS_APART", "PendingFigure", "FigureRenderer", "figure_png",
+           "render_figures", "render_workers"]
 
 #: Resolution the figures are made for (dots per inch of the PNG files).
 FIGURE_DPI = 110
@@ -262,22 +285,6 @@ def _draw_disturbance(left, right, s, iterations: int) -> tuple[_Coincide, ...]:
     return _draw_iterations([left, right], curves, [f.t for f in s.learning], iterations, ": d_hat + d_f")
 
 
-def _time_series(res: ReproductionResult) -> dict[str, Figure]:
-    figs = {}
-    n = res.iterations
-    for sr in res.scenarios:
-        sid = sr.scenario.id
-        figs[f"error_s{sid}.png"] = _per_system(
-            sr, n, f"tracking error of every trial ({n} learning iteration{'s' * (n != 1)})",
-            ("no DOB, only DOB and every learning iteration", "learning iterations only (zoom)"),
-            ("error e (m)", "error e (m)"), _draw_error)
-        figs[f"disturbance_s{sid}.png"] = _per_system(
-            sr, n, f"disturbance estimates of every trial ({n} learning iteration{'s' * (n != 1)})",
-            ("true disturbance and its estimates", "estimate minus true disturbance"),
-            ("d (m/s$^2$)", "estimate - d (m/s$^2$)"), _draw_disturbance)
-    return figs
-
-
 def _bode_columns(fig: Figure, ts: float, w: np.ndarray, columns: list[tuple[str, list[BodeCurve]]]) -> Figure:
     """One column per response: magnitude above, phase below (:func:`~ilcdob.design.figure.draw_bode`)."""
     axes = fig.subplots(2, len(columns), sharex=True, squeeze=False)
@@ -379,29 +386,437 @@ def _identified_models(fleet: Fleet) -> Figure | None:
     return _done(fig)
 
 
-def reproduction_figures(res: ReproductionResult) -> dict[str, Figure]:
+@dataclass(frozen=True)
+class PendingFigure:
+    """A figure not built yet, as content of a file: :func:`render_figures` builds it where it renders it.
+
+    Attributes
+    ----------
+    make : callable
+        ``make()`` builds the figure (a laid-out :class:`~matplotlib.figure.Figure`).
+    """
+
+    make: Callable[[], Figure]
+
+    def build(self) -> Figure:
+        """The figure, built now.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        fig = self.make()
+        if not isinstance(fig, Figure):
+            raise TypeError(f"PendingFigure.make returned {type(fig).__name__}, expected a matplotlib Figure")
+        return fig
+
+
+def _per_scenario(sr, iterations: int, kind: str) -> Figure:
+    """The ``error_s<N>.png`` or ``disturbance_s<N>.png`` figure of scenario ``sr``."""
+    n = iterations
+    if kind == "error":
+        return _per_system(sr, n, f"tracking error of every trial ({n} learning iteration{'s' * (n != 1)})",
+                           ("no DOB, only DOB and every learning iteration", "learning iterations only (zoom)"),
+                           ("error e (m)", "error e (m)"), _draw_error)
+    return _per_system(sr, n, f"disturbance estimates of every trial ({n} learning iteration{'s' * (n != 1)})",
+                       ("true disturbance and its estimates", "estimate minus true disturbance"),
+                       ("d (m/s$^2$)", "estimate - d (m/s$^2$)"), _draw_disturbance)
+
+
+def scenario_figures(sr, iterations: int, pending: bool = False) -> dict[str, Figure | PendingFigure]:
+    """The figures of one scenario as :func:`reproduction_figures` names them: ``error_s<N>.png`` and
+    ``disturbance_s<N>.png``.
+
+    Parameters
+    ----------
+    sr : ScenarioResult
+        The scenario's flights (:class:`~ilcdob.validation.reproduce.ScenarioResult`).
+    iterations : int
+        Learning iterations of the reproduction.
+    pending : bool
+        Return them unbuilt (:class:`PendingFigure`).
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure or PendingFigure
+    """
+    makers = {f"{kind}_s{sr.scenario.id}.png": partial(_per_scenario, sr, iterations, kind)
+              for kind in ("error", "disturbance")}
+    return {name: PendingFigure(make) if pending else make() for name, make in makers.items()}
+
+
+def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict[str, Figure | PendingFigure]:
     """Every figure of a reproduction, by PNG file name, in the order of the report.
 
     Parameters
     ----------
     res : ReproductionResult
         The reproduction (linear or nonlinear plant).
+    pending : bool
+        Return each figure unbuilt, as a :class:`PendingFigure` (for :func:`render_figures`,
+        which builds and renders them in parallel).
 
     Returns
     -------
-    dict of str to matplotlib.figure.Figure
-        ``rmse_bars.png``, ``error_s<N>.png`` and ``disturbance_s<N>.png`` per scenario,
-        ``bode_loops.png``, ``identified_models.png`` (systems with an identified plant only),
-        ``bode_learning.png`` and ``bode_te.png`` (when ``res.filters`` holds pairs). Laid
-        out; save each at :data:`FIGURE_DPI`.
+    dict of str to matplotlib.figure.Figure or PendingFigure
+        ``rmse_bars.png``, ``error_s<N>.png`` and ``disturbance_s<N>.png`` per scenario
+        (:func:`scenario_figures`), ``bode_loops.png``, ``identified_models.png`` (systems with
+        an identified plant only), ``bode_learning.png`` and ``bode_te.png`` (when
+        ``res.filters`` holds pairs). Laid out; save each at :data:`FIGURE_DPI` (:func:`figure_png`).
     """
-    figs = {"rmse_bars.png": _rmse_bars(res)}
-    figs.update(_time_series(res))
-    figs["bode_loops.png"] = _bode_loops(res.fleet)
-    ident = _identified_models(res.fleet)
-    if ident is not None:
-        figs["identified_models.png"] = ident
+    makers: dict[str, Callable[[], Figure]] = {"rmse_bars.png": partial(_rmse_bars, res)}
+    figs: dict[str, Figure | PendingFigure] = {}
+    for sr in res.scenarios:
+        makers.update({name: p.make for name, p in scenario_figures(sr, res.iterations, pending=True).items()})
+    makers["bode_loops.png"] = partial(_bode_loops, res.fleet)
+    if any(spec.identification is not None for spec in res.fleet.systems):  # the systems identified_bounds draws
+        makers["identified_models.png"] = partial(_identified_models, res.fleet)
     if res.filters:
-        figs["bode_learning.png"] = _bode_learning(res.filters, res.fleet.sample_time)
-        figs["bode_te.png"] = _bode_te(res.fleet, res.filters)
+        makers["bode_learning.png"] = partial(_bode_learning, res.filters, res.fleet.sample_time)
+        makers["bode_te.png"] = partial(_bode_te, res.fleet, res.filters)
+    for name, make in makers.items():
+        figs[name] = PendingFigure(make) if pending else make()
     return figs
+
+
+def figure_png(fig: Figure) -> bytes:
+    """The PNG file of a figure at :data:`FIGURE_DPI`, drawn once (module docstring, "Rendering").
+
+    The bytes are those of ``fig.savefig(f, format="png", dpi=FIGURE_DPI)``; the figure is
+    left laid out at that resolution, on an Agg canvas, without a layout engine.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        A figure with a constrained layout, or laid out already (e.g. ``tight_layout``).
+
+    Returns
+    -------
+    bytes
+    """
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.layout_engine import PlaceHolderLayoutEngine
+
+    FigureCanvasAgg(fig)  # one renderer for the layout and the drawing: text is measured once
+    engine = fig.get_layout_engine()
+    if engine is not None and not isinstance(engine, PlaceHolderLayoutEngine):
+        fig.set_dpi(FIGURE_DPI)  # the layout savefig would compute, at the resolution it renders
+        engine.execute(fig)
+    with matplotlib.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        fig.set_layout_engine(None)  # laid out: savefig draws once
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=FIGURE_DPI)
+    return buf.getvalue()
+
+
+def render_workers(workers: object = None, jobs: int | None = None, name: str = "workers") -> int:
+    """Processes :func:`render_figures` uses: ``workers``, or one per usable core, at most one per job.
+
+    Parameters
+    ----------
+    workers : int or None
+        Processes asked for (>= 1); None: the usable cores of this process.
+    jobs : int, optional
+        Figures to render (caps the count; 0 or 1: this process alone).
+    name : str
+        The name ``workers`` was given under, for the error message.
+
+    Returns
+    -------
+    int
+        1 means this process renders alone (also where worker processes cannot be forked: not
+        Linux).
+
+    Raises
+    ------
+    SpecError
+        ``workers`` not an integer >= 1.
+    """
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise SpecError(f"`{name}` (figure rendering processes): got {workers!r}, expected an integer >= 1, or "
+                        "None for one per usable core")
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if jobs is not None:
+        workers = min(workers, jobs)
+    return max(1, workers) if sys.platform.startswith("linux") else 1
+
+
+def _is_figure(content: object) -> bool:
+    return isinstance(content, (Figure, PendingFigure))
+
+
+def _figure_of(content: object) -> Figure:
+    return content.build() if isinstance(content, PendingFigure) else content
+
+
+@dataclass
+class _Batch:
+    """Figures submitted together: their names, the shared counter of the next one to take, how many
+    have come back and how many workers are on them."""
+
+    names: list[str]
+    counter: object = None
+    received: int = 0
+    workers: int = 0
+
+
+@dataclass
+class _Worker:
+    """A forked worker process, the caller's end of its pipe and its batch."""
+
+    proc: object
+    conn: object
+    batch: _Batch
+
+
+class FigureRenderer:
+    """Builds and renders figures to PNG bytes in forked worker processes while the caller goes on.
+
+    :meth:`submit` starts figures as soon as their data exist (e.g. each scenario's when it is
+    flown), in workers forked then, which see the caller's objects as they are at that moment;
+    :meth:`finish` renders the rest of a content map and returns it with every figure as PNG
+    bytes. While the caller works, the submitted figures use one worker fewer than
+    ``workers`` (the caller's core); :meth:`finish` uses all. With one worker (one usable core,
+    not Linux) everything is rendered in this process by :meth:`finish`. Use as a context
+    manager: leaving it with an exception stops the workers (module docstring, "Rendering").
+
+    Parameters
+    ----------
+    workers : int, optional
+        Worker processes (:func:`render_workers`; default one per usable core).
+
+    Raises
+    ------
+    SpecError
+        Bad ``workers``.
+    """
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = render_workers(workers)
+        self._content: dict[str, object] = {}
+        self._batches: list[_Batch] = []  # with figures not back yet
+        self._running: list[_Worker] = []
+        self._out: dict[str, bytes] = {}
+
+    def __enter__(self) -> FigureRenderer:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+    def submit(self, figures: Mapping[str, object]) -> None:
+        """Start building and rendering ``figures`` (name -> Figure or PendingFigure; other values ignored).
+
+        Parameters
+        ----------
+        figures : mapping of str to object
+            Figures not submitted before.
+        """
+        names = [name for name, c in figures.items() if _is_figure(c)]
+        again = [name for name in names if name in self._content]
+        if again:
+            raise ValueError(f"FigureRenderer.submit: {again} submitted twice")
+        self._content.update({name: figures[name] for name in names})
+        if self.workers > 1 and names:
+            self._batches.append(_Batch(names))
+            self._collect(block=False)
+            self._start(max(1, self.workers - 1))
+
+    def finish(self, content: Mapping[str, object]) -> dict[str, object]:
+        """``content`` with every figure as its PNG bytes: those submitted, the others rendered now.
+
+        Parameters
+        ----------
+        content : mapping of str to object
+            File name -> content (:mod:`ilcdob.app.output`); its figures (Figure or
+            PendingFigure) whose names were submitted are replaced by what was rendered for them.
+
+        Returns
+        -------
+        dict of str to object
+            The content map in the same order, each figure as the bytes of its PNG file.
+
+        Raises
+        ------
+        RuntimeError
+            A worker process ended without sending its figure (killed, out of memory).
+        Exception
+            What building or rendering a figure raised, with the worker's traceback as a note.
+        """
+        rest = {name: c for name, c in content.items() if _is_figure(c) and name not in self._content}
+        if self.workers > 1:
+            self.submit(rest)
+            while self._running or self._wanted() is not None:
+                self._start(self.workers)
+                self._collect(block=True)
+        else:
+            self._content.update(rest)
+            for name, c in self._content.items():
+                if name not in self._out:
+                    self._out[name] = figure_png(_figure_of(c))
+        missing = [name for name in self._content if name not in self._out]
+        if missing:
+            raise RuntimeError(f"figure workers ended without rendering {missing} (killed, or out of memory)")
+        return {name: self._out[name] if _is_figure(c) else c for name, c in content.items()}
+
+    def close(self) -> None:
+        """Stop the workers still running (their figures are dropped)."""
+        for w in self._running:
+            if w.proc.is_alive():
+                w.proc.terminate()
+        for w in self._running:
+            w.proc.join()
+            w.conn.close()
+        self._running = []
+        self._batches = []
+
+    def _wanted(self) -> _Batch | None:
+        """The first batch with more figures to come than workers on it (a worker would find one)."""
+        return next((b for b in self._batches if len(b.names) - b.received > b.workers
+                     and (b.counter is None or b.counter.value < len(b.names))), None)
+
+    def _start(self, slots: int) -> None:
+        """Fork workers for the batches that want one while fewer than ``slots`` run."""
+        import gc
+        import multiprocessing
+
+        if len(self._running) >= slots or self._wanted() is None:
+            return
+        ctx = multiprocessing.get_context("fork")
+        for stream in (sys.stdout, sys.stderr):  # written before the fork, not by a worker too
+            if stream is not None:
+                stream.flush()
+        gc.freeze()  # a worker's collector leaves the caller's objects alone: their pages stay shared
+        try:
+            while len(self._running) < slots and (batch := self._wanted()) is not None:
+                if batch.counter is None:
+                    batch.counter = ctx.Value("i", 0)
+                recv, send = ctx.Pipe(duplex=False)
+                _widen(send)
+                theirs = [w.conn for w in self._running] + [recv]
+                proc = ctx.Process(target=_render_worker, name="ilcdob-figures", daemon=True,
+                                   args=(self._content, batch.names, batch.counter, send, os.getpid(), theirs))
+                proc.start()
+                send.close()
+                self._running.append(_Worker(proc, recv, batch))
+                batch.workers += 1
+        finally:
+            gc.unfreeze()
+
+    def _collect(self, block: bool) -> None:
+        """Read what the workers sent (waiting for a message when ``block``); drop the ended ones."""
+        from multiprocessing.connection import wait
+
+        if not self._running:
+            return
+        for conn in wait([w.conn for w in self._running], timeout=None if block else 0):
+            worker = next(w for w in self._running if w.conn is conn)
+            try:
+                msg = conn.recv()
+            except EOFError:  # the worker ended
+                worker.proc.join()
+                conn.close()
+                self._running.remove(worker)
+                worker.batch.workers -= 1
+                if worker.batch.workers == 0 and worker.batch.counter.value >= len(worker.batch.names):
+                    self._batches.remove(worker.batch)  # every figure taken, and no worker left on it
+                continue
+            if msg[0] == "error":
+                _, name, exc, text = msg
+                exc.add_note(f"while rendering {name} in a worker process:\n{text}")
+                raise exc
+            self._out[msg[1]] = msg[2]
+            worker.batch.received += 1
+
+
+def _widen(conn) -> None:
+    """Make a pipe hold a few figures (1 MiB, Linux), so that a worker rarely waits for the caller to read."""
+    try:
+        import fcntl
+
+        fcntl.fcntl(conn.fileno(), fcntl.F_SETPIPE_SZ, 1 << 20)
+    except (ImportError, AttributeError, OSError):
+        pass  # the default size: a worker waits for the caller to read
+
+
+def render_figures(content: Mapping[str, object], workers: int | None = None) -> dict[str, object]:
+    """A content map with every figure (built, or :class:`PendingFigure`) replaced by its PNG bytes.
+
+    Parameters
+    ----------
+    content : mapping of str to object
+        File name -> content (:mod:`ilcdob.app.output`); the values that are a
+        :class:`~matplotlib.figure.Figure` or a :class:`PendingFigure` are rendered
+        (:func:`figure_png`), the others kept as they are, in the same order.
+    workers : int, optional
+        Processes that build and render (:func:`render_workers`; default one per usable core).
+
+    Returns
+    -------
+    dict of str to object
+        The content map, each figure as the bytes of its PNG file.
+
+    Raises
+    ------
+    SpecError
+        Bad ``workers``.
+    RuntimeError
+        A worker process ended without sending its figure (killed, out of memory).
+    Exception
+        What building or rendering a figure raised, with the worker's traceback as a note.
+    """
+    n = render_workers(workers, sum(1 for c in content.values() if _is_figure(c)))
+    with FigureRenderer(n) as renderer:
+        return renderer.finish(content)
+
+
+def _die_with_parent(parent: int) -> None:
+    """Have the kernel kill this worker when its parent dies (Linux), and end now if it has already."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, 9)  # PR_SET_PDEATHSIG, SIGKILL
+    except (OSError, AttributeError):
+        pass  # no prctl: the worker still stops when it cannot send
+    if os.getppid() != parent:
+        os._exit(0)
+
+
+def _render_worker(content: Mapping[str, object], names: list[str], counter, conn, parent: int,
+                   theirs: list) -> None:
+    """A forked worker: render the next figure of ``names`` (shared ``counter``) until none is left,
+    sending each to ``conn``; ``theirs``: the caller's ends of the pipes, closed here. It ends with
+    ``os._exit``: nothing of the caller's state (buffered output, exit handlers) runs twice."""
+    import signal
+
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the caller stops the workers
+        _die_with_parent(parent)
+        for other in theirs:  # so that a send fails (and the worker ends) once the caller is gone
+            other.close()
+        while True:
+            with counter.get_lock():
+                i = counter.value
+                counter.value = i + 1
+            if i >= len(names):
+                return
+            name = names[i]
+            try:
+                png = figure_png(_figure_of(content[name]))
+            except Exception as exc:  # sent to the caller, which raises it
+                text = traceback.format_exc()
+                try:
+                    conn.send(("error", name, exc, text))
+                except Exception:  # an exception that does not pickle: its text
+                    conn.send(("error", name, RuntimeError(f"{type(exc).__name__}: {exc}"), text))
+                return
+            conn.send(("png", name, png))
+    except (BrokenPipeError, EOFError, OSError):
+        return  # the caller is gone
+    finally:
+        try:
+            conn.close()
+        finally:
+            os._exit(0)

@@ -222,19 +222,23 @@ class ReproductionResult:
             + ("" if self.law == "paper" else f" --law {self.law}")
             + " --out <dir>`; numbers are in `results.json`."]
 
-    def files(self, figures: bool = True) -> dict[str, object]:
+    def files(self, figures: bool = True, pending: bool = False) -> dict[str, object]:
         """The report of the reproduction: file name -> content.
 
         Parameters
         ----------
         figures : bool
             Include the figures (:func:`ilcdob.validation.figures.reproduction_figures`).
+        pending : bool
+            The figures unbuilt (:class:`~ilcdob.validation.figures.PendingFigure`), for
+            :func:`~ilcdob.validation.figures.render_figures` to build and render in parallel.
 
         Returns
         -------
         dict of str to object
             The figures (``matplotlib.figure.Figure``, PNG at
-            :data:`ilcdob.validation.figures.FIGURE_DPI`) when ``figures``, then ``README.md``
+            :data:`ilcdob.validation.figures.FIGURE_DPI`; ``PendingFigure`` with ``pending``) when
+            ``figures``, then ``README.md``
             (str, :func:`markdown_index`), ``identified_fleet.toml`` when the run identified its
             models (:attr:`identified_toml`), then ``results.json`` (a JSON document,
             :meth:`to_dict` with non-finite numbers as null). ``results.json`` comes last: written
@@ -244,7 +248,7 @@ class ReproductionResult:
         if figures:
             from .figures import reproduction_figures  # matplotlib only when figures are made
 
-            out.update(reproduction_figures(self))
+            out.update(reproduction_figures(self, pending=pending))
         out["README.md"] = markdown_index(self, list(out))
         if self.identified_toml:
             out["identified_fleet.toml"] = self.identified_toml
@@ -555,7 +559,8 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
 def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: int = 3,
               progress: Callable[[int, int, str], None] | None = None, law: str = DEFAULT_LAW,
               sensor_noise_std: float = 0.0, seed: int = 0, bandwidth: object = "auto",
-              order: list[str] | None = None) -> ReproductionResult:
+              order: list[str] | None = None,
+              on_scenario: Callable[[ScenarioResult], None] | None = None) -> ReproductionResult:
     """Run the listed scenarios on ``fleet`` (see module docstring).
 
     Parameters
@@ -580,6 +585,9 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
     order : list of str, optional
         Learning order by system name, flown in every scenario
         (:func:`~ilcdob.validation.scenarios.check_order`); None (default): each scenario's.
+    on_scenario : callable, optional
+        Called with each scenario's :class:`ScenarioResult` as soon as it is flown, before the
+        next (e.g. to start rendering its figures, :func:`ilcdob.validation.figures.scenario_figures`).
 
     Returns
     -------
@@ -602,6 +610,8 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
         sc = scenario(sid)
         t0 = time.perf_counter()
         results.append(run_scenario(fleet, sc, iterations, filters, law, deltas, noise_std, seed, bandwidth, order))
+        if on_scenario is not None:
+            on_scenario(results[-1])
         if progress is not None:
             progress(i, len(scenario_ids), f"scenario {sid} ({sc.title}, law {law}): "
                                            f"{time.perf_counter() - t0:.1f} s")

@@ -83,7 +83,9 @@ from .output import MANIFEST, ManifestError, verify_manifest
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "report_files", "THEOREM_SAMPLES"]
 
-#: Sampled plants per Delta set of the Theorem check written by :func:`report_files` (as ``ilcdob check``).
+#: Sampled plants per Delta set of the Theorem check written by :func:`report_files` (as ``ilcdob check``
+#: draws them, seed 0). The check reads each set's bound, which does not depend on the samples, so
+#: :func:`report_files` draws none (:func:`ilcdob.design.theorem.bound_delta_sets`).
 THEOREM_SAMPLES = 8
 
 #: File name -> the command that writes it.
@@ -919,26 +921,40 @@ def _plant_section(res: JsonInput) -> str:
     return "\n".join(parts)
 
 
-def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any], Any]:
-    """The Theorem check of every learning order (``theorem.json``) and its figure (None: no check)."""
-    from matplotlib.figure import Figure
+def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any], list[Any] | None]:
+    """The Theorem check of every learning order (``theorem.json``) and the checks of the first order
+    (for :func:`_theorem_figure`; None: no check).
 
-    from ilcdob.design.pair import fleet_delta_sets, pair_band
-    from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
+    The check reads each source's Delta set through its bound only (``source="bound"``), so the
+    sets are the bounds (:func:`ilcdob.design.theorem.bound_delta_sets`, one per system for every
+    order) and no sampled plant is built: the results are those of the sets of
+    :data:`THEOREM_SAMPLES` samples drawn with seed 0 that ``theorem.json`` names (and
+    ``ilcdob check`` draws).
+    """
+    from ilcdob.design.pair import pair_band
+    from ilcdob.design.theorem import bound_delta_sets, format_theorem_table, learning_pairs, theorem_check
 
     missing = [s.name for s in fleet.systems if s.identification is None]
     if missing:
         return {"missing": f"the fleet {fleet.source} has no identified covariance for {missing}, so no Delta set "
                            "and no Theorem check"}, None
     data: dict[str, Any] = {"samples": THEOREM_SAMPLES, "seed": 0, "orders": []}
+    sets = bound_delta_sets(fleet, [name for name in fleet.names if any(name in o for o in orders)])
     first = None
     for order in orders:
-        deltas = fleet_delta_sets(fleet, order, k=THEOREM_SAMPLES, seed=0)
+        deltas = {name: sets[name] for name in order}
         bands = {(a, b): pair_band(fleet, a, b, deltas=deltas) for a, b in learning_pairs(fleet.names, order)}
         checks = theorem_check(fleet, order, deltas, bands=bands)
         first = first or checks
         data["orders"].append({"order": order, "table": format_theorem_table(checks),
                                "pairs": [_theorem_pair(c) for c in checks]})
+    return data, first
+
+
+def _theorem_figure(first: list[Any]) -> Any:
+    """``theorem.png``: the paper's condition per source of the first order's checks."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(4.0 * len(first), 3.2))
     for ax, c in zip(fig.subplots(1, len(first), squeeze=False)[0], first):
         ax.loglog(c.w, c.delta, label="|Delta_(j-1)| (3 sigma)")
@@ -948,7 +964,7 @@ def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any]
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
-    return data, fig
+    return fig
 
 
 _THEOREM_KEYS = ("source", "target", "min_margin", "worst_w", "holds_everywhere", "failing_band", "delta_source",
@@ -1009,7 +1025,7 @@ def _theorem_html(folder: Path, data: dict[str, Any] | None) -> str:
     return "\n".join(parts)
 
 
-def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True) -> dict[str, Any]:
+def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True, pending: bool = False) -> dict[str, Any]:
     """The report's inputs besides ``results.json``: ``fleet.json``, ``theorem.json`` (+ ``theorem.png``).
 
     Parameters
@@ -1019,7 +1035,10 @@ def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True) ->
     orders : list of list of str
         The learning orders of the scenarios.
     figures : bool
-        Include ``theorem.png``.
+        Include ``theorem.png`` (when the fleet has a Theorem check).
+    pending : bool
+        ``theorem.png`` unbuilt (:class:`ilcdob.validation.figures.PendingFigure`), for
+        :func:`ilcdob.validation.figures.render_figures`.
 
     Returns
     -------
@@ -1030,10 +1049,15 @@ def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True) ->
     for o in orders:
         if list(o) not in unique:
             unique.append(list(o))
-    theorem, fig = _theorem_data(fleet, unique)
+    theorem, first = _theorem_data(fleet, unique)
     files: dict[str, Any] = {"fleet.json": _fleet_table(fleet), "theorem.json": theorem}
-    if figures and fig is not None:
-        files["theorem.png"] = fig
+    if figures and first is not None:
+        if pending:
+            from ilcdob.validation.figures import PendingFigure
+
+            files["theorem.png"] = PendingFigure(lambda: _theorem_figure(first))
+        else:
+            files["theorem.png"] = _theorem_figure(first)
     return files
 
 
