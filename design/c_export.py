@@ -1433,8 +1433,10 @@ _FILE_TEXT = {
                  "of the functions running its filters alone (L1 and L2; robust-set: Ginv), with the sample time, "
                  "the band and the look-ahead of each filter",
     "filters.c": "their implementation (no allocation; compile it with your firmware or ground tool)",
-    "lifted.npz": "numpy arrays: for norm-optimal the lifted matrices L1, L2 (N x N, d_f,j = L1 e_j-1 + "
-                  "L2 d_f,j-1); for robust the learning signal d_f, the predicted improvement ratios and errors",
+    "lifted.npz": "numpy arrays: for norm-optimal its law d_f,j = L1 e_j-1 + L2 d_f,j-1 as Riccati gains "
+                  "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(numpy.load(...)).apply(e, d_f)) and, "
+                  "with --lifted, the N x N matrices L1, L2; for robust the learning signal d_f, the predicted "
+                  "improvement ratios and errors",
     "learning_signal.csv": "the learning signal d_f,j (m/s^2) computed from the given trial of the previous "
                            "vehicle, to feed forward on the next flight",
     "bode.png": "Bode plots (magnitude in dB, phase in degrees, against rad/s up to Nyquist) of the pair's "

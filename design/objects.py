@@ -56,7 +56,8 @@ DESIGN_FILE = "filters.json"
 
 #: What a design without ``L1``/``L2`` learns with instead, by method.
 _NO_FILTERS = {
-    "norm-optimal": "its learning is the lifted matrices L1, L2 of lifted.npz",
+    "norm-optimal": "its learning is the law in lifted.npz (Riccati gains: "
+                    "ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays; the matrices L1, L2 with --lifted)",
     "robust": "its learning signal is an SOCP solved per trial (learning_signal.csv, lifted.npz)",
     "robust-set": "its closed-form filters under `closed_form` are followed by the FIR `F` and computed on a "
                   "trial as `learning` states; use ilcdob.design.pair.design_pair(..., 'robust-set')",

@@ -3,8 +3,8 @@
 This is the API behind ``ilcdob design``: it builds the design, the ``filters.json``
 content (discrete filters applied to the previous system's error and learning signal:
 second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.export`; the C
-code of :mod:`.c_export` runs them), the lifted matrices
-for the lifted methods, and the learning signal for a given trial of the previous system.
+code of :mod:`.c_export` runs them), the norm-optimal law's gains (and, when asked, its
+lifted matrices), and the learning signal for a given trial of the previous system.
 
 Every design learns through the same law (:meth:`PairDesign.learning`)::
 
@@ -30,7 +30,6 @@ from scipy import signal as sps
 
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
-from ilcdob.lifted import check_lifted_size
 from ilcdob.display import html_table
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
@@ -44,7 +43,7 @@ from .fir import FIROptions, design_fir
 from .flown import airframe_path_filter, check_disturbance
 from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
 from .limit import LIMIT_POLICIES, LimitReport, enforce_limit
-from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
+from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_optimal_size, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
 from .robust_set import RobustSetOptions, design_robust_set, structured_set
 from .theorem import theorem_rhs
@@ -104,7 +103,9 @@ class PairDesign:
     raw : callable (e, df) -> d_f
         The method's learning filter on its own (no band, no reference terms, no limit).
     lifted : dict of str -> array, or None
-        ``L1``, ``L2`` (N x N) for the norm-optimal method.
+        Norm-optimal: its learning law in compact form (the gains of
+        :meth:`~ilcdob.design.norm_optimal.NormOptimalLaw.to_arrays`, O(N)), and the N x N
+        matrices ``L1``, ``L2`` when asked for (``lifted=True``).
     robust : RobustPairDesigner or None
         For the robust method: the per-trial SOCP (its ``design`` gives ratios per model).
     law : str
@@ -154,10 +155,11 @@ class PairDesign:
 
     @property
     def order(self) -> str:
-        """Implementation size: filter orders (zpk/FIR), lifted matrix size, or SOCP models."""
+        """Implementation size: filter orders (zpk/FIR), Riccati gains (and lifted matrix size), or SOCP models."""
         f = self.filters
         if self.method == "norm-optimal":
-            return f"lifted {f['n']}x{f['n']}"
+            lifted = f", lifted {f['n']}x{f['n']}" if self.lifted is not None and "L1" in self.lifted else ""
+            return f"Riccati gains over {f['n']} samples{lifted}"
         if self.method == "robust-set":
             return f"closed form + {len(f['F']['num'])}-tap FIR"
         if self.method == "robust":
@@ -381,7 +383,7 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
 def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
                 norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
                 deltas: dict[str, DeltaSet] | None = None, robust: RobustOptions | None = None,
-                relax: bool = False, lifted: bool = True, law: str = DEFAULT_LAW,
+                relax: bool = False, lifted: bool = False, law: str = DEFAULT_LAW,
                 reference: np.ndarray | None = None, acceleration: np.ndarray | None = None,
                 robust_set: RobustSetOptions | None = None, bandwidth: object = "auto",
                 disturbance: str = "command", on_limit: str = "clip") -> PairDesign:
@@ -409,7 +411,9 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
         Robust method: design at the smallest feasible rho (with a warning) when ``rho`` is
         infeasible for a trial, instead of raising.
     lifted : bool
-        Norm-optimal: build the N x N matrices L1, L2 (O(N^2) memory; not needed to learn).
+        Norm-optimal: also build the N x N matrices L1, L2 (about 8 N^2 numbers of memory while
+        they are built, O(N^3) time; not needed to learn). Without, the design holds its law in
+        compact form (:class:`~ilcdob.design.norm_optimal.NormOptimalLaw`, O(N)).
     law : {"paper", "exact-reference"}
         Learning law (:mod:`ilcdob.design.laws`). ``exact-reference`` adds the reference terms
         of ``reference`` around the method's learning; ``multi-source`` learns from several
@@ -543,14 +547,17 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
     n = 500 if n is None else int(n)
     if n < 2:
         raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
-    matrices = None
+    order = max(tgt.nominal.G_f.nstates, src.nominal.G_d.nstates)
+    check_norm_optimal_size(n, order, lifted, "n", "lifted=True")
+    designer = NormOptimalDesigner(tgt, n, opts)
+    arrays = designer.law(src).to_arrays()
+    what = ("lifted.npz: the law d_f,j = L1 e_{j-1} + L2 d_f,{j-1} as Riccati gains "
+            "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(...).apply(e, d_f))")
     if lifted:
-        check_lifted_size(n, "n")
-        l1, l2 = NormOptimalDesigner(tgt, n, opts).lifted_matrices(src)
-        matrices = {"L1": l1, "L2": l2}
-    filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
-               "lifted": "lifted.npz (L1, L2: d_f,j = L1 e_{j-1} + L2 d_f,{j-1})"}
-    return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts), matrices)
+        arrays["L1"], arrays["L2"] = designer.lifted_matrices(src)
+        what += " and as the N x N matrices L1, L2"
+    filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n, "lifted": what}
+    return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts), arrays)
 
 
 def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: str,

@@ -109,7 +109,7 @@ def test_compare_duration_below_two_samples(tmp_path, capsys, duration):
 
 # 7
 @pytest.mark.parametrize("extra, words", [
-    (["--n", "50000"], ["`--n`", "50000", "40 GB", "20000"]),
+    (["--method", "norm-optimal", "--lifted", "--n", "50000"], ["`--n`", "50000", "160 GB", "10000", "--lifted"]),
     (["--method", "fir", "--samples", "10000"], ["`--samples`", "10000", "1 to 200"]),
     (["--method", "robust", "--samples", "10000"], ["`--samples`", "10000", "1 to 200"]),
 ])

@@ -68,7 +68,7 @@ def test_norm_optimal_writes_lifted_matrices(fleet, tmp_path):
     d, fl = _trial(fleet, trial, n=400)
     out = tmp_path / "no"
     assert main(["design", "--from", "UAV1", "--to", "UAV2", "--method", "norm-optimal", "--trial", str(trial),
-                 "--out", str(out)]) == 0
+                 "--lifted", "--out", str(out)]) == 0
     lifted = np.load(out / "lifted.npz")
     assert lifted["L1"].shape == (400, 400) and lifted["L2"].shape == (400, 400)
     ls = load_csv(out / "learning_signal.csv", {"d_f": "learning"})
