@@ -13,39 +13,9 @@ import numpy as np
 from scipy.linalg import toeplitz
 from scipy.signal import fftconvolve
 
-from .errors import SignalError, SpecError
+from .errors import SignalError
 
-__all__ = ["MAX_LIFTED_SAMPLES", "check_lifted_size", "markov_parameters", "lifted_operator", "relative_degree", "toeplitz_matvec", "toeplitz_rmatvec"]
-
-
-#: Longest trial, in samples, for which N x N lifted matrices are built (two of them take
-#: 2 x 8 N^2 bytes: 6.4 GB at this length).
-MAX_LIFTED_SAMPLES = 20000
-
-
-def check_lifted_size(n: int, name: str = "n", matrices: int = 2) -> None:
-    """Refuse, before any work, a trial too long for N x N lifted matrices.
-
-    Parameters
-    ----------
-    n : int
-        Trial length, samples.
-    name : str
-        The option or argument that gave it, for the message.
-    matrices : int
-        How many N x N float64 matrices would be built.
-
-    Raises
-    ------
-    SpecError
-        ``n`` above :data:`MAX_LIFTED_SAMPLES`; the message states the memory it would take.
-    """
-    if n > MAX_LIFTED_SAMPLES:
-        need = matrices * 8.0 * float(n) ** 2
-        cap = matrices * 8.0 * float(MAX_LIFTED_SAMPLES) ** 2
-        raise SpecError(f"`{name}`: got {n} samples; {matrices} lifted {n} x {n} matrices would need "
-                        f"{need / 1e9:.3g} GB of memory; the limit is {MAX_LIFTED_SAMPLES} samples ({cap / 1e9:.3g} GB): "
-                        "use a shorter trial, or a filter method (closed-form, fir) that needs no lifted matrices")
+__all__ = ["markov_parameters", "lifted_operator", "relative_degree", "toeplitz_matvec", "toeplitz_rmatvec"]
 
 
 def markov_parameters(sys: ct.StateSpace, n: int) -> np.ndarray:
