@@ -60,6 +60,9 @@ __all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustPairDesigne
 
 _OK = ("optimal", "optimal_inaccurate")
 _DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl on these KKT systems
+#: Threads of Clarabel's KKT solver (0: its own choice, every core); campaigns set 1 on their workers, which
+#: share the cores with each other.
+CLARABEL_THREADS = 0
 _INFEASIBLE = ("infeasible", "infeasible_inaccurate")
 _CLARABEL_STATUS = {"Solved": "optimal", "AlmostSolved": "optimal_inaccurate",
                     "PrimalInfeasible": "infeasible", "AlmostPrimalInfeasible": "infeasible_inaccurate",
@@ -388,6 +391,7 @@ class RobustDesigner:
         settings = clarabel.DefaultSettings()
         settings.verbose = bool(self.options.verbose)
         settings.direct_solve_method = _DIRECT_METHOD
+        settings.max_threads = CLARABEL_THREADS
         # smaller static regularisation than Clarabel's 1e-8: with near-perfect learning the optimum is ~1e-6
         # and the default lets the primal residual of the state equations creep up (AlmostSolved at K=20, N=1000)
         settings.static_regularization_constant = 1e-10

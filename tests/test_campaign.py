@@ -23,7 +23,7 @@ from ilcdob.fleet import load_fleet
 from ilcdob.app.html import json_tables
 from ilcdob.validation.campaign import (SAMPLES_FILE, SETTINGS_FILE, CampaignError, CampaignOptions,
                                         MethodStatistics, SampleStore, campaign_settings, campaign_statistics,
-                                        draw_true_loops, run_campaign)
+                                        draw_true_loops, run_campaign, run_sample)
 
 # one scenario of 20 s (1000 samples), closed form + robust SOCP (1 + 1 models): ~0.3 s per sample
 KILL_ARGS = ["--samples", "12", "--scenarios", "2", "--methods", "closed-form,robust", "--duration", "20",
@@ -237,3 +237,128 @@ def test_runs_on_an_existing_cluster(fleet, tmp_path):
     assert res.workers == 1 and res.methods["closed-form"].runs == 2
     local = run_campaign(fleet, SMALL, tmp_path / "loc", workers=1)
     assert local.methods == res.methods
+
+
+def test_runs_through_a_scheduler_file_with_the_workers_threads_limited(fleet, tmp_path):
+    """``scheduler_file``: the file ``dask scheduler --scheduler-file`` writes names the cluster; its workers get
+    BLAS and Clarabel limited to one thread (a worker plugin, undone when the in-process worker closes)."""
+    from distributed import LocalCluster
+    from threadpoolctl import threadpool_info
+
+    from ilcdob.design import robust, robust_set
+
+    path = tmp_path / "scheduler.json"
+    blas_before = [i["num_threads"] for i in threadpool_info()]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
+                      dashboard_address=None, scheduler_kwargs={"scheduler_file": str(path)}):
+        assert json.loads(path.read_text())["address"].startswith("tcp://")
+        res = run_campaign(fleet, SMALL, tmp_path / "f", scheduler_file=path)
+        assert robust.CLARABEL_THREADS == robust_set.CLARABEL_THREADS == 1  # the worker is this process
+        assert all(i["num_threads"] == 1 for i in threadpool_info())
+    assert res.workers == 1 and res.methods["closed-form"].runs == 2
+    assert robust.CLARABEL_THREADS == robust_set.CLARABEL_THREADS == 0
+    assert [i["num_threads"] for i in threadpool_info()] == blas_before
+    report = res.to_dict()
+    assert report["library_threads"]["blas"] == report["library_threads"]["clarabel"] == 1
+    assert "thread_time" in report["cpu_s"]
+
+
+def test_cluster_options_are_checked_before_connecting(fleet, tmp_path, capsys):
+    """A missing or address-less scheduler file, both a scheduler and a file, TLS files without a tls://
+    scheduler (or missing), a tls:// scheduler without them: refused by name, nothing written."""
+    pem = tmp_path / "ca.pem"
+    pem.write_text("not checked before connecting")
+    missing = tmp_path / "nowhere.json"
+    cases = [({"scheduler_file": missing}, "nowhere.json"),
+             ({"scheduler": "tcp://127.0.0.1:8786", "scheduler_file": missing}, "give one of them"),
+             ({"tls_ca_file": pem, "tls_cert": pem}, r"TLS files go with a tls:// scheduler, got a local cluster"),
+             ({"scheduler": "tcp://127.0.0.1:8786", "tls_ca_file": pem, "tls_cert": pem},
+              r"`tls_ca_file`, `tls_cert`: TLS files go with a tls:// scheduler, got 'tcp://127.0.0.1:8786'"),
+             ({"scheduler": "tls://127.0.0.1:8786"}, "needs tls_ca_file and tls_cert"),
+             ({"scheduler": "tls://127.0.0.1:8786", "tls_ca_file": pem, "tls_cert": tmp_path / "no.pem"},
+              r"`tls_cert`: got '.*no\.pem' \(no such file\)")]
+    for kwargs, message in cases:
+        with pytest.raises(CampaignError, match=message):
+            run_campaign(fleet, SMALL, tmp_path / "out", **kwargs)
+    (tmp_path / "bare.json").write_text('{"type": "Scheduler"}')
+    with pytest.raises(CampaignError, match=r"bare\.json: no \"address\""):
+        run_campaign(fleet, SMALL, tmp_path / "out", scheduler_file=tmp_path / "bare.json")
+    assert not (tmp_path / "out").exists()
+    assert main(["campaign", "--samples", "2", "--scheduler-file", str(missing), "--out", str(tmp_path / "c")]) == 2
+    assert "nowhere.json" in capsys.readouterr().err
+    assert main(["campaign", "--samples", "2", "--scheduler", "tcp://127.0.0.1:8786", "--scheduler-file",
+                 str(missing), "--out", str(tmp_path / "c")]) == 2
+    assert "--scheduler-file: not allowed with argument --scheduler" in capsys.readouterr().err
+
+
+def test_cpu_s_is_the_samples_thread_time(fleet, monkeypatch):
+    """``cpu_s`` counts the thread that flew the sample, not the whole worker process (its other threads)."""
+    import time as time_module
+
+    thread, process = iter([10.0, 12.5]), iter([0.0, 100.0])
+    monkeypatch.setattr(time_module, "thread_time", lambda: next(thread))
+    monkeypatch.setattr(time_module, "process_time", lambda: next(process))
+    rec = run_sample(fleet, SMALL, campaign_settings(fleet, SMALL)["id"], 0)
+    assert rec["cpu_s"] == 2.5
+
+
+def test_designs_are_shared_by_the_threads_of_a_worker_process(fleet):
+    """One state (scenarios, designs) per process and campaign: a second thread reuses the first one's."""
+    import threading
+
+    from ilcdob.validation.campaign import run as campaign_run
+
+    states = []
+    threads = [threading.Thread(target=lambda: states.append(campaign_run._worker_state(fleet, SMALL, "one")))
+               for _ in range(2)]
+    for t in threads:
+        t.start()
+        t.join()
+    assert states[0] is states[1]
+    assert campaign_run._worker_state(fleet, SMALL, "two") is not states[0]  # another campaign: rebuilt
+
+
+def _self_signed(folder: Path) -> tuple[Path, Path]:
+    """A self-signed certificate for 127.0.0.1 that is its own CA, and its key (PEM files)."""
+    import datetime
+    import ipaddress
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "ilcdob-test")])
+    now = datetime.datetime.now(datetime.timezone.utc)
+    cert = (x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
+            .serial_number(x509.random_serial_number()).not_valid_before(now - datetime.timedelta(days=1))
+            .not_valid_after(now + datetime.timedelta(days=1))
+            .add_extension(x509.BasicConstraints(ca=True, path_length=None), critical=True)
+            .add_extension(x509.SubjectAlternativeName([x509.IPAddress(ipaddress.ip_address("127.0.0.1")),
+                                                        x509.DNSName("localhost")]), critical=False)
+            .sign(key, hashes.SHA256()))
+    cert_file, key_file = folder / "cert.pem", folder / "key.pem"
+    cert_file.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    key_file.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                           serialization.NoEncryption()))
+    return cert_file, key_file
+
+
+def test_runs_on_a_tls_cluster(fleet, tmp_path):
+    """``tls://`` scheduler with ``tls_ca_file``, ``tls_cert``, ``tls_key``: the client connects with
+    them (a self-signed certificate, its own CA, for scheduler, worker and client)."""
+    pytest.importorskip("cryptography", reason="generates the test's self-signed certificate")
+    from distributed import LocalCluster
+    from distributed.security import Security
+
+    cert, key = _self_signed(tmp_path)
+    security = Security(tls_ca_file=str(cert), tls_scheduler_cert=str(cert), tls_scheduler_key=str(key),
+                        tls_worker_cert=str(cert), tls_worker_key=str(key), tls_client_cert=str(cert),
+                        tls_client_key=str(key), require_encryption=True)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tls", host="127.0.0.1",
+                      dashboard_address=None, security=security) as cluster:
+        assert cluster.scheduler_address.startswith("tls://")
+        res = run_campaign(fleet, SMALL, tmp_path / "tls", scheduler=cluster.scheduler_address, tls_ca_file=cert,
+                           tls_cert=cert, tls_key=key)
+    assert res.workers == 1 and res.methods["closed-form"].runs == 2

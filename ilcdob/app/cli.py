@@ -267,6 +267,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fir, robust and robust-set only: multiplicative uncertainty bound (default: identified)")
     p.add_argument("--n", type=_pos, default=None,
                    help="norm-optimal only: trial length in samples (default: the trial's, else 500)")
+    p.add_argument("--lifted", action="store_true",
+                   help="norm-optimal only: also write the N x N lifted matrices L1, L2 to lifted.npz (about 8 N^2 "
+                        "numbers of memory while built; default: the law as Riccati gains only, O(N))")
     p.add_argument("--fir-unattainable", choices=FIR_UNATTAINABLE, default=None,
                    help="fir only: where no filter meets |Te1| <= 0.9 for every sampled model, keep only the no-harm "
                         "promise there and warn (default: no-harm), or refuse the design (exit 2, bands named)")
@@ -328,7 +331,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = _sub(sub, "campaign", "Monte Carlo campaign on Dask over sampled true plants (resumable)")
     _common(p, "output folder; run again to resume", law=True)
     p.add_argument("--samples", type=_pos, required=True, help="number of sampled true plants")
-    p.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT (default: a local cluster)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None,
+                       help="Dask scheduler tcp://HOST:PORT or tls://HOST:PORT (default: a local cluster)")
+    where.add_argument("--scheduler-file", default=None,
+                       help="the JSON file `dask scheduler --scheduler-file PATH` wrote (instead of --scheduler)")
+    p.add_argument("--tls-ca-file", default=None, help="tls:// scheduler: the CA certificate (PEM)")
+    p.add_argument("--tls-cert", default=None, help="tls:// scheduler: this client's certificate (PEM)")
+    p.add_argument("--tls-key", default=None, help="tls:// scheduler: the client's private key (PEM; omit when "
+                   "--tls-cert holds it)")
     p.add_argument("--workers", type=_pos, default=None, help="local cluster: worker processes (default: cores)")
     p.add_argument("--dashboard", action="store_true", help="print the Dask dashboard link")
     p.add_argument("--methods", type=_methods, default=None, help="comma-separated designs (default: "

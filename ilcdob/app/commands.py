@@ -126,7 +126,7 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
                         figures: bool = True, overwrite: bool = False, progress: Progress | None = None,
                         argv: Sequence[str] | None = None, order: Sequence[str] | None = None,
                         sensor_noise: float | None = None, bandwidth: object = "auto",
-                        workers: int | None = None) -> Any:
+                        workers: int | None = None, figure_workers: int | None = None) -> Any:
     """Run the paper's scenarios on a fleet and write the reproduction folder (paper Sec. IV).
 
     Parameters
@@ -166,15 +166,21 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         The learning band (:mod:`ilcdob.design.band`).
     workers : int, optional
         Processes flying the scenarios; the rotorpy plant only (default 1).
+    figure_workers : int, optional
+        Processes building and rendering the figures (:class:`ilcdob.validation.figures.FigureRenderer`;
+        default one per usable core): the linear plant's scenario figures while the next scenario
+        flies, the others once every scenario is flown.
 
     Returns
     -------
     ReproductionResult
     """
     from ilcdob.design.laws import check_law
+    from ilcdob.validation.figures import FigureRenderer, render_workers, scenario_figures
     from ilcdob.validation.scenarios import check_order
 
     law = check_law(law, "--law")
+    render_workers(figure_workers, name="figure_workers")  # a bad count fails before the run
     if plant not in ("linear", "nonlinear", "rotorpy"):
         raise SpecError(f"`plant`: got {plant!r}, expected 'linear', 'nonlinear' or 'rotorpy'")
     if workers is not None and plant != "rotorpy":
@@ -193,9 +199,9 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
         settings = VehicleSettings(dryden_seed=seed, workers=workers or 1, **noise)
         res = reproduce_vehicles(list(scenarios), iterations, settings, progress=progress)
-        _write_folder(out, _provenance("reproduce", argv, None, res.law), res.files(figures=figures),
-                      report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures),
-                      overwrite=overwrite)
+        with FigureRenderer(figure_workers) as renderer:
+            content = _report(res, figures, renderer)
+        _write_folder(out, _provenance("reproduce", argv, None, res.law), content, overwrite=overwrite)
         return res
     if plant == "nonlinear" and law == "multi-source":
         raise SpecError("`--law multi-source` with `--plant nonlinear`: the nonlinear vehicles learn one pair at a time "
@@ -207,22 +213,37 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     flt, digest = fleet_and_hash(fleet)
     check_bandwidth(bandwidth, flt.sample_time)  # a corner, against the fleet's Nyquist frequency
     order = None if order is None else check_order(flt.names, order, "--order")
-    if plant == "nonlinear":
-        from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
+    with FigureRenderer(figure_workers) as renderer:
+        if plant == "nonlinear":
+            from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
 
-        noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
-        settings = NonlinearSettings(seed=seed, bandwidth=bandwidth, **noise)
-        res = reproduce_nonlinear(flt if fleet else None, list(scenarios), iterations, settings, progress=progress,
-                                  order=order, law=law)
-    else:
-        from ilcdob.validation.reproduce import reproduce
+            noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
+            settings = NonlinearSettings(seed=seed, bandwidth=bandwidth, **noise)
+            res = reproduce_nonlinear(flt if fleet else None, list(scenarios), iterations, settings,
+                                      progress=progress, order=order, law=law)
+        else:
+            from ilcdob.validation.reproduce import reproduce
 
-        res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress, order=order,
-                        sensor_noise_std=0.0 if sensor_noise is None else sensor_noise, seed=seed,
-                        bandwidth=bandwidth)
-    _write_folder(out, _provenance("reproduce", argv, digest, res.law), res.files(figures=figures),
-                  report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures), overwrite=overwrite)
+            def flown(sr: Any) -> None:  # its figures are rendered while the next scenario flies
+                renderer.submit(scenario_figures(sr, iterations, pending=True))
+
+            res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress, order=order,
+                            sensor_noise_std=0.0 if sensor_noise is None else sensor_noise, seed=seed,
+                            bandwidth=bandwidth, on_scenario=flown if figures else None)
+        content = _report(res, figures, renderer)
+    _write_folder(out, _provenance("reproduce", argv, digest, res.law), content, overwrite=overwrite)
     return res
+
+
+def _report(res: Any, figures: bool, renderer: Any) -> dict[str, Any]:
+    """The reproduction folder's content (:meth:`ReproductionResult.files` and :func:`report_files`), every
+    figure built and rendered to PNG by ``renderer`` (:class:`ilcdob.validation.figures.FigureRenderer`)."""
+    files = res.files(figures=figures, pending=True)
+    report = report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures, pending=True)
+    clash = sorted(set(files) & set(report))
+    if clash:
+        raise RuntimeError(f"reproduction report: {clash} written twice (results and report inputs)")
+    return renderer.finish({**files, **report})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -490,7 +511,7 @@ def _csv_header(path: str | Path) -> list[str]:
 DESIGN_OPTION_METHODS: dict[str, tuple[str, ...]] = {
     "--rho": ("robust", "robust-set"), "--samples": ("fir", "robust"), "--bound": ("fir", "robust", "robust-set"),
     "--n": ("norm-optimal",), "--c-prefix": ("closed-form", "fir", "robust-set"),
-    "--c-float": ("closed-form", "fir"), "--fir-unattainable": ("fir",)}
+    "--c-float": ("closed-form", "fir"), "--fir-unattainable": ("fir",), "--lifted": ("norm-optimal",)}
 
 
 def _refuse_unused(method: str, given: dict[str, Any]) -> None:
@@ -514,7 +535,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                      c_prefix: str | None = None, c_float: bool = False, bandwidth: object = "auto",
                      disturbance: str = "command", on_limit: str = "clip", overwrite: bool = False,
                      argv: Sequence[str] | None = None, axis: str = "x",
-                     fir_unattainable: str | None = None) -> tuple[Any, dict[str, Any]]:
+                     fir_unattainable: str | None = None, lifted: bool = False) -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
     Parameters
@@ -536,8 +557,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         fir, robust and robust-set only: multiplicative uncertainty bound instead of the
         identified covariance.
     n : int, optional
-        norm-optimal only: trial length in samples of its lifted matrices (default: the trial's,
-        else 500).
+        norm-optimal only: trial length in samples of its gains (default: the trial's, else 500).
     law : str
         Learning law (:mod:`ilcdob.design.laws`).
     trial : str or Path, optional
@@ -567,6 +587,9 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         keep only the no-harm promise there and warn (default, "no-harm"), or refuse the design
         (``refuse``: :class:`~ilcdob.design.fir.FIRDesignError`, nothing written);
         :attr:`ilcdob.design.fir.FIROptions.unattainable`.
+    lifted : bool
+        norm-optimal only: also write the N x N lifted matrices L1, L2 to lifted.npz (about 8 N^2
+        numbers of memory while they are built; the compact law, Riccati gains, is always written).
 
     Returns
     -------
@@ -589,20 +612,21 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     from ilcdob.design.pair import METHODS, design_pair, design_with_band, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
     from ilcdob.identification.loaders import load_csv
-    from ilcdob.lifted import check_lifted_size
+    from ilcdob.design.norm_optimal import check_norm_optimal_size
     from ilcdob.signals import FlightData
 
     if c_prefix is not None:
         check_c_prefix(c_prefix)
     if n is not None:
-        check_lifted_size(n, "--n")
+        check_norm_optimal_size(n, None, lifted and method == "norm-optimal", "--n", "--lifted")
     if samples is not None and method in ("fir", "robust") and samples > MAX_DELTA_SAMPLES:
         raise SpecError(f"`--samples`: got {samples}, expected 1 to {MAX_DELTA_SAMPLES} Delta-set samples per system: "
                         f"every sample is a closed loop that --method {method} builds, flies and constrains on")
     if method not in METHODS:
         raise SpecError(f"`--method`: got {method!r}, valid methods are {list(METHODS)}")
     _refuse_unused(method, {"--rho": rho, "--samples": samples, "--bound": bound, "--n": n, "--c-prefix": c_prefix,
-                            "--c-float": True if c_float else None, "--fir-unattainable": fir_unattainable})
+                            "--c-float": True if c_float else None, "--fir-unattainable": fir_unattainable,
+                            "--lifted": True if lifted else None})
     if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
         raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)} "
                         "(no-harm: keep only the no-harm promise where the margin cannot be met, and warn; "
@@ -640,6 +664,8 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         raise SpecError(f"`--n`: got {n}, but the trial {trial} has {len(data)} samples; the learning signal is "
                         f"computed for the whole trial, so its matrices must be {len(data)} long: omit --n or give "
                         f"--n {len(data)}")
+    if data is not None and n is None:
+        check_norm_optimal_size(len(data), None, lifted and method == "norm-optimal", "--trial", "--lifted")
     n = n or (len(data) if data is not None else None)
     deltas = None
     if method in ("fir", "robust", "robust-set"):
@@ -651,7 +677,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                          fir=FIROptions(unattainable=fir_unattainable) if fir_unattainable is not None else None,
                          robust=RobustOptions(rho=rho) if method in ("robust", "robust-set") else None,
                          law=law, bandwidth=bandwidth, disturbance=disturbance, on_limit=on_limit,
-                         **reference)
+                         lifted=lifted, **reference)
     if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
         e_in = design.reference.error_in(data["e"]) if design.reference is not None else data["e"]
         design = design_with_band(design, design.band_for(e_in, data["d_f"]))
@@ -1056,7 +1082,9 @@ class _StoreState:
 def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | None = None,
                        scheduler: str | None = None, workers: int | None = None, overwrite: bool = False,
                        progress: Progress | None = None, dashboard: Callable[[str], None] | None = None,
-                       argv: Sequence[str] | None = None) -> Any:
+                       argv: Sequence[str] | None = None, scheduler_file: str | Path | None = None,
+                       tls_ca_file: str | Path | None = None, tls_cert: str | Path | None = None,
+                       tls_key: str | Path | None = None) -> Any:
     """Monte Carlo campaign on Dask; resumable: run it again on the same folder to continue.
 
     Parameters
@@ -1072,7 +1100,7 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     fleet : str or Path or None
         Fleet TOML (None: the built-in fleet).
     scheduler : str, optional
-        Dask scheduler ``tcp://HOST:PORT`` (default: a local cluster).
+        Dask scheduler ``tcp://HOST:PORT`` or ``tls://HOST:PORT`` (default: a local cluster).
     workers : int, optional
         Local cluster: worker processes.
     overwrite : bool
@@ -1083,6 +1111,10 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
         Called with a line naming the Dask dashboard link once the cluster is up.
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
+    scheduler_file : str or Path, optional
+        Instead of ``scheduler``: the file ``dask scheduler --scheduler-file`` writes.
+    tls_ca_file, tls_cert, tls_key : str or Path, optional
+        TLS files of a ``tls://`` scheduler: CA certificate, client certificate, its key.
 
     Returns
     -------
@@ -1095,7 +1127,8 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     before = _StoreState.of(out, STORE_FILES)
     try:
         result = run_campaign(flt, options, out, scheduler=scheduler, workers=workers, progress=progress,
-                              dashboard=dashboard)
+                              dashboard=dashboard, scheduler_file=scheduler_file, tls_ca_file=tls_ca_file,
+                              tls_cert=tls_cert, tls_key=tls_key)
     except BaseException:
         before.restore(SAMPLES_FILE)
         raise

@@ -248,7 +248,7 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
         a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho, samples=a.samples, bound=a.bound,
         n=a.n, law=a.law, trial=a.trial, c_prefix=a.c_prefix, c_float=a.c_float, bandwidth=a.bandwidth,
         disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv, axis=a.axis,
-        fir_unattainable=a.fir_unattainable)
+        fir_unattainable=a.fir_unattainable, lifted=a.lifted)
     band = written.get("band", {})
     cutoff = band.get("cutoff_rad_s")
     con.note(f"ilcdob: learning band {'off' if cutoff is None else f'{cutoff:.4g} rad/s'} ({band.get('reason', '')})")
@@ -359,7 +359,8 @@ def _campaign(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                            robust_models=_given(a.robust_models, 1), rho=_given(a.rho, 0.95), law=a.law,
                            delta_set=_given(a.delta_set, "structured"), margin=a.margin)
     result = uc.campaign_to_folder(a.out, opts, fleet=a.fleet, scheduler=a.scheduler, workers=a.workers,
-                                   overwrite=a.overwrite, progress=con.progress,
+                                   scheduler_file=a.scheduler_file, tls_ca_file=a.tls_ca_file,
+                                   tls_cert=a.tls_cert, tls_key=a.tls_key, overwrite=a.overwrite, progress=con.progress,
                                    dashboard=con.note if a.dashboard else None, argv=argv)
     print(result.table(), end="")
     con.note(f"wrote {a.out} ({result.wall_time_s:.0f} s)")

@@ -40,19 +40,24 @@ method); its report, :meth:`CampaignResult.files` (``campaign.json``, ``campaign
 ``campaign_ratios.png``), is content for the caller to write.
 
 Dask: a local cluster (``distributed.LocalCluster``, one single-threaded worker process per
-core) unless a scheduler address ``tcp://HOST:PORT`` of a running cluster is given; its
-workers need ilcdob installed.
+core) unless a running cluster is named by its scheduler's address (``tcp://`` or ``tls://``
+with its TLS files) or scheduler file (:mod:`.cluster`); its workers need ilcdob installed.
+Each worker process builds the designs once and shares them among its threads, with BLAS and
+Clarabel limited to one thread (a worker plugin); a record's ``cpu_s`` is the CPU time of the
+thread that flew it.
 
-Modules: :mod:`.options` (settings and their identity), :mod:`.run` (sampling, the workers'
-state, the Dask client, :func:`run_campaign`), :mod:`.store` (the sample store, the settings
+Modules: :mod:`.options` (settings and their identity), :mod:`.cluster` (the Dask connection
+and the workers' thread limits), :mod:`.run` (sampling, the workers' state,
+:func:`run_campaign`), :mod:`.store` (the sample store, the settings
 file, the folder lock), :mod:`.statistics` (the statistics and the report).
 """
 
+from .cluster import Cluster
 from .options import FORMAT_VERSION, CampaignError, CampaignOptions, campaign_settings
 from .run import FIR_DESIGN_SAMPLES, draw_true_loops, run_campaign, run_sample
 from .statistics import CampaignResult, MethodStatistics, campaign_statistics
 from .store import SAMPLES_FILE, SETTINGS_FILE, STORE_FILES, SampleStore
 
-__all__ = ["CampaignError", "CampaignOptions", "CampaignResult", "MethodStatistics", "SampleStore",
+__all__ = ["Cluster", "CampaignError", "CampaignOptions", "CampaignResult", "MethodStatistics", "SampleStore",
            "campaign_settings", "draw_true_loops", "run_sample", "campaign_statistics", "run_campaign",
            "SAMPLES_FILE", "SETTINGS_FILE", "STORE_FILES", "FORMAT_VERSION", "FIR_DESIGN_SAMPLES"]

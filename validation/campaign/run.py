@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import os
-import re
 import threading
 import time
 import warnings
-from contextlib import contextmanager
+from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import numpy as np
 
 from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.extras import require
 from ilcdob.design.laws import DEFAULT_LAW
 from ilcdob.design.pair import PairDesign, design_pair, with_law
 from ilcdob.design.robust import RobustOptions
@@ -25,17 +22,16 @@ from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
 
 from ..compare import PairScenario, evaluate_case, pair_scenario
+from .cluster import WORKERS_PER_CORE, Cluster, cluster_client
 from .options import CampaignError, CampaignOptions, campaign_settings
-from .statistics import CampaignResult, campaign_statistics
+from .statistics import CPU_S, CampaignResult, campaign_statistics
 from .store import SAMPLES_FILE, SampleStore, campaign_lock, check_settings
 
-__all__ = ["FIR_DESIGN_SAMPLES", "WORKERS_PER_CORE", "draw_true_loops", "run_sample", "run_campaign"]
+__all__ = ["CPU_S", "FIR_DESIGN_SAMPLES", "WORKERS_PER_CORE", "draw_true_loops", "run_sample", "run_campaign"]
 
 #: Delta samples of the FIR design's robust ``|Te1|`` constraint (its default K).
 FIR_DESIGN_SAMPLES = 8
-#: Most local worker processes per usable core (more only share the cores, each with its own libraries).
-WORKERS_PER_CORE = 2
-_SCHEDULER_RE = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
+
 
 
 def _rng(seed: int, *key: int) -> np.random.Generator:
@@ -82,10 +78,16 @@ def _design_deltas(fleet: Fleet, options: CampaignOptions) -> dict[str, DeltaSet
 
 
 class _WorkerState:
-    """Per worker thread: the fleet's scenarios and designs of one campaign, built on first use."""
+    """Per worker process: the fleet's scenarios and designs of one campaign, built on first use.
+
+    Its threads share it: ``lock`` is held while a scenario or design is built (each is built once)
+    and, with the robust method, while a sample is flown (its SOCP designer keeps the state of its
+    last solve; local clusters run one thread per worker process, so nobody waits there).
+    """
 
     def __init__(self, fleet: Fleet, options: CampaignOptions):
         self.fleet, self.options = fleet, options
+        self.lock = threading.RLock()
         self.pairs: dict[int, PairScenario] = {}
         self.designs: dict[tuple[str, str, str], PairDesign | str] = {}
         self._deltas: dict[str, DeltaSet] | None = None
@@ -133,14 +135,19 @@ class _WorkerState:
         return self.lawful[(sid, method)]
 
 
-_local = threading.local()
+_STATE: dict[str, _WorkerState] = {}  # settings id -> the state of the campaign this process flies
+_STATE_LOCK = threading.Lock()
 
 
 def _worker_state(fleet: Fleet, options: CampaignOptions, settings_id: str) -> _WorkerState:
-    cache = getattr(_local, "state", None)
-    if cache is None or cache[0] != settings_id:  # keep one campaign per thread (long-lived workers)
-        _local.state = cache = (settings_id, _WorkerState(fleet, options))
-    return cache[1]
+    """The process's state of campaign ``settings_id``: one campaign per process (long-lived workers drop the
+    previous one's designs when another campaign's samples arrive)."""
+    with _STATE_LOCK:
+        state = _STATE.get(settings_id)
+        if state is None:
+            _STATE.clear()
+            _STATE[settings_id] = state = _WorkerState(fleet, options)
+        return state
 
 
 def _finite(x: float) -> float | None:
@@ -158,7 +165,7 @@ def run_sample(fleet: Fleet, options: CampaignOptions, settings_id: str, index: 
         The campaign's options.
     settings_id : str
         ``id`` of :func:`~ilcdob.validation.campaign.options.campaign_settings`; each worker
-        keeps the designs of one campaign, rebuilt when the id changes.
+        process keeps the designs of one campaign (shared by its threads), rebuilt when the id changes.
     index : int
         The sample, >= 0.
 
@@ -168,21 +175,34 @@ def run_sample(fleet: Fleet, options: CampaignOptions, settings_id: str, index: 
         The JSON record of the sample: ``{"sample", "settings", "rejected", "plants": {name:
         {"num", "den", "delay"}}, "scenarios": {id: {"source", "target", "rmse_without",
         "ratios": {method: ratio or null}, "errors": {method: message}}}, "time_s", "cpu_s"}``
-        (wall-clock and CPU time of the worker, s; they differ when the cores are shared).
+        (s: wall-clock time, and the CPU time of the thread that flew the sample, :data:`CPU_S`;
+        they differ when the cores are shared).
     """
-    t0, c0 = time.perf_counter(), time.process_time()
+    t0, c0 = time.perf_counter(), time.thread_time()
     state = _worker_state(fleet, options, settings_id)
+    # the robust SOCP designer keeps its last solve's state: the process's threads take turns on it
+    with state.lock if "robust" in options.methods else nullcontext():
+        record = _fly(state, fleet, options, settings_id, index)
+    return {**record, "time_s": time.perf_counter() - t0, "cpu_s": time.thread_time() - c0}
+
+
+def _fly(state: _WorkerState, fleet: Fleet, options: CampaignOptions, settings_id: str,
+         index: int) -> dict[str, Any]:
+    """:func:`run_sample`'s record without its timings."""
     loops, rejected = draw_true_loops(fleet, options, index)
     scenarios = {}
     for sid in options.scenarios:
-        pair = state.pair(sid)
+        with state.lock:
+            pair = state.pair(sid)
         designs, errors = {}, {}
         for method in options.methods:
-            d = state.design(pair.source, pair.target, method, pair.t.size)
+            with state.lock:  # built once per process
+                d = state.design(pair.source, pair.target, method, pair.t.size)
             if isinstance(d, str):
                 errors[method] = d
             else:
-                designs[method] = state.with_law(sid, method, d)
+                with state.lock:
+                    designs[method] = state.with_law(sid, method, d)
         case = evaluate_case(pair, loops[pair.source], loops[pair.target], designs)
         errors.update(case.errors)
         scenarios[str(sid)] = {"source": pair.source, "target": pair.target, "rmse_without": case.rmse_without,
@@ -191,8 +211,7 @@ def run_sample(fleet: Fleet, options: CampaignOptions, settings_id: str, index: 
                                "errors": errors}
     plants = {name: {"num": list(lp.spec.plant.num), "den": list(lp.spec.plant.den), "delay": lp.spec.plant.delay}
               for name, lp in loops.items()}
-    return {"sample": index, "settings": settings_id, "rejected": rejected, "plants": plants,
-            "scenarios": scenarios, "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+    return {"sample": index, "settings": settings_id, "rejected": rejected, "plants": plants, "scenarios": scenarios}
 
 
 def _sample_task(fleet: Fleet, options: CampaignOptions, settings_id: str,
@@ -206,64 +225,12 @@ def _sample_task(fleet: Fleet, options: CampaignOptions, settings_id: str,
     return record, list(seen.values())
 
 
-def _local_workers(workers: int | None, scheduler: str | None) -> None:
-    """Refuse a worker count that is not an integer from 1 to :data:`WORKERS_PER_CORE` times the usable cores,
-    or one given with a scheduler (whose cluster has its own workers)."""
-    if workers is None:
-        return
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise CampaignError(f"`workers`: got {workers!r}, expected an integer >= 1")
-    if scheduler is not None:
-        raise CampaignError(f"`workers`: got {workers} with `scheduler` {scheduler}: the cluster there has its own "
-                            "workers; omit --workers (it sizes a local cluster only)")
-    cores = len(os.sched_getaffinity(0))
-    if workers > WORKERS_PER_CORE * cores:
-        raise CampaignError(f"`workers`: got {workers}, expected 1 to {WORKERS_PER_CORE * cores} local worker "
-                            f"processes ({WORKERS_PER_CORE} per usable core, {cores} here): each is a Python process "
-                            "with its own copy of the libraries, and more than the cores only share them; for more, "
-                            "run a Dask cluster and give its --scheduler")
-
-
-def _check_scheduler(address: str) -> None:
-    m = _SCHEDULER_RE.match(address)
-    if not m or not 0 < int(m.group(3)) < 65536:
-        raise CampaignError(f"`scheduler`: got {address!r}, expected a Dask scheduler address tcp://HOST:PORT "
-                            "(e.g. tcp://10.0.0.5:8786, printed by `dask scheduler`), or none for a local cluster")
-
-
-@contextmanager
-def _client(scheduler: str | None, workers: int | None, dashboard: bool = False) -> Iterator[Any]:
-    """A Dask client: on a new local cluster (with its dashboard on a free port if asked), or
-    connected to ``scheduler``."""
-    import logging
-
-    distributed = require("distributed", "campaign", "a campaign (it runs on a Dask cluster)")
-    Client, LocalCluster = distributed.Client, distributed.LocalCluster
-
-    if scheduler is not None:
-        _check_scheduler(scheduler)
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise CampaignError(f"`scheduler`: cannot connect to {scheduler} ({exc}); is `dask scheduler` "
-                                "running there and reachable? Omit --scheduler for a local cluster") from None
-        try:
-            yield client
-        finally:
-            client.close()
-        return
-    n = workers if workers is not None else len(os.sched_getaffinity(0))
-    # the workers log nothing (a failed sample's traceback too): the failure reaches the client as its exception
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                      dashboard_address=":0" if dashboard else None,
-                      silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
-        yield client
-
-
 def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, scheduler: str | None = None,
                  workers: int | None = None,
                  progress: Callable[[int, int, str], None] | None = None,
-                 dashboard: Callable[[str], None] | None = None) -> CampaignResult:
+                 dashboard: Callable[[str], None] | None = None, *, scheduler_file: str | Path | None = None,
+                 tls_ca_file: str | Path | None = None, tls_cert: str | Path | None = None,
+                 tls_key: str | Path | None = None) -> CampaignResult:
     """Run (or resume) a campaign whose samples are kept in ``out`` (see :mod:`ilcdob.validation.campaign`).
 
     The folder holds the campaign's sample store and settings (:mod:`.store`), kept up to date
@@ -279,7 +246,7 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
     out : str or Path
         The campaign folder (created); holds ``samples.jsonl`` and ``campaign_settings.json``.
     scheduler : str, optional
-        ``tcp://HOST:PORT`` of a running Dask scheduler (default: a local cluster).
+        ``tcp://HOST:PORT`` or ``tls://HOST:PORT`` of a running Dask scheduler (default: a local cluster).
     workers : int, optional
         Local cluster: worker processes (default: the usable cores).
     progress : callable, optional
@@ -289,6 +256,10 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
     dashboard : callable, optional
         Called with one line naming the Dask dashboard link when the cluster is up (a local
         cluster then serves its dashboard on a free port). None: no dashboard.
+    scheduler_file : str or Path, optional
+        Instead of ``scheduler``: the file ``dask scheduler --scheduler-file`` writes.
+    tls_ca_file, tls_cert, tls_key : str or Path, optional
+        A ``tls://`` scheduler's TLS files (:class:`~ilcdob.validation.campaign.cluster.Cluster`).
 
     Returns
     -------
@@ -298,7 +269,8 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
     Raises
     ------
     CampaignError
-        Bad scheduler address or no connection, a worker count beyond :data:`WORKERS_PER_CORE`
+        Bad scheduler address or file, missing TLS files (or TLS without ``tls://``), no connection, a
+        worker count beyond :data:`WORKERS_PER_CORE`
         per usable core (or given with a scheduler), ``out`` holding a campaign with other
         settings or in use, a sample failing on a worker (finished samples are kept: run again
         to resume).
@@ -311,9 +283,9 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
     """
     t_start = time.perf_counter()
     say = progress if progress is not None else (lambda done, total, what: None)
-    if scheduler is not None:
-        _check_scheduler(scheduler)
-    _local_workers(workers, scheduler)
+    cluster = Cluster(scheduler=scheduler, scheduler_file=scheduler_file, tls_ca_file=tls_ca_file,
+                      tls_cert=tls_cert, tls_key=tls_key, workers=workers)
+    cluster.check()
     if len(fleet.systems) < 2:
         raise CampaignError(f"fleet {fleet.source}: a campaign needs at least two systems, got {fleet.names}")
     if options.bound is None:
@@ -337,7 +309,7 @@ def run_campaign(fleet: Fleet, options: CampaignOptions, out: str | Path, schedu
         total = options.samples
         say(resumed, total, f"campaign: {len(todo)} of {total} samples to fly ({resumed} already in {store.path})")
         if todo:
-            with _client(scheduler, workers, dashboard is not None) as client:
+            with cluster_client(cluster, dashboard is not None) as client:
                 if dashboard is not None:
                     dashboard(f"Dask dashboard: {client.dashboard_link}")
                 from distributed import as_completed

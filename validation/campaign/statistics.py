@@ -11,12 +11,18 @@ import numpy as np
 from ilcdob.display import fmt, html_table
 
 from ..reproduce import json_document
+from .cluster import LIBRARY_THREADS
 from .options import CampaignError, CampaignOptions
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["MethodStatistics", "CampaignResult", "campaign_statistics"]
+__all__ = ["CPU_S", "MethodStatistics", "CampaignResult", "campaign_statistics"]
+
+#: What a record's ``cpu_s`` measures (written into ``campaign.json`` beside the mean).
+CPU_S = ("CPU time of the worker thread that flew the sample (time.thread_time): a sample runs in one thread, with "
+         "BLAS and Clarabel limited to one thread on the workers, so other threads of the worker process (its "
+         "event loop, other samples) are not counted")
 
 
 @dataclass(frozen=True)
@@ -88,7 +94,8 @@ class CampaignResult:
     wall_time_s : float
         Time of this run (s), including the cluster's start.
     sample_time_s, sample_cpu_s : float
-        Mean wall-clock and CPU time per sample on a worker (s; they differ when the cores are shared).
+        Mean wall-clock and CPU time per sample on a worker (s; they differ when the cores are shared; CPU time:
+        :data:`CPU_S`).
     workers : int
         Workers of the cluster (0 when nothing was left to fly).
     """
@@ -139,7 +146,9 @@ class CampaignResult:
             "duration": o.duration, "runs_per_method": o.samples * len(o.scenarios),
             "rejected_plants": self.rejected, "resumed_samples": self.resumed, "workers": self.workers,
             "wall_time_s": self.wall_time_s, "sample_time_s": self.sample_time_s,
-            "sample_cpu_s": self.sample_cpu_s,
+            "sample_cpu_s": self.sample_cpu_s, "cpu_s": CPU_S,
+            "library_threads": {"blas": LIBRARY_THREADS, "clarabel": LIBRARY_THREADS,
+                                "per": "worker process, set by a worker plugin on every worker of the cluster"},
             "ratio": "||e_j|| / ||e'_j|| over whole trials (< 1: learning improved on the DOB-only flight)",
             "methods": {m: s.to_dict() for m, s in self.methods.items()},
             "scenarios": {f"scenario {sid}: {self.pairs[sid][0]} -> {self.pairs[sid][1]}":
