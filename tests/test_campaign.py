@@ -59,6 +59,7 @@ def _results(rec: dict) -> dict:
     return {k: v for k, v in rec.items() if k not in ("time_s", "cpu_s")}
 
 
+@pytest.mark.slow  # 20 s (-m slow); by default test_examples resumes a finished campaign from its store
 def test_killed_campaign_resumes_to_the_statistics_of_an_uninterrupted_run(tmp_path):
     killed, clean = tmp_path / "killed", tmp_path / "clean"
     proc = _campaign(killed, wait=False)
@@ -91,7 +92,7 @@ def test_killed_campaign_resumes_to_the_statistics_of_an_uninterrupted_run(tmp_p
     assert "methods" in paths and any(p.startswith("scenarios.") for p in paths)
 
 
-@pytest.mark.slow  # 15 s; the command-line kill-and-resume test above covers the store by default
+@pytest.mark.slow  # 15 s (-m slow); the command-line kill-and-resume test above covers the same store
 def test_killed_library_campaign_resumes_to_an_uninterrupted_run(fleet, tmp_path):
     """``run_campaign`` keeps the sample store up to date: killed mid-run (client and workers), it resumes
     with only the missing samples and gives the statistics and report of an uninterrupted run."""
