@@ -218,3 +218,31 @@ def test_default_design_never_worse_on_fresh_plants_reaching_instability(fleet):
     design = PairDesign("robust-set", {}, d.apply)
     ratios = [evaluate_case(pair, s, t, {"rs": design}).ratios["rs"] for s, t in zip(src, tgt)]
     assert max(ratios) <= 1.0 and np.median(ratios) < 0.5, ratios
+
+
+def test_exchange_takes_every_band_of_violations():
+    """An exchange round gives every run of violations its peak and its two ends, the runs in the order of
+    their peaks (the 60 worst violations alone all fell in the widest band: 5 exchange rounds for the
+    structured bound-0.9 design UAV1 -> UAV2, 2 now), at most ``n_max`` frequencies."""
+    from ilcdob.design.robust_set import _exchange_points
+    worst = np.zeros(400)
+    worst[10:200] = 1.001 + 0.01 * np.hanning(190)  # a wide band, slightly over the level
+    worst[250:253] = [1.1, 1.3, 1.2]              # two narrow ones, further over
+    worst[300] = np.inf
+    worst[350:352] = np.nan                       # no rows there: not a violation
+    bad = worst > 1.0
+    picked = _exchange_points(worst, bad)
+    np.testing.assert_array_equal(picked, [10, 104, 199, 250, 251, 252, 300])
+    np.testing.assert_array_equal(_exchange_points(worst, bad, n_max=4), [250, 251, 252, 300])
+    assert np.all(bad[picked])
+
+
+def test_fir_response_by_horner_matches_the_taps():
+    """``F`` on the verification grid without the grid x taps matrix: the FIR's own response to 1e-12 of
+    ``sum |h|`` (the bound of ``|F|``; measured 7e-15)."""
+    from ilcdob.design.fir import FIRFilter
+    from ilcdob.design.robust_set import _fir_response
+    h = np.random.default_rng(5).normal(size=301)
+    w = RobustSetOptions().verify_grid(0.02)
+    np.testing.assert_allclose(_fir_response(h, w, 0.02, 150), FIRFilter(h, 150, 0.02).freqresp(w), rtol=0,
+                               atol=1e-12 * np.abs(h).sum())
