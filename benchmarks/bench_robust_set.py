@@ -4,8 +4,8 @@ Per pair, the whole design (the FIR ``F``, its verification, the closed form and
 ``rho_N``) is timed in one process with
 
 * ``before``: the formulation as it was (copied below, ``_old_*``): the structured set's polygon and
-  sagitta built from every value of its grid on all 20,200 verification frequencies, the 60 worst
-  violations per exchange round, ``F`` on the verification grid as a dense ``20,200 x n_taps`` matrix;
+  sagitta built from every value of its grid on all 20,199 verification frequencies, the 60 worst
+  violations per exchange round, ``F`` on the verification grid as a dense ``20,199 x n_taps`` matrix;
 * ``after``: the current :mod:`ilcdob.design.robust_set` / :mod:`ilcdob.design.value_set` (the
   set's boundary values where they decide the polygon, runs of violations in the exchange, ``F`` by
   Horner's rule).
@@ -20,7 +20,7 @@ set from its identification, guaranteed over its parameter ellipsoid) for UAV1->
 UAV1->UAV3; ``delta_set="structured"`` (for an identified source: the same ellipsoid); the README's
 example (UAV2->UAV3, rho 0.8, disc of bound 0.3). ``--extra`` adds the fleet-bound sets of
 reports/robust_set (UAV1->UAV2 at bound 0.5 and 0.9: disc, and the structured gain/high-pass family at
-margins 0.5, 0.2 and 0), which take 10-30 s each before.
+margins 0.5, 0.2 and 0), which take 14-70 s each before.
 
 Run:  python benchmarks/bench_robust_set.py [--repeat 3] [--extra] [--only NAME,...]
 """
