@@ -58,7 +58,7 @@ def _folder_command_survives_kills(tmp_path: Path, args: list[str]) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
 
 
-@pytest.mark.slow  # 20 s; design and identify cover the staging path by default, the fault probe every command
+@pytest.mark.slow  # 20 s; the design kill test covers the staging path by default, the fault probe every command
 def test_reproduce_survives_sigkill(tmp_path):
     _folder_command_survives_kills(tmp_path, ["reproduce", "--scenarios", "1,4", "--iterations", "1"])
 
@@ -79,6 +79,7 @@ def flight_csv(tmp_path) -> Path:
     return path
 
 
+@pytest.mark.slow  # 12 s (-m slow); the design kill test covers the staging path by default
 def test_identify_survives_sigkill(tmp_path, flight_csv):
     model, plots = tmp_path / "model.json", tmp_path / "plots"
     args = ["identify", str(flight_csv), "--input", "u", "--output", "y", "--poles", "2", "--delay", "auto",

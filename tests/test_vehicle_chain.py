@@ -46,6 +46,7 @@ def test_the_structure_is_chosen_from_the_flights(identified):
         assert spec.dob.q_order >= max(3, fit.structure.n_poles - fit.structure.n_zeros)
 
 
+@pytest.mark.slow  # 26 s (-m slow); the wind-through-drag and fly-log-learn tests of test_vehicle_interface run the chain on rotorpy by default
 def test_hover_chain_in_the_papers_disturbance_and_in_wind(identified):
     """Scenario 1's hover, 15 s, one learning flight each, the chain crazyflie -> hummingbird -> crazyflie.
     The paper's disturbance on the command: learning leaves (measured) 0.37 % / 0.42 % of the DOB-only
