@@ -60,6 +60,7 @@ from scipy import signal
 
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
+from ilcdob.statespace import simulate
 
 from .band import fold_start, learning_horizon
 from .closed_form import inverse_gd_filter, one_minus
@@ -512,7 +513,8 @@ def state_space_to_dict(sys: ct.StateSpace) -> dict[str, Any]:
 def apply_state_space(ss: dict[str, Any], x: object) -> np.ndarray:
     """Run a state-space entry of ``filters.json`` causally over a trial, from rest.
 
-    ``s(k + 1) = A s(k) + B u(k)``, ``y(k) = C s(k) + D u(k)``, ``s(0) = 0`` (``scipy.signal.dlsim``).
+    ``s(k + 1) = A s(k) + B u(k)``, ``y(k) = C s(k) + D u(k)``, ``s(0) = 0``, by the compiled kernel
+    :func:`ilcdob.statespace.simulate` (as :func:`~.closed_form.simulate_map` runs the design's maps).
 
     Parameters
     ----------
@@ -529,9 +531,9 @@ def apply_state_space(ss: dict[str, Any], x: object) -> np.ndarray:
     x = as_signal(x, "x")
     if x.size == 0:
         return x
-    a, b, c = (np.atleast_2d(np.asarray(ss[k], float)) for k in ("A", "B", "C"))
-    _, y, _ = signal.dlsim((a, b.reshape(-1, 1), c.reshape(1, -1), np.array([[float(ss["D"])]]), 1.0), x)
-    return np.asarray(y, dtype=float).reshape(-1)
+    a = np.asarray(ss["A"], float)
+    b, c = (np.asarray(ss[k], float).reshape(-1) for k in ("B", "C"))
+    return simulate(a.reshape(b.size, b.size), b, c, float(ss["D"]), x).reshape(-1)
 
 
 def robust_set_maps(design: RobustSetDesign) -> dict[str, Any]:
