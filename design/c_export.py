@@ -1194,6 +1194,52 @@ def _law_macros(filters: dict[str, Any], macro: str, lp: _Learning) -> tuple[str
     return macros, limit_note
 
 
+def _header(title: str, macro: str, prefix: str, law: str, limit_note: str, apply_text: str, macros: str,
+            declarations: str) -> str:
+    """``filters.h`` of a design: how to call ``learn`` (``law``: :func:`_law_comment`), ``apply_text`` on the
+    other functions (comment lines, each starting `` * ``), the include guard, ``macros`` (before the
+    ``LEARN_*`` codes) and ``declarations`` after ``learn``'s, in ``extern "C"`` for C++."""
+    guard = f"{macro}FILTERS_H"
+    return f"""\
+/* {title}, written by `ilcdob design`.
+ *
+ * Between two flights, the learning signal d_next of the next vehicle is computed from the
+ * previous vehicle's recorded trial, its tracking error e (m) and the learning signal it
+ * flew, d_f (m/s^2; zeros if none), n samples each, every {macro}SAMPLE_TIME seconds from
+ * the start of the trial, by one call:
+ *
+ *     static double work[{macro}LEARN_WORK(N_MAX)];      (scratch, N_MAX >= n)
+ *     if ({prefix}learn(e, d_f, d_next, n, work) != 0) {{ n == 0 or a NULL pointer }}
+ *
+ * then d_next (m/s^2) is fed forward on the next flight, sample k at time k Ts. It is
+{law} * work holds {macro}LEARN_WORK(n) doubles and overlaps none of e, d_f, d_next; d_next
+ * may be e or d_f (both are read before d_next is written). learn returns 0, or without
+ * writing anything {macro}LEARN_EMPTY (n == 0) or {macro}LEARN_NULL (a NULL pointer).
+{limit_note} *
+{apply_text} */
+#ifndef {guard}
+#define {guard}
+
+#include <stddef.h>
+
+{macros}#define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
+#define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
+
+#ifdef __cplusplus
+extern "C" {{
+#endif
+
+/* The learning law: previous vehicle's trial (e in m, df_prev in m/s^2) -> df_next (m/s^2). */
+int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, double *work);
+{declarations}
+#ifdef __cplusplus
+}}
+#endif
+
+#endif /* {guard} */
+"""
+
+
 def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bool = False) -> CCode:
     """``filters.h`` and ``filters.c`` for the learning law and the ``L1``/``L2`` filters of a design.
 
@@ -1234,7 +1280,6 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
                             "learning law runs in double only; leave out --c-float")
         return _robust_c_code(filters, prefix, lp, rp)
     macro = prefix.upper()
-    guard = f"{macro}FILTERS_H"
     pair = c_comment(f"{filters['from']} -> {filters['to']}")
     ts = float(filters["sample_time"])
     types = [_DOUBLE, _FLOAT] if float_variant else [_DOUBLE]
@@ -1257,22 +1302,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
             + f"\n *   on {_REFERENCE_TEXT}\n *   (float32 emulation of this arithmetic when the file was written).\n"
             f" *   The learning law ({prefix}learn) has no float variant: it runs in double only.\n")
     band_macros, limit_note = _law_macros(filters, macro, lp)
-    header = f"""\
-/* Learning filters {pair} (method {c_comment(filters['method'])}), written by `ilcdob design`.
- *
- * Between two flights, the learning signal d_next of the next vehicle is computed from the
- * previous vehicle's recorded trial, its tracking error e (m) and the learning signal it
- * flew, d_f (m/s^2; zeros if none), n samples each, every {macro}SAMPLE_TIME seconds from
- * the start of the trial, by one call:
- *
- *     static double work[{macro}LEARN_WORK(N_MAX)];      (scratch, N_MAX >= n)
- *     if ({prefix}learn(e, d_f, d_next, n, work) != 0) {{ n == 0 or a NULL pointer }}
- *
- * then d_next (m/s^2) is fed forward on the next flight, sample k at time k Ts. It is
-{_law_comment(macro, lp)} * work holds {macro}LEARN_WORK(n) doubles and overlaps none of e, d_f, d_next; d_next
- * may be e or d_f (both are read before d_next is written). learn returns 0, or without
- * writing anything {macro}LEARN_EMPTY (n == 0) or {macro}LEARN_NULL (a NULL pointer).
-{limit_note} *
+    apply_text = f"""\
  * The filters alone: {prefix}l1_apply and {prefix}l2_apply each filter one whole
  * recorded trial of n samples (n >= 1; n = 0 does nothing)
  * exactly as ilcdob.design.export.apply_coefficients does: the filter looks
@@ -1288,41 +1318,25 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
  * double, {4 * stack} in float) plus a few scalars. Compile with -ffp-contract=off (no fused multiply-add)
  * to reproduce the Python arithmetic operation by operation; contraction changes the
  * results only at the level of rounding.
-{float_note} */
-#ifndef {guard}
-#define {guard}
-
-#include <stddef.h>
-
+{float_note}"""
+    macros = f"""\
 #define {macro}SAMPLE_TIME {ts!r} /* s */
 #define {macro}L1_ADVANCE {adv['L1']} /* samples of look-ahead of L1 */
 #define {macro}L2_ADVANCE {adv['L2']} /* samples of look-ahead of L2 */
 #define {macro}L1_LOOKAHEAD_TAPS {taps['L1']} /* taps of L1's look-ahead FIR (0: none) */
 #define {macro}L2_LOOKAHEAD_TAPS {taps['L2']} /* taps of L2's look-ahead FIR (0: none) */
 {band_macros}#define {macro}LEARN_WORK(n) (2 * ((n) + 2 * {macro}PAD)) /* doubles of scratch for learn */
-#define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
-#define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
-
-#ifdef __cplusplus
-extern "C" {{
-#endif
-
-/* The learning law: previous vehicle's trial (e in m, df_prev in m/s^2) -> df_next (m/s^2). */
-int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, double *work);
+"""
+    declarations = f"""\
 /* L1: previous vehicle's tracking error (m) -> learning signal (m/s^2). */
 {decls[0]}
 /* L2: previous vehicle's learning signal (m/s^2) -> learning signal (m/s^2). */
 {decls[1]}
 """
     if float_variant:
-        header += f"/* The same in float, see the error stated above. */\n{decls[2]}\n{decls[3]}\n"
-    header += f"""
-#ifdef __cplusplus
-}}
-#endif
-
-#endif /* {guard} */
-"""
+        declarations += f"/* The same in float, see the error stated above. */\n{decls[2]}\n{decls[3]}\n"
+    header = _header(f"Learning filters {pair} (method {c_comment(filters['method'])})", macro, prefix,
+                     _law_comment(macro, lp), limit_note, apply_text, macros, declarations)
     parts = [f"/* Learning filters {pair}: see filters.h. Written by `ilcdob design`. */\n"
              '#include "filters.h"\n']
     for ct in types:
@@ -1337,7 +1351,6 @@ int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_
 def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: _RobustSet) -> CCode:
     """``filters.h`` and ``filters.c`` of a robust-set design: ``learn`` and ``ginv_apply`` (:func:`c_code`)."""
     macro = prefix.upper()
-    guard = f"{macro}FILTERS_H"
     pair = c_comment(f"{filters['from']} -> {filters['to']}")
     src, tgt = c_comment(str(filters["from"])), c_comment(str(filters["to"]))
     ts = float(filters["sample_time"])
@@ -1355,34 +1368,15 @@ def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: _Rob
         + (f"; per frequency |e_j| <= {guarantee:.4g} |e'_j| for every plant of the Delta set"
            if isinstance(guarantee, (int, float)) else "") + ";"]
     work = f"3 * (n + 2 * {lp.pad}) + {rp.advance}"
-    header = f"""\
-/* Robust-set learning law {pair}, written by `ilcdob design`.
- *
- * Between two flights, the learning signal d_next of the next vehicle is computed from the
- * previous vehicle's recorded trial, its tracking error e (m) and the learning signal it
- * flew, d_f (m/s^2; zeros if none), n samples each, every {macro}SAMPLE_TIME seconds from
- * the start of the trial, by one call:
- *
- *     static double work[{macro}LEARN_WORK(N_MAX)];      (scratch, N_MAX >= n)
- *     if ({prefix}learn(e, d_f, d_next, n, work) != 0) {{ n == 0 or a NULL pointer }}
- *
- * then d_next (m/s^2) is fed forward on the next flight, sample k at time k Ts. It is
-{_law_comment(macro, lp, robust)} * work holds {macro}LEARN_WORK(n) doubles and overlaps none of e, d_f, d_next; d_next
- * may be e or d_f (both are read before d_next is written). learn returns 0, or without
- * writing anything {macro}LEARN_EMPTY (n == 0) or {macro}LEARN_NULL (a NULL pointer).
-{limit_note} *
+    apply_text = f"""\
  * {prefix}ginv_apply runs Ginv alone over a whole trial of n samples (y may be u), as
  * ilcdob.design.export.apply_coefficients does: it looks {macro}GINV_ADVANCE samples ahead, the
  * input taken as zero before the trial and continued past its end by the least-squares
  * cubic through its last 16 samples. Uses cos() of the C math library (link with -lm).
  * Compile with -ffp-contract=off to reproduce the Python arithmetic operation by operation;
  * contraction changes the results only at the level of rounding.
- */
-#ifndef {guard}
-#define {guard}
-
-#include <stddef.h>
-
+"""
+    macros = f"""\
 #define {macro}SAMPLE_TIME {ts!r} /* s */
 #define {macro}F_TAPS {rp.h.size} /* taps of the robustness FIR */
 #define {macro}F_ADVANCE {rp.advance} /* samples of look-ahead of the robustness FIR */
@@ -1390,24 +1384,13 @@ def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: _Rob
 #define {macro}GINV_ADVANCE {ginv_adv} /* samples of look-ahead of Ginv */
 #define {macro}GINV_LOOKAHEAD_TAPS {ginv_taps} /* taps of Ginv's look-ahead FIR (0: none) */
 {band_macros}#define {macro}LEARN_WORK(n) ({work.replace("n + ", "(n) + ")}) /* doubles of scratch for learn */
-#define {macro}LEARN_EMPTY 1 /* learn: n == 0 */
-#define {macro}LEARN_NULL 2 /* learn: a NULL pointer */
-
-#ifdef __cplusplus
-extern "C" {{
-#endif
-
-/* The learning law: previous vehicle's trial (e in m, df_prev in m/s^2) -> df_next (m/s^2). */
-int {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, double *work);
+"""
+    declarations = f"""\
 /* Ginv = Gd_hat^-1 of the previous vehicle's model: tracking error (m) -> disturbance (m/s^2), sign as Gd^-1. */
 void {prefix}ginv_apply(const double *u, double *y, size_t n);
-
-#ifdef __cplusplus
-}}
-#endif
-
-#endif /* {guard} */
 """
+    header = _header(f"Robust-set learning law {pair}", macro, prefix, _law_comment(macro, lp, robust), limit_note,
+                     apply_text, macros, declarations)
     parts = [f"/* Robust-set learning law {pair}: see filters.h. Written by `ilcdob design`. */\n"
              '#include <math.h>\n#include "filters.h"\n']
     if ginv_adv:
