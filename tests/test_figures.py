@@ -393,7 +393,7 @@ def _savefig_png(fig) -> bytes:
     import io
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    fig.savefig(buf, format="png", dpi=110, pil_kwargs={"compress_level": 3})  # figure_png's zlib level
     return buf.getvalue()
 
 
@@ -497,3 +497,43 @@ def test_render_workers_must_be_a_count(workers):
 
     with pytest.raises(SpecError, match=r"`workers` \(figure rendering processes\): got .*expected an integer >= 1"):
         render_figures({}, workers=workers)
+
+
+def test_minor_log_grid_draws_matplotlibs_minor_positions_as_one_collection():
+    """The minor grid of a long log view is one line collection at the positions matplotlib's own minor
+    ticks had (read from a twin figure left as matplotlib draws it), on every axes of a shared group; a view
+    of less than two decades (where matplotlib may label minor ticks) keeps its ticks."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    from ilcdob.design.figure import minor_log_grid
+
+    def build():
+        fig = Figure(figsize=(6, 4))
+        axes = fig.subplots(3, 1, sharex=True)
+        for k, ax in enumerate(axes[:2]):
+            ax.semilogx([0.013, 170.0], [k, k + 1])
+            ax.grid(True, which="both", alpha=0.3)
+        axes[2].loglog([1.0, 30.0], [2.0, 50.0])   # x shared (long), y 1.4 decades (short)
+        axes[2].grid(True, which="both", alpha=0.3)
+        FigureCanvasAgg(fig)
+        return fig, axes
+
+    ref, ref_axes = build()
+    ref.canvas.draw()
+    expect_x = [sorted(t.get_loc() for t in ax.xaxis.get_minor_ticks() if t.gridline.get_visible()
+                       and ax.get_xlim()[0] <= t.get_loc() <= ax.get_xlim()[1]) for ax in ref_axes]
+    expect_y = sorted(ref_axes[2].yaxis.get_minorticklocs())
+    assert len(expect_x[0]) > 30 and len(expect_y) > 3   # five decades of 2..9; the short view's own ticks
+
+    fig, axes = build()
+    minor_log_grid(fig, alpha=0.3)
+    fig.canvas.draw()
+    for ax, want in zip(axes, expect_x):
+        assert len(ax.xaxis.get_minorticklocs()) == 0
+        lines = [c for c in ax.collections if isinstance(c, LineCollection)]
+        assert len(lines) == 1
+        got = sorted(seg[0, 0] for seg in lines[0].get_segments())
+        np.testing.assert_allclose(got, want, rtol=1e-12)
+        assert lines[0].get_alpha() == 0.3
+    np.testing.assert_allclose(sorted(axes[2].yaxis.get_minorticklocs()), expect_y, rtol=1e-12)

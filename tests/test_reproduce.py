@@ -271,8 +271,8 @@ def test_cli_order_option(tmp_path, capsys):
 
 def test_the_folder_holds_the_figures_savefig_makes_rendered_in_worker_processes(tmp_path):
     """``reproduce`` builds and renders its figures in worker processes: the PNG files are those that
-    ``savefig`` makes of :meth:`files`' figures (and of the report's ``theorem.png``), and no worker is
-    left running."""
+    ``savefig`` makes of :meth:`files`' figures (and of the report's ``theorem.png``) at the zlib level
+    the figures are written with, and no worker is left running."""
     import io
     import multiprocessing
 
@@ -285,10 +285,28 @@ def test_the_folder_holds_the_figures_savefig_makes_rendered_in_worker_processes
     pending = {**res.files(pending=True), **report_files(res.fleet, [sr.order for sr in res.scenarios],
                                                          pending=True)}
     assert sorted(p.name for p in out.glob("*.png")) == sorted(n for n in pending if n.endswith(".png"))
-    for name in ("error_s1.png", "theorem.png"):  # constrained layout, submitted as flown; tight layout, at the end
+    # constrained layout, submitted as flown; tight layout, before the first flight; tight layout, at the end
+    for name in ("error_s1.png", "bode_loops.png", "theorem.png"):
         buf = io.BytesIO()
-        pending[name].build().savefig(buf, format="png", dpi=110)
+        pending[name].build().savefig(buf, format="png", dpi=110, pil_kwargs={"compress_level": 3})  # figure_png's
         assert (out / name).read_bytes() == buf.getvalue(), name
+
+
+def test_the_fleets_figures_are_handed_over_before_the_first_flight(tmp_path, monkeypatch):
+    """The figures that need the fleet alone are rendered while the first scenario flies: the renderer gets
+    them before the run flies anything, then each scenario's as it is flown."""
+    from ilcdob.app.commands import reproduce_to_folder
+    from ilcdob.validation import figures, reproduce as reproduce_module
+
+    events = []
+    submit, run_scenario = figures.FigureRenderer.submit, reproduce_module.run_scenario
+    monkeypatch.setattr(figures.FigureRenderer, "submit",
+                        lambda self, figs: (events.append(sorted(figs)), submit(self, figs))[1])
+    monkeypatch.setattr(reproduce_module, "run_scenario",
+                        lambda *a, **k: (events.append("fly"), run_scenario(*a, **k))[1])
+    reproduce_to_folder(tmp_path / "run", scenarios=[1, 2], iterations=1, figure_workers=1)
+    assert events[:5] == [["bode_loops.png", "identified_models.png"], "fly", ["disturbance_s1.png", "error_s1.png"],
+                          "fly", ["disturbance_s2.png", "error_s2.png"]]
 
 
 def test_each_scenario_is_handed_over_as_soon_as_it_is_flown(fleet):

@@ -53,7 +53,7 @@ from matplotlib.figure import Figure
 
 from ilcdob.design import LearningFilters
 from ilcdob.design.figure import (TE_GAIN_ERROR, BodeCurve, draw_bode, finish_bode_axes, frequency_grid, loop_maps,
-                                  magnitude_db, with_gain_error)
+                                  magnitude_db, minor_log_grid, with_gain_error)
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import freqresp
@@ -62,12 +62,15 @@ from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicativ
 if TYPE_CHECKING:
     from .reproduce import ReproductionResult
 
-__all__ = ["reproduction_figures", "scenario_figures", "frequency_grid", "identified_bounds", "TE_GAIN_ERROR",
-           "FIGURE_DPI", "ITERATIONS_RTOL", "ITERATIONS_APART", "PendingFigure", "FigureRenderer", "figure_png",
-           "render_figures", "render_workers"]
+__all__ = ["reproduction_figures", "scenario_figures", "fleet_figures", "frequency_grid", "identified_bounds",
+           "TE_GAIN_ERROR", "FIGURE_DPI", "PNG_COMPRESS_LEVEL", "ITERATIONS_RTOL", "ITERATIONS_APART", "PendingFigure",
+           "FigureRenderer", "figure_png", "render_figures", "render_workers"]
 
 #: Resolution the figures are made for (dots per inch of the PNG files).
 FIGURE_DPI = 110
+#: zlib level of the PNG files :func:`figure_png` writes: 5 % larger files than the default level
+#: 6 for a third less encoding time (docs/performance.md, "Figures").
+PNG_COMPRESS_LEVEL = 3
 #: Learning iterations whose curves differ by at most this share of their peak coincide: they
 #: are drawn as one line (0.1 %, well below a pixel of the figures).
 ITERATIONS_RTOL = 1e-3
@@ -85,6 +88,7 @@ def _subplots(nrows: int, ncols: int, figsize: tuple[float, float], **kwargs) ->
 
 
 def _done(fig: Figure) -> Figure:
+    minor_log_grid(fig)
     fig.tight_layout()
     return fig
 
@@ -381,7 +385,7 @@ def _identified_models(fleet: Fleet) -> Figure | None:
     axes[1].set_title("|Delta(jw)|: 3-sigma multiplicative uncertainty")
     for ax in axes:
         ax.set_xlabel("frequency (rad/s)")
-        ax.grid(True, which="both", alpha=0.3)
+        ax.grid(True, which="both", alpha=0.3)  # minor lines of long log views: minor_log_grid (_done)
         ax.legend(fontsize=7)
     return _done(fig)
 
@@ -445,6 +449,27 @@ def scenario_figures(sr, iterations: int, pending: bool = False) -> dict[str, Fi
     return {name: PendingFigure(make) if pending else make() for name, make in makers.items()}
 
 
+def fleet_figures(fleet: Fleet, pending: bool = False) -> dict[str, Figure | PendingFigure]:
+    """The figures of a reproduction that need the fleet alone (they can be rendered before it flies).
+
+    Parameters
+    ----------
+    fleet : Fleet
+        The fleet flown.
+    pending : bool
+        Return each figure unbuilt, as a :class:`PendingFigure`.
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure or PendingFigure
+        ``bode_loops.png``, and ``identified_models.png`` when a system has an identified plant.
+    """
+    makers: dict[str, Callable[[], Figure]] = {"bode_loops.png": partial(_bode_loops, fleet)}
+    if any(spec.identification is not None for spec in fleet.systems):  # the systems identified_bounds draws
+        makers["identified_models.png"] = partial(_identified_models, fleet)
+    return {name: PendingFigure(make) if pending else make() for name, make in makers.items()}
+
+
 def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict[str, Figure | PendingFigure]:
     """Every figure of a reproduction, by PNG file name, in the order of the report.
 
@@ -468,9 +493,7 @@ def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict
     figs: dict[str, Figure | PendingFigure] = {}
     for sr in res.scenarios:
         makers.update({name: p.make for name, p in scenario_figures(sr, res.iterations, pending=True).items()})
-    makers["bode_loops.png"] = partial(_bode_loops, res.fleet)
-    if any(spec.identification is not None for spec in res.fleet.systems):  # the systems identified_bounds draws
-        makers["identified_models.png"] = partial(_identified_models, res.fleet)
+    makers.update({name: p.make for name, p in fleet_figures(res.fleet, pending=True).items()})
     if res.filters:
         makers["bode_learning.png"] = partial(_bode_learning, res.filters, res.fleet.sample_time)
         makers["bode_te.png"] = partial(_bode_te, res.fleet, res.filters)
@@ -482,8 +505,9 @@ def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict
 def figure_png(fig: Figure) -> bytes:
     """The PNG file of a figure at :data:`FIGURE_DPI`, drawn once (module docstring, "Rendering").
 
-    The bytes are those of ``fig.savefig(f, format="png", dpi=FIGURE_DPI)``; the figure is
-    left laid out at that resolution, on an Agg canvas, without a layout engine.
+    The bytes are those of ``fig.savefig(f, format="png", dpi=FIGURE_DPI, pil_kwargs={"compress_level":
+    PNG_COMPRESS_LEVEL})``; the figure is left laid out at that resolution, on an Agg canvas, without a
+    layout engine.
 
     Parameters
     ----------
@@ -506,7 +530,7 @@ def figure_png(fig: Figure) -> bytes:
     with matplotlib.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
         fig.set_layout_engine(None)  # laid out: savefig draws once
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=FIGURE_DPI)
+    fig.savefig(buf, format="png", dpi=FIGURE_DPI, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     return buf.getvalue()
 
 

@@ -168,15 +168,15 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         Processes flying the scenarios; the rotorpy plant only (default 1).
     figure_workers : int, optional
         Processes building and rendering the figures (:class:`ilcdob.validation.figures.FigureRenderer`;
-        default one per usable core): the linear plant's scenario figures while the next scenario
-        flies, the others once every scenario is flown.
+        default one per usable core): on the linear plant the fleet's figures while the first
+        scenario flies and each scenario's while the next flies, the others once every scenario is flown.
 
     Returns
     -------
     ReproductionResult
     """
     from ilcdob.design.laws import check_law
-    from ilcdob.validation.figures import FigureRenderer, render_workers, scenario_figures
+    from ilcdob.validation.figures import FigureRenderer, fleet_figures, render_workers, scenario_figures
     from ilcdob.validation.scenarios import check_order
 
     law = check_law(law, "--law")
@@ -226,6 +226,9 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
 
             def flown(sr: Any) -> None:  # its figures are rendered while the next scenario flies
                 renderer.submit(scenario_figures(sr, iterations, pending=True))
+
+            if figures:  # the fleet's figures while the first scenario flies
+                renderer.submit(fleet_figures(flt, pending=True))
 
             res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress, order=order,
                             sensor_noise_std=0.0 if sensor_noise is None else sensor_noise, seed=seed,
