@@ -79,3 +79,31 @@ def test_c_options_are_accepted_for_robust_set_and_still_refused_elsewhere():
     with pytest.raises(SpecError, match=r"`--c-prefix` 'abc_': --method norm-optimal does not use it, only "
                                         r"closed-form, fir and robust-set do \(the methods with C code\)"):
         commands._refuse_unused("norm-optimal", {"--c-prefix": "abc_"})
+
+
+COMPARE = ["compare", "--scenario", "1", "--duration", "5", "--samples", "6", "--bound", "0.6", "--methods", "fir"]
+
+
+@pytest.mark.parametrize("policy", ["refuse", "no-harm"])
+def test_compare_takes_the_policy_a_refused_design_is_its_row(tmp_path, capsys, policy):
+    """compare designs scenario 1's first pair (UAV1 -> UAV2) over its six paired samples, where no filter keeps
+    the margin above about 2.3 rad/s (reports/compare): with ``refuse`` the FIR row says the design failed and
+    names the bands (a comparison reports a failed design and goes on, exit 0); with ``no-harm`` it is flown."""
+    rc = main(["--quiet", *COMPARE, "--fir-unattainable", policy, "--out", str(tmp_path / "c")])
+    out, err = capsys.readouterr()
+    assert rc == 0, err[-3000:]
+    row = next(line for line in out.splitlines() if line.startswith("fir "))
+    if policy == "refuse":
+        assert "design failed" in row and "not met by any filter" in row and BAND.search(row), row
+    else:
+        assert "design failed" not in row and "improved" not in row, row
+
+
+def test_compare_refuses_the_flag_without_fir_among_the_methods(tmp_path, capsys):
+    rc = main(["--quiet", *COMPARE[:-1], "closed-form,robust", "--fir-unattainable", "no-harm",
+               "--out", str(tmp_path / "c")])
+    out, err = capsys.readouterr()
+    assert rc == 2, err[-3000:]
+    assert err.startswith("ilcdob: error: `--fir-unattainable` 'no-harm': none of the methods closed-form, robust "
+                          "uses it, only fir does"), err
+    assert out == "" and not (tmp_path / "c").exists()

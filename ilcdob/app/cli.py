@@ -48,7 +48,7 @@ _EXAMPLES = {
 MAX_STARTS = 20
 #: Most Levenberg-Marquardt iterations per start of ``identify``.
 MAX_LM_ITERATIONS = 10_000
-#: Choices of ``design --fir-unattainable``: ``ilcdob.design.fir.UNATTAINABLE`` (not imported here, so that
+#: Choices of ``design`` and ``compare --fir-unattainable``: ``ilcdob.design.fir.UNATTAINABLE`` (not imported here, so that
 #: ``--help`` stays fast; a test keeps the two equal).
 FIR_UNATTAINABLE = ("no-harm", "refuse")
 
@@ -325,6 +325,9 @@ def build_parser() -> argparse.ArgumentParser:
     _delta_options(p)
     p.add_argument("--duration", type=float, default=None, help="fly the first SECONDS of the scenario (default: all)")
     p.add_argument("--seed", type=_seed, default=0, help="seed of the Delta-set draw")
+    p.add_argument("--fir-unattainable", choices=FIR_UNATTAINABLE, default=None,
+                   help="fir only: where no filter meets |Te1| <= 0.9 for every sampled model, keep only the no-harm "
+                        "promise there (default: no-harm), or refuse the design (exit 2, bands named)")
     p = _sub(sub, "extensions", "the two extensions beyond the paper, per scenario")
     _common(p, "output folder (written as a unit)")
     p.add_argument("--scenarios", type=_ids, default=[1, 2, 3, 4], help="comma-separated scenario ids")

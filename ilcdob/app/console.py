@@ -318,6 +318,7 @@ def _robust_set_rho(rho: float | None, methods: list[str]) -> None:
 
 def _compare(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     from ilcdob.design.delta import check_scale
+    from ilcdob.design.fir import FIROptions
     from ilcdob.design.pair import DEFAULT_METHODS
     from ilcdob.design.robust import RobustOptions
     from ilcdob.validation.compare import CompareOptions
@@ -325,13 +326,15 @@ def _compare(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
     methods = list(a.methods or DEFAULT_METHODS)
     _used_by("--rho", a.rho, methods, ("robust", "robust-set"))
+    _used_by("--fir-unattainable", a.fir_unattainable, methods, ("fir",))
     _robust_set_rho(a.rho, methods)
     scenario = SCENARIOS.get(a.scenario)
     if a.duration is not None and scenario is not None and a.duration > scenario.duration:
         raise SpecError(f"`--duration`: got {a.duration:g} s, but scenario {a.scenario} lasts {scenario.duration:g} s; "
                         "give a shorter duration, or omit --duration to fly all of it")
     opts = CompareOptions(samples=a.samples, bound=a.bound, scale=check_scale(_given(a.scale, 1.0), a.bound),
-                          seed=a.seed, duration=a.duration, robust=RobustOptions(rho=_given(a.rho, 0.95)), law=a.law)
+                          seed=a.seed, duration=a.duration, robust=RobustOptions(rho=_given(a.rho, 0.95)), law=a.law,
+                          fir=None if a.fir_unattainable is None else FIROptions(unattainable=a.fir_unattainable))
     cmp = uc.compare_to_folder(a.out, a.scenario, opts, fleet=a.fleet, methods=a.methods, overwrite=a.overwrite,
                                progress=con.progress, argv=argv)
     print(cmp.table(), end="")
