@@ -9,24 +9,32 @@ here as the baseline), at N = 3000 and N = 300000 samples:
   noise and a reference; baseline: the plant and the :class:`~ilcdob.controller.OuterLoopController`
   stepped sample by sample, as the function did.
 
-CPU time (``time.process_time``: BLAS threads included), the methods interleaved (A B A B ...),
-medians of ``--repeat`` runs; the ratio baseline / new; and the largest difference of the results,
-relative to each signal's peak.
+Part 2, large loops: the stress loops at Ts = 1 ms with ``q_order`` 8 (``a8``: 22 states; ``b8``:
+109 states, two delay lines of 44) and ``b8`` at 2 ms (65 states), maps (``G_f``; ``G_d`` of ``b8``)
+and flights, at N = 3000 and N = 100000: the Python loop of Part 1, the previous kernel (a Schur
+solve with a refinement pass, the plain recursion above 50 states: :func:`schur_simulate`, a copy
+kept here) and the kernel; the ratios Python loop / kernel and previous kernel / kernel; the largest
+difference of the kernel from the Python loop and, for the maps, from the recursion in 80-bit
+arithmetic (``numpy.longdouble``), relative to each signal's peak.
 
-Part 2 (``--methods``), the approaches measured to choose the kernel, on ``G_f`` of UAV1 (11 states)
+CPU time (``time.process_time``: BLAS threads included), the methods interleaved (A B A B ...),
+medians of ``--repeat`` runs (fewer at the long trials).
+
+Part 3 (``--methods``), the approaches measured to choose the kernel, on ``G_f`` of UAV1 (11 states)
 and of the stress loop ``a8`` at Ts = 1 ms (``q_order`` 8, 22 states; tests/test_statespace.py):
 
 * ``plain``: the recursion, a Python loop (what ``forced_response`` runs);
-* ``schur``: the kernel without its refinement pass (the Schur solve alone);
-* ``schur+refine``: the kernel, :func:`ilcdob.statespace.simulate`;
+* ``schur``: the previous kernel without its refinement pass (the Schur solve alone);
+* ``schur+refine``: the previous kernel, :func:`schur_simulate`;
+* ``blocks``: the kernel, :func:`ilcdob.statespace.simulate` (the recursion in all blocks at once);
 * ``casadi``: the step as a CasADi SX Function (sparse: only the nonzero entries of A, B, C, D),
   ``mapaccum(N)`` evaluated in CasADi's virtual machine (no JIT); its build time is given apart;
 * ``numba``: the recursion compiled by numba (not a dependency of ilcdob: this row only when it is
   installed; compile time excluded).
 
-with the largest difference from the plain recursion, relative to the output's peak. Part 3
-(``--sweep``): the kernel's Schur path against its plain recursion over the stress loops' maps
-(3 to 109 states), which sets :data:`ilcdob.statespace.DENSE_MAX_STATES`.
+with the largest difference from the plain recursion, relative to the output's peak. Part 4
+(``--sweep``): the kernel and the previous kernel against the plain recursion over the stress
+loops' maps (3 to 109 states), N = 3000.
 
 Run:  python benchmarks/bench_loops.py [--repeat 5] [--methods] [--sweep]
 """
@@ -38,9 +46,13 @@ import copy
 import os
 import statistics
 import time
+from functools import lru_cache
 
 import control as ct
 import numpy as np
+from scipy.linalg import schur
+from scipy.signal import lfilter
+from threadpoolctl import ThreadpoolController
 
 import ilcdob
 import ilcdob.statespace as kernel
@@ -48,6 +60,7 @@ from ilcdob.controller import OuterLoopController
 from ilcdob.design import simulate_map
 from ilcdob.design.closed_form import one_minus
 from ilcdob.fleet import fleet_from_dict
+import ilcdob.validation.simulate as flight_module
 from ilcdob.validation.simulate import simulate_flight
 
 STRESS = {  # the stress loops of tests/test_conditioning.py
@@ -94,6 +107,158 @@ def old_simulate_flight(loop, r, d, d_f, a_ref, noise) -> dict[str, np.ndarray]:
         xp = ap @ xp + bp * (u2k + d_l[k])
         y[k], e[k], dh[k], u2[k] = yk, r_l[k] - ymk, ctl.d_hat, u2k
     return {"y": y, "e_meas": e, "d_hat": dh, "u2": u2}
+
+
+# --- the previous kernel: a Schur solve with one refinement pass (the plain recursion above 50 states) ---
+
+_OLD_DENSE_MAX_STATES, _OLD_CHUNK_ENTRIES, _OLD_MIN_CHUNK, _OLD_GROUP = 50, 1 << 16, 4096, 16
+
+
+class _OldSchur:
+    """Real Schur form of ``A`` and the solve of ``s[k + 1] = T s[k] + drive[:, k]`` (the previous kernel)."""
+
+    def __init__(self, a, b, c):
+        self.t, self.z = schur(a, output="real")
+        self.zt = np.ascontiguousarray(self.z.T)
+        self.bz, self.cz = self.zt @ b, c @ self.z
+        blocks, i = [], a.shape[0] - 1
+        while i >= 0:
+            pair = i > 0 and self.t[i, i - 1] != 0.0
+            blocks.append((i - 1, True) if pair else (i, False))
+            i -= 2 if pair else 1
+        self.groups = []
+        for i, pair in blocks:
+            if pair:
+                (t11, t12), (t21, t22) = self.t[i:i + 2, i:i + 2]
+                block = (i, np.array([[-t22, t12], [t21, -t11]]), np.array([1.0, -(t11 + t22), t11 * t22 - t12 * t21]))
+            else:
+                block = (i, None, np.array([1.0, -self.t[i, i]]))
+            if not self.groups or self.groups[-1][1] - i > _OLD_GROUP:
+                self.groups.append((i, i + 2 if pair else i + 1, []))
+            self.groups[-1] = (i, self.groups[-1][1], self.groups[-1][2] + [block])
+
+    def solve(self, drive):
+        t, n, s = self.t, drive.shape[0], np.empty_like(drive)
+        for g0, g1, members in self.groups:
+            if g1 < n:
+                drive[g0:g1, 1:] += (t[g0:g1, g1:] @ s[g1:])[:, :-1]
+            for i, fir, den in members:
+                if fir is None:
+                    dr = drive[i]
+                    if i + 1 < g1:
+                        dr[1:] += (t[i, i + 1:g1] @ s[i + 1:g1])[:-1]
+                    s[i] = lfilter(np.ones(1), den, dr)
+                    continue
+                dr = drive[i:i + 2]
+                if i + 2 < g1:
+                    dr[:, 1:] += (t[i:i + 2, i + 2:g1] @ s[i + 2:g1])[:, :-1]
+                v = dr.copy()
+                v[:, 1:] += fir @ dr[:, :-1]
+                s[i:i + 2] = lfilter(np.ones(1), den, v, axis=1)
+        return s
+
+
+@lru_cache(maxsize=1)
+def _old_blas() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+@lru_cache(maxsize=32)
+def _old_schur_cached(a, b, c, n, m, p):
+    return _OldSchur(np.frombuffer(a).reshape(n, n), np.frombuffer(b).reshape(n, m), np.frombuffer(c).reshape(p, n))
+
+
+def _old_product(b, u):
+    return b * u if b.shape[1] == 1 else b @ u
+
+
+def _old_plain(a, b, u, x0, evaluate):
+    x, prev = np.empty((a.shape[0], u.shape[1])), x0
+    if evaluate is None:
+        w = _old_product(b, u)
+        for k in range(u.shape[1]):
+            prev = x[:, k] = a @ prev + w[:, k]
+    else:
+        for k in range(u.shape[1]):
+            prev = x[:, k] = evaluate(prev[:, None], u[:, k:k + 1])[0][:, 0]
+    return x
+
+
+def _old_previous(x, x0):
+    prev = np.empty_like(x)
+    prev[:, 0], prev[:, 1:] = x0, x[:, :-1]
+    return prev
+
+
+def _old_outputs(c, d, u, x, x0, evaluate):
+    if evaluate is not None:
+        return evaluate(_old_previous(x, x0), u)[1]
+    y = _old_product(d, u)
+    y[:, 0] += c @ x0
+    y[:, 1:] += (c @ x)[:, :-1]
+    return y
+
+
+def _old_chunk(a, b, c, d, form, u, x0, evaluate, refine=True):
+    at_rest = not np.any(x0)
+    if at_rest:
+        x = form.z @ form.solve(_old_product(form.bz, u))
+    else:
+        x = form.z @ form.solve(np.hstack([(form.zt @ x0)[:, None], _old_product(form.bz, u)]))[:, 1:]
+    if not refine:
+        return _old_outputs(c, d, u, x, x0, evaluate), x[:, -1]
+    w = _old_product(b, u) if evaluate is None else None
+    for _ in range(4):
+        if evaluate is None:
+            ax = a @ x
+            defect = w - x
+            defect[:, 1:] += ax[:, :-1]
+            if not at_rest:
+                defect[:, 0] += a @ x0
+        else:
+            defect = evaluate(_old_previous(x, x0), u)[0] - x
+        corr = form.solve(form.zt @ defect)
+        size = float(np.max(np.abs(corr)))
+        if size <= 1e-7 * float(np.max(np.abs(x))):
+            x += form.z @ corr
+            return _old_outputs(c, d, u, x, x0, evaluate), x[:, -1]
+        if not np.isfinite(size):
+            break
+        x += form.z @ corr
+    x = _old_plain(a, b, u, x0, evaluate)
+    return _old_outputs(c, d, u, x, x0, evaluate), x[:, -1]
+
+
+def schur_simulate(a, b, c, d, u, x0=None, evaluate=None, refine=True):
+    """The previous kernel, ``simulate`` before the block recursion (arguments as in
+    :func:`ilcdob.statespace.simulate`, without the checks); ``refine=False``: its Schur solve alone."""
+    a = np.asarray(a, float)
+    u = np.atleast_2d(np.asarray(u, float))
+    n, (m, length) = a.shape[0], u.shape
+    b = np.asarray(b, float).reshape(n, m)
+    c = np.asarray(c, float).reshape(-1, n)
+    d = np.asarray(d, float).reshape(c.shape[0], m)
+    state = np.zeros(n) if x0 is None else np.asarray(x0, float)
+    if n > _OLD_DENSE_MAX_STATES and evaluate is None:
+        return _old_outputs(c, d, u, _old_plain(a, b, u, state, None), state, None)
+    with _old_blas().limit(limits=1, user_api="blas"):
+        a_, b_, c_ = (np.ascontiguousarray(x) for x in (a, b, c))
+        form = _old_schur_cached(a_.tobytes(), b_.tobytes(), c_.tobytes(), n, m, c.shape[0])
+        chunk = max(_OLD_MIN_CHUNK, _OLD_CHUNK_ENTRIES // n)
+        y = np.empty((c.shape[0], length))
+        for k0 in range(0, length, chunk):
+            k1 = min(k0 + chunk, length)
+            y[:, k0:k1], state = _old_chunk(a, b, c, d, form, u[:, k0:k1], state, evaluate, refine)
+    return y
+
+
+def schur_simulate_flight(*args, **kwargs):
+    """``simulate_flight`` on the previous kernel."""
+    kernel_now, flight_module.simulate = flight_module.simulate, schur_simulate
+    try:
+        return simulate_flight(*args, **kwargs)
+    finally:
+        flight_module.simulate = kernel_now
 
 
 def _worst(got: dict | np.ndarray, want: dict | np.ndarray) -> float:
@@ -144,26 +309,60 @@ def part1(repeat: int) -> None:
               f"{_worst(res['new'], res['old']):14.1e}")
 
 
-def _plain(a, b, c, d, u):
-    x = np.zeros(a.shape[0])
-    y = np.empty(u.size)
+def _plain(a, b, c, d, u, dtype=float):
+    """The recursion, a Python loop; in ``numpy.longdouble`` (80-bit on x86) for the reference."""
+    a, b, c = (np.asarray(m, dtype=dtype) for m in (a, b, c))
+    d, u = dtype(d), np.asarray(u).astype(dtype)
+    x = np.zeros(a.shape[0], dtype=dtype)
+    y = np.empty(u.size, dtype=dtype)
     for k in range(u.size):
         y[k] = c @ x + d * u[k]
         x = a @ x + b * u[k]
     return y
 
 
-def _schur_only(a, b, c, d, u):
-    """The kernel without its refinement pass (the same chunks)."""
-    def unrefined(a_, b_, c_, d_, form, u_, x0, evaluate):
-        x = form.z @ form.solve(np.hstack([(form.zt @ x0)[:, None], kernel._product(form.bz, u_)]))[:, 1:]
-        return kernel._outputs(c_, d_, u_, x, x0, evaluate), x[:, -1]
+def _siso(g):
+    return (np.asarray(g.A, float), np.asarray(g.B, float)[:, 0], np.asarray(g.C, float)[0],
+            float(np.asarray(g.D)[0, 0]))
 
-    refined, kernel._chunk = kernel._chunk, unrefined
-    try:
-        return kernel.simulate(a, b, c, d, u)[0]
-    finally:
-        kernel._chunk = refined
+
+def part2(repeat: int) -> None:
+    print(f"\nPart 2: large loops; Python loop, previous kernel (Schur) and kernel; {_load()}")
+    print(f"{'loop':26s} {'N':>6s} {'loop [s]':>9s} {'Schur [s]':>9s} {'kernel [s]':>10s} {'loop/kernel':>11s} "
+          f"{'Schur/kernel':>12s} {'diff loop':>9s} {'diff 80-bit':>11s}")
+    loops = {"a8 1 ms": stress_loop("a", 8, 0.001), "b8 2 ms": stress_loop("b", 8, 0.002),
+             "b8 1 ms": stress_loop("b", 8, 0.001)}
+    for n in (3000, 100000):
+        reps = repeat if n <= 3000 else max(3, repeat // 2)
+        rng = np.random.default_rng(0)
+        u = rng.standard_normal(n)
+        for name, lp in loops.items():
+            g = lp.G_d if name == "b8 1 ms" else lp.G_f
+            label = f"{name} {'G_d' if name == 'b8 1 ms' else 'G_f'} ({g.nstates} states)"
+            simulate_map(g, u[:10])
+            med, res = _interleaved({"loop": lambda: old_simulate_map(g, u),
+                                     "schur": lambda: schur_simulate(g.A, g.B, g.C, g.D, u)[0],
+                                     "new": lambda: simulate_map(g, u)}, reps)
+            ref = _plain(*_siso(g), u, dtype=np.longdouble)
+            print(f"{label:26s} {n:6d} {med['loop']:9.4f} {med['schur']:9.4f} {med['new']:10.4f} "
+                  f"{med['loop'] / med['new']:10.1f}x {med['schur'] / med['new']:11.1f}x "
+                  f"{_worst(res['new'], res['loop']):9.1e} {_worst(res['new'], ref):11.1e}")
+        d, noise = 0.3 * rng.standard_normal(n), 1e-3 * rng.standard_normal(n)
+        for name, lp in loops.items():
+            label = f"{name} flight ({lp.closed_loop.nstates} states)"
+            tt = np.arange(n) * lp.ts
+            r, a_ref, d_f = np.sin(0.5 * tt), -0.25 * np.sin(0.5 * tt), 0.1 * np.cos(2.0 * tt)
+
+            def run(func, lp=lp, r=r, a_ref=a_ref, d_f=d_f):
+                f = func(lp, r, d, d_f=d_f, a_ref=a_ref, sensor_noise=noise)
+                return {"y": f.y, "e_meas": f.e_meas, "d_hat": f.d_hat, "u2": f.u2}
+
+            med, res = _interleaved({"loop": lambda: old_simulate_flight(lp, r, d, d_f, a_ref, noise),
+                                     "schur": lambda: run(schur_simulate_flight),
+                                     "new": lambda: run(simulate_flight)}, reps if n <= 3000 else 1)
+            print(f"{label:26s} {n:6d} {med['loop']:9.4f} {med['schur']:9.4f} {med['new']:10.4f} "
+                  f"{med['loop'] / med['new']:10.1f}x {med['schur'] / med['new']:11.1f}x "
+                  f"{_worst(res['new'], res['loop']):9.1e} {'':>11s}")
 
 
 def _casadi(a, b, c, d, n):
@@ -175,9 +374,9 @@ def _casadi(a, b, c, d, n):
     return step.mapaccum("trial", n)
 
 
-def part2(repeat: int) -> None:
+def part3(repeat: int) -> None:
     n_values = (3000, 300000)
-    print(f"\nPart 2: approaches on G_f (median CPU s; max rel. diff from the plain recursion); {_load()}")
+    print(f"\nPart 3: approaches on G_f (median CPU s; max rel. diff from the plain recursion); {_load()}")
     try:
         import numba
     except ImportError:
@@ -193,14 +392,14 @@ def part2(repeat: int) -> None:
             return y
     for label, lp in (("UAV1 (11 states)", ilcdob.default_fleet().loop("UAV1")),
                       ("a8 at 1 ms (22 states)", stress_loop("a", 8, 0.001))):
-        g = lp.G_f
-        a, b, c = np.asarray(g.A, float), np.asarray(g.B, float)[:, 0], np.asarray(g.C, float)[0]
-        d = float(np.asarray(g.D)[0, 0])
+        a, b, c, d = _siso(lp.G_f)
         for n in n_values:
             u = np.random.default_rng(1).standard_normal(n)
             reps = repeat if n <= 3000 else 1
-            funcs = {"plain": lambda: _plain(a, b, c, d, u), "schur": lambda: _schur_only(a, b, c, d, u),
-                     "schur+refine": lambda: kernel.simulate(a, b, c, d, u)[0]}
+            funcs = {"plain": lambda: _plain(a, b, c, d, u),
+                     "schur": lambda: schur_simulate(a, b, c, d, u, refine=False)[0],
+                     "schur+refine": lambda: schur_simulate(a, b, c, d, u)[0],
+                     "blocks": lambda: kernel.simulate(a, b, c, d, u)[0]}
             t0 = time.process_time()
             trial = _casadi(a, b, c, d, n)
             build = time.process_time() - t0
@@ -222,8 +421,8 @@ def part2(repeat: int) -> None:
                 print(f"  {k:13s} {med[k]:9.4f} s  {med['plain'] / med[k]:6.1f}x  {_worst(res[k], ref):9.1e}{extra}")
 
 
-def part3(repeat: int) -> None:
-    print(f"\nPart 3: the kernel's Schur path against its plain recursion (N = 3000, median CPU ms); {_load()}")
+def part4(repeat: int) -> None:
+    print(f"\nPart 4: kernel and previous kernel against the plain recursion (N = 3000, median CPU ms); {_load()}")
     rows = []
     for name in ("a", "b"):
         for q in (3, 8):
@@ -232,32 +431,27 @@ def part3(repeat: int) -> None:
                 tag = f"{name}{q} {ts * 1e3:g} ms"
                 rows += [(f"{tag} G_d", lp.G_d), (f"{tag} 1 - Q", one_minus(lp.Q))]
     u = np.random.default_rng(2).standard_normal(3000)
-    limit = kernel.DENSE_MAX_STATES
-    try:
-        out = []
-        for label, g in sorted(rows, key=lambda r: r[1].nstates):
-            a, b, c, d = (np.asarray(m, float) for m in (g.A, g.B, g.C, g.D))
-            kernel.DENSE_MAX_STATES = 10**9
-            med_s, _ = _interleaved({"schur": lambda: kernel.simulate(a, b, c, d, u)}, repeat)
-            kernel.DENSE_MAX_STATES = 0
-            med_p, _ = _interleaved({"plain": lambda: kernel.simulate(a, b, c, d, u)}, repeat)
-            out.append((label, a.shape[0], med_s["schur"], med_p["plain"]))
-    finally:
-        kernel.DENSE_MAX_STATES = limit
-    for label, n, ts_, tp in out:
-        print(f"  {label:20s} {n:4d} states  schur {ts_ * 1e3:7.2f}  plain {tp * 1e3:7.2f}  "
-              f"plain/schur {tp / ts_:5.2f}")
-    print(f"  (the kernel takes the plain recursion above {limit} states)")
+    for label, g in sorted(rows, key=lambda r: r[1].nstates):
+        a, b, c, d = _siso(g)
+        kernel.simulate(a, b, c, d, u)
+        med, res = _interleaved({"plain": lambda: _plain(a, b, c, d, u),
+                                 "schur": lambda: schur_simulate(a, b, c, d, u)[0],
+                                 "new": lambda: kernel.simulate(a, b, c, d, u)[0]}, repeat)
+        print(f"  {label:20s} {a.shape[0]:4d} states  plain {med['plain'] * 1e3:7.2f}  "
+              f"Schur {med['schur'] * 1e3:7.2f}  kernel {med['new'] * 1e3:7.2f}  "
+              f"plain/kernel {med['plain'] / med['new']:5.1f}  "
+              f"Schur/kernel {med['schur'] / med['new']:5.1f}  diff {_worst(res['new'], res['plain']):7.1e}")
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--methods", action="store_true", help="part 2: the approaches compared")
-    parser.add_argument("--sweep", action="store_true", help="part 3: Schur path against plain recursion by size")
+    parser.add_argument("--methods", action="store_true", help="part 3: the approaches compared")
+    parser.add_argument("--sweep", action="store_true", help="part 4: kernels against the plain recursion by size")
     args = parser.parse_args()
     part1(args.repeat)
+    part2(args.repeat)
     if args.methods:
-        part2(args.repeat)
-    if args.sweep:
         part3(args.repeat)
+    if args.sweep:
+        part4(args.repeat)

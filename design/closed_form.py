@@ -70,8 +70,8 @@ def simulate_map(sys: ct.StateSpace, u: np.ndarray) -> np.ndarray:
     """Causal response of a discrete SISO system to an input trial, from rest.
 
     The state-space recursion of ``sys`` in compiled code (:func:`ilcdob.statespace.simulate`:
-    a Schur solve refined against ``sys``'s own matrices), to the rounding of the
-    sample-by-sample recursion.
+    the recursion run in all blocks of the trial at once, block starts refined), to the rounding
+    of the sample-by-sample recursion.
 
     Parameters
     ----------

@@ -10,8 +10,12 @@ signals whose own rounding in the stepped loop is that large).
 
 Hard loops (tests/test_conditioning.py): relative degree 2 and UAV1's plant with a 43.7 ms input
 delay, ``q_order`` 8, at 1 ms and 5 ms: the Q filter's 8-fold pole and M's sit ~Ts/tau from z = 1, the
-PID's slow pole at 0.99989, and a delay line of 44 states. There the Schur solve alone is off by
-up to 1e-9 of the peak; the refinement brings it to the recursion's rounding.
+PID's slow pole at 0.99989, and two delay lines of 44 states (109 states). The kernel runs the recursion
+in all blocks of the trial at once from block starts given by powers of A, copying the delay lines'
+states; the refinement makes the blocks' ends meet the next starts (module docstring of
+ilcdob/statespace.py). Synthetic cases check what the loops do not isolate: a delay line in a scrambled
+state order, a cluster of eight equal poles with slow modes near z = 1 over 1e5 samples, a model's own
+step that differs from its matrices.
 """
 
 from __future__ import annotations
@@ -28,7 +32,8 @@ from ilcdob.design import simulate_map
 from ilcdob.design.closed_form import one_minus
 from ilcdob.errors import SignalError, SpecError
 from ilcdob.fleet import fleet_from_dict
-from ilcdob.statespace import DENSE_MAX_STATES, simulate
+from ilcdob import statespace
+from ilcdob.statespace import simulate
 from ilcdob.validation.simulate import simulate_flight
 
 RTOL = 1e-12
@@ -94,26 +99,138 @@ def test_maps_of_the_built_in_fleet_are_the_recursion():
 def test_maps_of_hard_loops_are_the_recursion(fleet, name, which):
     lp = fleet.loop(name)
     sys_ = one_minus(lp.Q) if which == "1-Q" else getattr(lp, which)
-    assert sys_.nstates <= DENSE_MAX_STATES  # the Schur solve, not the large-system recursion
     for kind, u in _inputs(20000, lp.ts).items():
         want = _recursion(sys_.A, sys_.B, sys_.C, sys_.D, u)[0]
         assert _worst(simulate_map(sys_, u), want) <= RTOL, kind
 
 
-def test_long_trials_carry_the_state_exactly_across_chunks():
-    # 1e5 samples at 1 ms: 25 chunks; a state rounded at each chunk's start drifted to 1e-11 (step input
-    # into the slow modes); the DC gain of the 0.99989 pole keeps an error from fading
+def test_long_trials_carry_the_state_exactly_across_chunks(monkeypatch):
+    # 1e5 samples at 1 ms in 25 chunks of 4096; a state rounded at each chunk's start drifted to 1e-11 (step
+    # input into the slow modes); the DC gain of the 0.99989 pole keeps an error from fading
+    monkeypatch.setattr(statespace, "CHUNK_ENTRIES", 1 << 13)
     sys_ = HARD_1MS.loop("a8").G_f
     u = np.ones(100_000)
     u[50_000:] = -0.5
     assert _worst(simulate_map(sys_, u), _recursion(sys_.A, sys_.B, sys_.C, sys_.D, u)[0]) <= RTOL
 
 
-def test_large_systems_run_the_recursion():
+@pytest.fixture
+def runs(monkeypatch):
+    """The runs of the block recursion, counted (one per chunk when the block starts from the matrix powers
+    are right: the refinement then applies its correction in closed form); the per-sample loop, the last
+    resort, must not run."""
+    count: list[int] = []
+    run = statespace._Blocks.run
+
+    def counted(self, *args):
+        count.append(1)
+        return run(self, *args)
+
+    def no_fallback(*args):
+        raise AssertionError("the block recursion did not settle: the per-sample loop ran")
+
+    monkeypatch.setattr(statespace._Blocks, "run", counted)
+    monkeypatch.setattr(statespace, "_plain", no_fallback)
+    return count
+
+
+def _delay_loop(seed: int, line: int = 30):
+    """A 4-state core closed through a delay line of ``line`` states (``x_i[k + 1] = x_(i-1)[k]``), the states
+    in a scrambled order; two inputs, two outputs, the second reading the middle of the line."""
+    rng = np.random.default_rng(seed)
+    core, n = 4, 4 + line
+    a, b, c, d = np.zeros((n, n)), np.zeros((n, 2)), np.zeros((2, n)), rng.standard_normal((2, 2))
+    a[:core, :core] = 0.9 * np.linalg.qr(rng.standard_normal((core, core)))[0]
+    a[:core, n - 1] = 0.05 * rng.standard_normal(core)  # the line's end drives the core
+    a[core, :core] = rng.standard_normal(core)  # the line's start: the core and the second input
+    b[:core, 0], b[core, 1] = rng.standard_normal(core), 1.0
+    for i in range(core + 1, n):
+        a[i, i - 1] = 1.0
+    c[0, :core], c[1, core + line // 2] = rng.standard_normal(core), 1.0
+    perm = rng.permutation(n)
+    return a[perm][:, perm], b[perm], c[:, perm], d, rng
+
+
+def test_delay_lines_are_copied_not_multiplied(runs):
+    a, b, c, d, rng = _delay_loop(4)
+    form = statespace._blocks(a, b, c, d, 64)
+    # 29 states copy another; the product multiplies the 2 inputs, the 5 other states and the 2 copied
+    # states that the others or the outputs read (the line's end and middle), not all 34
+    assert form.g == 5 and form.k == 2 + 5 + 2
+    u, x0 = rng.standard_normal((2, 20_000)), rng.standard_normal(a.shape[0])
+    assert _worst(simulate(a, b, c, d, u, x0), _recursion(a, b, c, d, u, x0)) <= RTOL
+    # the same system with its states in the reverse order, as a check of where each copy comes from
+    flip = np.arange(a.shape[0])[::-1]
+    af, bf, cf = a[flip][:, flip], b[flip], c[:, flip]
+    assert _worst(simulate(af, bf, cf, d, u, x0[flip]), _recursion(a, b, c, d, u, x0)) <= RTOL
+    assert len(runs) == 2  # one run of the recursion each
+
+
+def _cluster_system(seed: int):
+    """An 8-fold pole at 0.993 (a Q filter's cascade of first-order lags), driving a slow pole at 0.99989
+    and a lightly damped pair at radius 0.9995, in a dense random basis (11 states)."""
+    rng = np.random.default_rng(seed)
+    t = np.zeros((11, 11))
+    for i in range(8):
+        t[i, i] = 0.993
+        if i:
+            t[i, i - 1] = 0.007
+    t[8, 8], t[8, 7], t[9, 8] = 0.99989, 1.1e-4, 0.01
+    t[9:, 9:] = 0.9995 * np.array([[np.cos(0.003), -np.sin(0.003)], [np.sin(0.003), np.cos(0.003)]])
+    q = np.linalg.qr(rng.standard_normal((11, 11)))[0]
+    return q @ t @ q.T, q[:, :1].copy(), rng.standard_normal((1, 11)) @ q.T, np.array([[0.5]]), rng
+
+
+def test_repeated_poles_and_slow_modes_over_a_long_trial(runs):
+    a, b, c, d, rng = _cluster_system(7)
+    n = 100_000
+    u = np.where(np.arange(n) < n // 2, 1.0, -0.5) + 0.1 * rng.standard_normal(n)
+    x0 = rng.standard_normal(11)
+    assert _worst(simulate(a, b, c, d, u, x0), _recursion(a, b, c, d, u, x0)) <= RTOL
+    assert len(runs) == 1
+    # a model whose own step differs from the matrices by 1e-9 (as an interconnection's rounded products
+    # do, more): the result is the model's recursion, which the matrices' misses by far more than 1e-12
+    a_model = a * (1.0 + 1e-9 * rng.standard_normal(a.shape))
+
+    def step(x, w):
+        return a_model @ x + b @ w, c @ x + d @ w
+
+    want = _recursion(a_model, b, c, d, u[:20_000], x0)
+    assert _worst(_recursion(a, b, c, d, u[:20_000], x0), want) > 100 * RTOL
+    assert _worst(simulate(a, b, c, d, u[:20_000], x0, evaluate=step), want) <= RTOL
+    # the correction after the first run (block starts from the matrices) exceeds REFINE_RTOL of the states
+    # there: the recursion runs once more from the corrected starts
+    assert len(runs) == 1 + 2
+
+
+def test_the_model_step_runs_for_all_blocks_at_once(runs):
+    # b8 at 2 ms: 65 states, two delay lines of 22; 1e5 samples; the step is called for all blocks at
+    # once: L calls (L < sqrt(N)), the i-th with samples i, L + i, 2 L + i, ... (one per block), not with
+    # runs of consecutive samples
+    sys_ = _hard(0.002).loop("b8").G_f
+    a, b, c, d = (np.asarray(m, float) for m in (sys_.A, sys_.B, sys_.C, sys_.D))
+    assert a.shape == (65, 65)
+    u = _inputs(100_000, 0.002, 3)["noise"]
+    calls = []
+
+    def step(x, w):
+        calls.append(np.array(w[0]))
+        return a @ x + b @ w, c @ x + d @ w
+
+    want = _recursion(a, b, c, d, u)
+    assert _worst(simulate(a, b, c, d, u), want) <= RTOL
+    assert _worst(simulate(a, b, c, d, u, evaluate=step), want) <= RTOL
+    span = len(calls)
+    assert len(runs) == 2 and 1 < span <= np.sqrt(u.size)
+    np.testing.assert_array_equal(calls[0], u[::span])
+    np.testing.assert_array_equal(calls[-1][:-1], u[span - 1::span][:calls[-1].size - 1])
+
+
+def test_large_systems_with_delay_lines():
     sys_ = HARD_1MS.loop("b8").G_d  # 109 states: two delay lines of 44
-    assert sys_.nstates > DENSE_MAX_STATES
+    assert sys_.nstates == 109
     u = _inputs(3000, 0.001)["noise"]
-    assert _worst(simulate_map(sys_, u), _recursion(sys_.A, sys_.B, sys_.C, sys_.D, u)[0]) <= 1e-15
+    assert _worst(simulate_map(sys_, u), _recursion(sys_.A, sys_.B, sys_.C, sys_.D, u)[0]) <= RTOL
 
 
 def test_initial_state_several_inputs_and_outputs():

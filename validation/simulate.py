@@ -20,16 +20,16 @@ With position-sensor noise ``n`` the controller and the DOB see the measured pos
 true and the measured signals, and its RMSE is that of the true error.
 
 Two ways to run a trial, the same result to rounding (1e-15 to 1e-14 of each signal's peak; up
-to 4e-13 for ``d_hat``, a small difference of large signals, whose own rounding in either way is
+to 8e-13 for ``d_hat``, a small difference of large signals, whose own rounding in either way is
 that large; held to 1e-12 by tests/test_statespace.py on the built-in fleet and on 1 ms,
 ``q_order`` 8 loops):
 
 * default: the closed loop is assembled from the plant's state-space matrices and the
   controller's own equations in matrix form (:meth:`OuterLoopController.state_space`, never
   :mod:`ilcdob.loop`'s interconnection), inputs ``(r, d, d_f, a_ff, n)``, and the trial is
-  simulated at once in compiled code (:func:`ilcdob.statespace.simulate`; its refinement
-  evaluates the blocks' own equations, :meth:`LawStateSpace.evaluate`, so that the result is
-  that of the blocks stepped, not of the rounded products in the assembled matrices);
+  simulated at once in compiled code (:func:`ilcdob.statespace.simulate`; it steps the blocks'
+  own equations, :meth:`LawStateSpace.evaluate`, for all blocks of the trial at once, so that the
+  result is that of the blocks stepped, not of the rounded products in the assembled matrices);
 * ``stepped=True``: the plant and the controller object stepped sample by sample in Python,
   exactly as a flight computer calls it (10 to 30 times slower; what the default is tested
   against).
