@@ -227,8 +227,9 @@ class RobustSetOptions:
     margin : float
         Stability margin ``m`` in [0, 1) of system j-1's true loop, ``|1 + T0 Delta| >= m``
         (its true ``D`` at least ``m`` times its model's), assumed only at frequencies where
-        ``W |T0| > 1 - m`` (:func:`uncertainty_cones`); 0 keeps the whole disc everywhere, which
-        forbids learning (``F = 0``) wherever the disc reaches the stability boundary.
+        ``W |T0| > 1 - m`` (:func:`uncertainty_cones`); 0 keeps the whole disc everywhere: where the
+        disc then reaches the stability boundary (``W |T0| >= 1``) no FIR has a finite worst case
+        (it would have to vanish on a band) and :func:`design_robust_set` refuses with a ``SpecError``.
     tol : float
         Verification tolerance (in [0, 0.01]): the worst case on the verification grid may exceed
         the imposed rho by this much before the exchange step adds frequencies; where the bound
@@ -1034,6 +1035,9 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         ``options.relax`` is False and ``options.rho`` cannot be guaranteed; carries ``rho_best``.
     RobustSetSolverError
         The SOCP solver failed.
+    SpecError
+        ``margin = 0`` over the disc (``structure`` None) where the disc reaches system j-1's stability
+        boundary: no FIR has a finite worst case there.
     """
     o = options or RobustSetOptions()
     lf = closed_form_filters(source, target)
@@ -1070,6 +1074,15 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     wv = o.verify_grid(ts)
     rows_v = _set_rows(source, wv, w_bound, bound, structure, o.margin)
     excluded_v = rows_v[4]
+    if structure is None and not np.all(rows_v[1] > 0):
+        # margin 0 keeps the whole disc, and where it reaches the stability boundary (W |T0| >= 1) its image is
+        # unbounded: only F = 0 there keeps the worst case finite, and a FIR vanishing on a band vanishes everywhere
+        reach = mask_intervals(wv, ~(rows_v[1] > 0))
+        raise SpecError(f"`margin`: got {o.margin!r}; over the whole disc |Delta| <= W system {source.name}'s "
+                        f"loop reaches its stability boundary (W |T0| >= 1 at {reach[0][0]:.3g}-{reach[-1][1]:.3g} "
+                        "rad/s), where no learning filter has a finite worst case. Expected a margin in (0, 1) "
+                        "(default 0.5: the guarantee then covers the plants keeping it), a smaller bound, or "
+                        "`delta_set = \"structured\"`")
     described = "disc |Delta| <= W" if structure is None else structure.describe()
 
     def phi_v_at(h: np.ndarray) -> np.ndarray:  # F on the verification grid

@@ -246,3 +246,13 @@ def test_fir_response_by_horner_matches_the_taps():
     w = RobustSetOptions().verify_grid(0.02)
     np.testing.assert_allclose(_fir_response(h, w, 0.02, 150), FIRFilter(h, 150, 0.02).freqresp(w), rtol=0,
                                atol=1e-12 * np.abs(h).sum())
+
+
+def test_disc_without_margin_reaching_the_stability_boundary_is_refused(fleet):
+    """``delta_set="disc"``, ``margin=0`` at |Delta| <= 0.5 from UAV1: the disc reaches its loop's stability
+    boundary (W |T0| >= 1 near 2.5-3.2 rad/s), where no FIR has a finite worst case; the design refuses with a
+    SpecError naming the option (exit 2 from the CLI), where it ended in a solver error (worst case nan)."""
+    ds = fleet_delta_sets(fleet, ["UAV1"], bound=0.5)["UAV1"]
+    opts = RobustSetOptions(delta_set="disc", margin=0.0, finite_trial_s=0.0, **FAST)
+    with pytest.raises(SpecError, match=r"`margin`: got 0\.0.*stability boundary.*Expected a margin in \(0, 1\)"):
+        design_robust_set(fleet.loop("UAV1"), fleet.loop("UAV2"), ds.w, ds.bound, opts)
