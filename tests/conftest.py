@@ -98,3 +98,35 @@ def unequal_fleet() -> ilcdob.Fleet:
 def feedforward_fleet() -> ilcdob.Fleet:
     """Three unequal plants at Ts = 0.02 s with mixed acceleration feed-forward (:data:`FEEDFORWARD_FLEET`)."""
     return ilcdob.fleet.fleet_from_dict(FEEDFORWARD_FLEET, source="feedforward_fleet")
+
+
+#: The rotorpy vehicles identified by :func:`rotorpy_identified`, their sample time and sensor noise.
+ROTORPY_NAMES = ("crazyflie", "hummingbird")
+ROTORPY_TS = 0.01
+ROTORPY_NOISE_STD = 5e-4
+
+
+def make_rotorpy(name: str, command, wind, seed: int):
+    """A fresh rotorpy vehicle at :data:`ROTORPY_TS` with 0.5 mm sensor noise
+    (:data:`ilcdob.validation.vehicle_chain.MakeVehicle`)."""
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
+
+    return RotorpyVehicle(name, ROTORPY_TS, command_disturbance=command, wind=wind, noise_std=ROTORPY_NOISE_STD,
+                          seed=seed)
+
+
+@pytest.fixture(scope="session")
+def rotorpy_identified():
+    """The crazyflie and the hummingbird identified from their own flights
+    (:func:`ilcdob.validation.vehicle_chain.identify_vehicles`: two 20 s closed-loop chirp flights each, the
+    structure with the best held-out fit), the paper's PID and a DOB(3, 0.2) on both: ``(fleet, fits)``.
+
+    Flown once per session for test_vehicle_chain and test_vehicle_interface (about 12 s of CPU): the
+    flights are repeatable (seeded sensor noise; rotorpy's motor noise is zero in these parameter sets), so
+    every module that identified the pair itself got the same fleet."""
+    pytest.importorskip("rotorpy")
+    from ilcdob.validation.vehicle_chain import identify_vehicles
+
+    names = list(ROTORPY_NAMES)
+    return identify_vehicles(make_rotorpy, names, {n: ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05) for n in names},
+                             {n: ilcdob.DOBSpec(3, 0.2) for n in names}, ROTORPY_TS)

@@ -11,25 +11,20 @@ import pytest
 import ilcdob
 from ilcdob.validation.scenarios import scenario
 
+from conftest import ROTORPY_NAMES, ROTORPY_TS, make_rotorpy
+
 pytest.importorskip("rotorpy")
 
-TS = 0.01
-NAMES = ["crazyflie", "hummingbird"]
-
-
-def _make(name, command, wind, seed):
-    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
-
-    return RotorpyVehicle(name, TS, command_disturbance=command, wind=wind, noise_std=5e-4, seed=seed)
+TS = ROTORPY_TS
+NAMES = list(ROTORPY_NAMES)
+_make = make_rotorpy  # 0.5 mm sensor noise, seeded
 
 
 @pytest.fixture(scope="module")
-def identified():
-    from ilcdob.validation.vehicle_chain import identify_vehicles
-
-    pid = {n: ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05) for n in NAMES}
-    dob = {n: ilcdob.DOBSpec(3, 0.2) for n in NAMES}
-    return identify_vehicles(_make, NAMES, pid, dob, TS)
+def identified(rotorpy_identified):
+    """The crazyflie and the hummingbird identified from their flights with the paper's PID and a DOB(3, 0.2)
+    (tests/conftest.py: flown once per session, test_vehicle_interface uses the same fleet)."""
+    return rotorpy_identified
 
 
 def test_the_structure_is_chosen_from_the_flights(identified):

@@ -12,8 +12,10 @@ import ilcdob
 from ilcdob.errors import SpecError
 from ilcdob.vehicles.interface import Vehicle, fly_vehicle
 
+from conftest import ROTORPY_TS
+
 FLEET = ilcdob.default_fleet()
-TS_ROTORPY = 0.01
+TS_ROTORPY = ROTORPY_TS  # the identified fleet's (tests/conftest.py)
 
 
 class _LinearVehicle:
@@ -141,21 +143,12 @@ def test_rotorpy_vehicle_refuses_bad_input():
 
 
 @pytest.fixture(scope="module")
-def identified_rotorpy():
+def identified_rotorpy(rotorpy_identified):
     """The crazyflie and the hummingbird identified from their own flights
     (:func:`ilcdob.validation.vehicle_chain.identify_vehicles`: 20 s closed-loop chirp flights, the structure
-    with the best held-out fit, one integrator and a drag pole here); returns the fleet of the fits and
-    their held-out fits (%)."""
-    pytest.importorskip("rotorpy")
-    from ilcdob.validation.vehicle_chain import identify_vehicles
-    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
-
-    names = ["crazyflie", "hummingbird"]
-    fleet, fits = identify_vehicles(
-        lambda name, command, wind, seed: RotorpyVehicle(name, TS_ROTORPY, command_disturbance=command, wind=wind,
-                                                         noise_std=5e-4, seed=seed),
-        names, {n: ilcdob.PIDSpec(2.5, 0.3, 2.2, 0.05) for n in names}, {n: ilcdob.DOBSpec(3, 0.2) for n in names},
-        TS_ROTORPY)
+    with the best held-out fit, one integrator and a drag pole here; flown once per session,
+    tests/conftest.py); returns the fleet of the fits and their held-out fits (%)."""
+    fleet, fits = rotorpy_identified
     return fleet, {n: f.fit for n, f in fits.items()}
 
 
@@ -199,9 +192,12 @@ def test_wind_through_the_drag_is_learned_through_the_drag_ratio(identified_roto
     fleet, _ = identified_rotorpy
     n = int(20.0 / TS_ROTORPY)
     wind = lambda t: np.array([2.0 * np.sin(0.9425 * t), 0.0, 0.0])  # noqa: E731
+    # each vehicle's DOB-only flight in the wind, flown once: the source's trial of one direction is the
+    # target's DOB-only flight of the other (a flight is repeatable: seeded noise, rotorpy's motor noise zero)
+    dob_flights = {name: _fly_fleet(fleet, name, n, wind=wind) for name in ("crazyflie", "hummingbird")}
     for src, tgt in (("crazyflie", "hummingbird"), ("hummingbird", "crazyflie")):
-        e_src = _fly_fleet(fleet, src, n, wind=wind).e_meas[:, 0]
-        dob_only = _fly_fleet(fleet, tgt, n, wind=wind).rmse(0)
+        e_src = dob_flights[src].e_meas[:, 0]
+        dob_only = dob_flights[tgt].rmse(0)
         ratio = {}
         for path in ("command", "wind"):
             d_f = design_pair(fleet, src, tgt, "closed-form", disturbance=path).learning(e_src, np.zeros(n)).d_f

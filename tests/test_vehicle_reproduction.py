@@ -5,6 +5,7 @@ report against the flights it holds; the full run (slow) checks the acceptance f
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import replace
 
 import numpy as np
@@ -19,10 +20,12 @@ pytest.importorskip("rotorpy")
 @pytest.fixture(scope="module")
 def short():
     """Hover and diamond, 10 s each, one learning iteration, crazyflie and PX4 (with rotor drag), the paper's
-    disturbance and Dryden wind."""
+    disturbance and Dryden wind; the four scenario x disturbance jobs flown on two processes where two cores are
+    usable (the test run leaves its second core idle; the flights are the same on one process or two)."""
     from ilcdob.validation.vehicle_reproduction import VehicleSettings, reproduce_vehicles
 
-    settings = VehicleSettings(vehicles=("crazyflie", "px4"), disturbances=("dryden",))
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    settings = VehicleSettings(vehicles=("crazyflie", "px4"), disturbances=("dryden",), workers=min(2, usable))
     seen = []
     res = reproduce_vehicles(iterations=1, settings=settings, progress=lambda *a: seen.append(a),
                              scenarios=[replace(scenario(i), duration=10.0) for i in (1, 4)])
