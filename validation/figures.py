@@ -602,7 +602,8 @@ class FigureRenderer:
     flown), in workers forked then, which see the caller's objects as they are at that moment;
     :meth:`finish` renders the rest of a content map and returns it with every figure as PNG
     bytes. While the caller works, the submitted figures use one worker fewer than
-    ``workers`` (the caller's core); :meth:`finish` uses all. With one worker (one usable core,
+    ``workers`` (the caller's core); :meth:`finish` uses all, and renders the submitted figures
+    no worker has started yet with the rest, as one batch (a fork per worker, not per batch). With one worker (one usable core,
     not Linux) everything is rendered in this process by :meth:`finish`. Use as a context
     manager: leaving it with an exception stops the workers (module docstring, "Rendering").
 
@@ -671,7 +672,14 @@ class FigureRenderer:
         """
         rest = {name: c for name, c in content.items() if _is_figure(c) and name not in self._content}
         if self.workers > 1:
-            self.submit(rest)
+            # the batches no worker has started join the rest: one batch, taken by every worker in turn,
+            # costs a fork per worker instead of one per figure; the rest first (a run's summary figures,
+            # the largest, are left for the end: started first, the workers end closer together)
+            waiting = [name for b in self._batches if b.counter is None for name in b.names]
+            self._batches = [b for b in self._batches if b.counter is not None]
+            self._content.update(rest)
+            if waiting or rest:
+                self._batches.append(_Batch(list(rest) + waiting))
             while self._running or self._wanted() is not None:
                 self._start(self.workers)
                 self._collect(block=True)
