@@ -107,3 +107,65 @@ def test_compare_refuses_the_flag_without_fir_among_the_methods(tmp_path, capsys
     assert err.startswith("ilcdob: error: `--fir-unattainable` 'no-harm': none of the methods closed-form, robust "
                           "uses it, only fir does"), err
     assert out == "" and not (tmp_path / "c").exists()
+
+
+#: Two third-order plants (the built-in UAV2 and UAV3 models) with a stated bound of 0.6: the FIR's sampled models
+#: disagree too much between about 2 and 7 rad/s for any filter to keep |Te1| <= 0.9 there.
+LEARN_FLEET = """sample_time = 0.02
+[[system]]
+name = "A"
+plant = { num = [9.957850872], den = [1, 9.914970966, 0, 0] }
+controller = { kp = 1.2, ki = 0.12, kd = 1.53, derivative_filter = 0.05 }
+dob = { q_order = 3, q_time_constant = 0.15 }
+uncertainty = { bound = 0.6 }
+
+[[system]]
+name = "B"
+plant = { num = [7.442384984], den = [1, 7.360005403, 0, 0] }
+controller = { kp = 1.9, ki = 0.19, kd = 1.93, derivative_filter = 0.05 }
+dob = { q_order = 3, q_time_constant = 0.15 }
+uncertainty = { bound = 0.6 }
+"""
+
+
+@pytest.fixture
+def learn_inputs(tmp_path):
+    """The fleet above and a 500-sample trial of A (error 0.01 sin t m, Ts 0.02 s)."""
+    import numpy as np
+
+    (tmp_path / "fleet.toml").write_text(LEARN_FLEET, encoding="utf-8")
+    t = np.arange(500) * 0.02
+    rows = "".join(f"{t[k]:.10g},{0.01 * np.sin(t[k]):.10g}\n" for k in range(t.size))
+    (tmp_path / "trial.csv").write_text("# units: time=s, error=m\ntime,error\n" + rows, encoding="utf-8")
+    return ["learn", str(tmp_path / "trial.csv"), "--fleet", str(tmp_path / "fleet.toml"), "--from", "A", "--to", "B",
+            "--error", "error"]
+
+
+@pytest.mark.parametrize("policy", ["refuse", "no-harm"])
+def test_learn_designs_the_fir_with_the_policy(learn_inputs, tmp_path, capsys, policy):
+    """``learn --method fir`` designs here: ``refuse`` stops (exit 2, bands named, nothing written), ``no-harm``
+    writes the signal and warns."""
+    rc = main([*learn_inputs, "--method", "fir", "--fir-unattainable", policy, "--out", str(tmp_path / "l")])
+    out, err = capsys.readouterr()
+    if policy == "refuse":
+        assert rc == 2, err[-3000:]
+        assert "not met by any filter" in err and BAND.search(err), err[-3000:]
+        assert not (tmp_path / "l").exists()
+    else:
+        assert rc == 0, err[-3000:]
+        assert "given up at" in err and json.loads(out)["filters"] == "designed here (fir)", err[-3000:]
+
+
+@pytest.mark.parametrize("design, words", [
+    (False, "--method closed-form does not use it, only fir does"),
+    (True, "--fir-unattainable would be ignored"),
+])
+def test_learn_refuses_the_flag_where_no_fir_is_designed(learn_inputs, tmp_path, capsys, design, words):
+    """With a design folder (its filters are fixed) or another method, the flag would change nothing: refused."""
+    trial = learn_inputs[:2] + ["--error", "error"]
+    args = [*trial, "--design", str(tmp_path / "d")] if design else [*learn_inputs, "--method", "closed-form"]
+    rc = main(["--quiet", *args, "--fir-unattainable", "refuse", "--out", str(tmp_path / "l")])
+    out, err = capsys.readouterr()
+    assert rc == 2, err[-3000:]
+    assert words in err, err
+    assert out == "" and not (tmp_path / "l").exists()

@@ -48,7 +48,7 @@ _EXAMPLES = {
 MAX_STARTS = 20
 #: Most Levenberg-Marquardt iterations per start of ``identify``.
 MAX_LM_ITERATIONS = 10_000
-#: Choices of ``design`` and ``compare --fir-unattainable``: ``ilcdob.design.fir.UNATTAINABLE`` (not imported here, so that
+#: Choices of ``design``, ``compare`` and ``learn --fir-unattainable``: ``ilcdob.design.fir.UNATTAINABLE`` (not imported here, so that
 #: ``--help`` stays fast; a test keeps the two equal).
 FIR_UNATTAINABLE = ("no-harm", "refuse")
 
@@ -295,6 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--design", default=None, help="a folder written by `ilcdob design` whose filters run (default: "
                                                   "design them here from the fleet)")
     p.add_argument("--method", default="closed-form", help="without --design: closed-form or fir")
+    p.add_argument("--fir-unattainable", choices=FIR_UNATTAINABLE, default=None,
+                   help="--method fir without --design: where no filter meets |Te1| <= 0.9 for every sampled model, "
+                        "keep only the no-harm promise there (default: no-harm), or refuse (exit 2, bands named)")
     p.add_argument("--error", default=None, help="tracking error column, m: COLUMN, TOPIC.FIELD (ULog) or "
                                                  "MESSAGE.FIELD (DataFlash)")
     p.add_argument("--reference", default=None, help="instead of --error: reference position, m (same forms)")

@@ -790,7 +790,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                     target: str | None = None, fleet: str | Path | None = None, design: str | Path | None = None,
                     method: str = "closed-form", bandwidth: object = "auto", on_limit: str = "clip",
                     overwrite: bool = False, argv: Sequence[str] | None = None,
-                    axis: str | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+                    axis: str | None = None, fir_unattainable: str | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """The next vehicle's learning signal from a recorded trial of the previous one (the paper's law).
 
     Computed from the filters' coefficients exactly as the emitted C function ``<prefix>learn``
@@ -833,6 +833,9 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         Command line, recorded in ``manifest.json``.
     axis : {"x", "y", "z"}, optional
         The axis learned (default x; with ``design``: checked against its filters.json).
+    fir_unattainable : {"no-harm", "refuse"}, optional
+        ``method="fir"`` without ``design``: :attr:`ilcdob.design.fir.FIROptions.unattainable` (refused with
+        ``design`` or another method).
 
     Returns
     -------
@@ -851,7 +854,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     digest = None
     if design is not None:
         ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != "closed-form"),
-                                            ("--bandwidth", bandwidth != "auto")) if given]
+                                            ("--bandwidth", bandwidth != "auto"),
+                                            ("--fir-unattainable", fir_unattainable is not None)) if given]
         if ignored:
             raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
                             "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
@@ -873,12 +877,17 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         if source is None or target is None:
             raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
                             "(or give --design FOLDER)")
+        from ilcdob.design.fir import UNATTAINABLE, FIROptions
         from ilcdob.design.pair import design_pair, design_with_band
 
+        _refuse_unused(method, {"--fir-unattainable": fir_unattainable})
+        if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
+            raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)}")
         flt, digest = fleet_and_hash(fleet, axis or "x")
         if abs(data.ts - flt.sample_time) > 1e-9:
             raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
-        made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit)
+        made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit,
+                           fir=None if fir_unattainable is None else FIROptions(unattainable=fir_unattainable))
         if made.choose is not None:
             made = design_with_band(made, made.band_for(e, df_prev))
         filters = {**made.filters, "axis": axis or "x"}
