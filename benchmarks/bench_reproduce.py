@@ -228,19 +228,15 @@ def main(argv: list[str] | None = None) -> None:
               f"CPU {cost['new'][1] / cost['baseline'][1]:.2f}x")
     print(f"   ({_load()})")
 
-    print(f"\n2. The report's Theorem check (two orders), CPU s, median of {args.repeat} interleaved runs")
-    times, same = bench_theorem(args.repeat)
-    for k, v in times.items():
-        print(f"   {k:<32} {v:7.3f}")
-    before, now = times.values()
-    print(f"   ratio now / before: {now / before:.3f}; the same theorem.json: {same}")
-
-    print(f"\n3. Building and rendering the 13 figures in one process, CPU s, median of {args.repeat} interleaved runs")
-    times, same = bench_render(args.repeat)
-    for k, v in times.items():
-        print(f"   {k:<32} {v:7.3f}")
-    before, now = times.values()
-    print(f"   ratio now / before: {now / before:.3f}; the same image (pixels): {same}")
+    for title, bench, same_what in (("2. The report's Theorem check (two orders)", bench_theorem, "theorem.json"),
+                                    ("3. Building and rendering the 13 figures in one process", bench_render,
+                                     "image (pixels)")):
+        print(f"\n{title}, CPU s, median of {args.repeat} interleaved runs")
+        times, same = bench(args.repeat)
+        for k, v in times.items():
+            print(f"   {k:<32} {v:7.3f}")
+        before, now = times.values()
+        print(f"   ratio now / before: {now / before:.3f}; the same {same_what}: {same}")
     print(f"   ({_load()})")
 
     if args.trial:

@@ -184,7 +184,7 @@ def _lag_blocks(model: PlantSpec, ts: float, tau: tuple) -> tuple:
 
 
 def bound_family(bound: float, w: np.ndarray, n_r: int = 21, n_tau: int = 30,
-                 source: LoopSystem | None = None, margin: float = 0.0) -> ValueSet:
+                 source: LoopSystem | None = None, margin: float = 0.0, t0: np.ndarray | None = None) -> ValueSet:
     """Values of the fleet-bound family (module docstring) on ``w``.
 
     Parameters
@@ -202,6 +202,8 @@ def bound_family(bound: float, w: np.ndarray, n_r: int = 21, n_tau: int = 30,
         ``Delta(jw)`` over ``|r| <= b``.
     margin : float
         With ``source``: the margin ``m`` of :func:`admissible_range`.
+    t0 : numpy.ndarray, optional
+        ``T0`` of ``source`` on ``w`` (:func:`complementary_sensitivity`), if known.
 
     Returns
     -------
@@ -209,7 +211,7 @@ def bound_family(bound: float, w: np.ndarray, n_r: int = 21, n_tau: int = 30,
         Two pieces: the gain errors ``r`` (one column) and the high-pass errors, the grid
         ``r x (h(tau_1), ..., h(tau_n))``, ``h = jw tau/(1 + jw tau)``, both refined twice.
     """
-    w, r, h, what, _ = _bound_grid(bound, w, n_r, n_tau, source, margin)
+    w, r, h, what, _ = _bound_grid(bound, w, n_r, n_tau, source, margin, t0)
     gain = np.broadcast_to(r[:, :, :1], (w.size, r.shape[1], 1)).astype(complex)
     return ValueSet(w, (gain, r[:, :, 1:] * h[:, None, :]), what)
 
@@ -434,9 +436,7 @@ class BoundFamily:
         -------
         ValueSet
         """
-        w, r, h, what, _ = _bound_grid(self.bound, w, self.n_r, self.n_tau, source, margin, t0)
-        gain = np.broadcast_to(r[:, :, :1], (w.size, r.shape[1], 1)).astype(complex)
-        return ValueSet(w, (gain, r[:, :, 1:] * h[:, None, :]), what)
+        return bound_family(self.bound, w, self.n_r, self.n_tau, source, margin, t0)
 
     def boundary(self, source: LoopSystem, w: np.ndarray, margin: float = 0.0,
                  t0: np.ndarray | None = None) -> Boundary:
