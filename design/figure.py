@@ -37,7 +37,7 @@ from .closed_form import LearningFilters, closed_form_filters
 
 __all__ = ["BodeCurve", "COINCIDE_RTOL", "TE_GAIN_ERROR", "frequency_grid", "magnitude_db", "wrapped_phase",
            "coinciding", "group_label", "draw_bode", "finish_bode_axes", "mark_band", "with_gain_error",
-           "loop_maps", "te_loops", "pair_bode_figure", "minor_log_grid"]
+           "loop_maps", "te_loops", "pair_bode_figure", "minor_log_grid", "decade_label", "TITLE_Y"]
 
 #: Relative tolerance, at every frequency, under which two frequency responses coincide on a Bode
 #: plot (drawn once): 1 %, i.e. 0.09 dB and 0.6 degrees, below a pixel of the figures. (Omega of
@@ -223,6 +223,16 @@ def draw_bode(mag_ax: Any, phase_ax: Any, w: np.ndarray, curves: Sequence[BodeCu
     return groups
 
 
+#: Height of axes titles, in axes coordinates (1: the top edge; matplotlib's title pad above it). Given
+#: to every ``set_title``, it switches off matplotlib's automatic title placement, which looks for
+#: tick labels and an x label above the axes and for a y offset text in the title's way, for every
+#: title at every layout pass and draw: a tenth of the time of a reproduction's figures. Our axes
+#: draw nothing above them but a y offset text at the left corner, clear of a centred title, so the
+#: titles land where the automatic placement puts them, pixel for pixel (docs/performance.md,
+#: "Figures").
+TITLE_Y = 1.0
+
+
 def _min_span(ax: Any, span: float) -> None:
     """Keep matplotlib from zooming into rounding noise (L2 = 1 to 1e-8 with exact models)."""
     lo, hi = ax.get_ylim()
@@ -246,7 +256,7 @@ def finish_bode_axes(mag_ax: Any, phase_ax: Any, title: str, ts: float, legend: 
         Add the magnitude axes' legend.
     """
     _min_span(mag_ax, 10.0)
-    mag_ax.set_title(title, fontsize=10)
+    mag_ax.set_title(title, fontsize=10, y=TITLE_Y)
     mag_ax.set_ylabel("magnitude (dB)")
     phase_ax.set_ylabel("phase (deg)")
     phase_ax.set_xlabel("frequency (rad/s)")
@@ -259,8 +269,36 @@ def finish_bode_axes(mag_ax: Any, phase_ax: Any, title: str, ts: float, legend: 
         mag_ax.legend(fontsize=7)
 
 
+#: Unicode superscripts of an exponent's characters, for :func:`decade_label`.
+_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
+
+
+def decade_label(x: float, pos: int | None = None) -> str:
+    """Tick label of a power of ten as plain text, ``10`` and its exponent in superscripts (``10⁻²``).
+
+    The label matplotlib's log axes draw as mathtext (``$\\mathdefault{10^{-2}}$``), without mathtext:
+    see :func:`minor_log_grid`. Other values get no label (matplotlib labels only decades on long views).
+
+    Parameters
+    ----------
+    x : float
+        Tick position.
+    pos : int, optional
+        Tick index (unused; the signature of :class:`matplotlib.ticker.FuncFormatter`).
+
+    Returns
+    -------
+    str
+    """
+    if not x > 0 or not np.isfinite(x):
+        return ""
+    e = round(float(np.log10(x)))
+    return "10" + str(e).translate(_SUPERSCRIPT) if np.isclose(x, 10.0 ** e, rtol=1e-9, atol=0) else ""
+
+
 def minor_log_grid(fig: Figure, alpha: float = 0.3, min_decades: float = 2.0) -> Figure:
-    """Draw the minor grid of a figure's log axes as one line collection per axis, without minor ticks.
+    """Draw the minor grid of a figure's log axes as one line collection per axis, without minor ticks,
+    and label their decades in plain text.
 
     matplotlib draws each minor grid line as part of a tick object (two marks, a grid line, two
     labels), built and laid out for every minor position of every axes: a six-panel Bode figure
@@ -270,6 +308,10 @@ def minor_log_grid(fig: Figure, alpha: float = 0.3, min_decades: float = 2.0) ->
     locator is cleared: the grid looks the same, the small minor tick marks are gone. Only views
     of at least ``min_decades`` decades are changed (matplotlib labels no minor tick there); call it
     once the figure's data and limits are final (its limits are read, not changed).
+
+    On the same axes, matplotlib's default decade labels (mathtext, ``10^{-2}``) are replaced by
+    :func:`decade_label` (``10⁻²``, the same text in superscript characters): mathtext costs every
+    process that draws a figure its parser and fonts, and every label a parse.
 
     Parameters
     ----------
@@ -287,7 +329,7 @@ def minor_log_grid(fig: Figure, alpha: float = 0.3, min_decades: float = 2.0) ->
     """
     import matplotlib as mpl
     from matplotlib.collections import LineCollection
-    from matplotlib.ticker import NullLocator
+    from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation, NullLocator
 
     todo = []
     for ax in fig.axes:  # every position first: axes sharing an axis share its locator
@@ -301,6 +343,8 @@ def minor_log_grid(fig: Figure, alpha: float = 0.3, min_decades: float = 2.0) ->
             todo.append((ax, axis, pos, vertical))
     for ax, axis, pos, vertical in todo:
         axis.set_minor_locator(NullLocator())
+        if type(axis.get_major_formatter()) is LogFormatterSciNotation:  # matplotlib's default, not one set
+            axis.set_major_formatter(FuncFormatter(decade_label))
         segments = [[(p, 0), (p, 1)] if vertical else [(0, p), (1, p)] for p in pos]
         transform = ax.get_xaxis_transform(which="grid") if vertical else ax.get_yaxis_transform(which="grid")
         style = {key: mpl.rcParams[f"grid.minor.{key}"] or mpl.rcParams[f"grid.{key}"]  # unset: the grid's

@@ -432,6 +432,35 @@ def test_figure_png_draws_once_the_bytes_of_savefig(run, name, monkeypatch):
     assert len(calls) == 2
 
 
+@pytest.mark.parametrize("which, name", [("one_row_coincides", "error_s4.png"), ("run", "disturbance_s4.png"),
+                                         ("run", "rmse_bars.png"), ("run", "bode_te.png"),
+                                         ("run", "identified_models.png")])
+def test_titles_stand_where_matplotlibs_automatic_placement_puts_them(which, name, run, distinct, monkeypatch):
+    """Titles are given their height (TITLE_Y), which spares matplotlib's automatic placement; the image is
+    the one automatic placement draws (TITLE_Y None: matplotlib places them), byte for byte. In
+    ``one_row_coincides`` only the second row's iterations coincide: its note is the title of its right
+    panel, in the row below the first row's x axis."""
+    from ilcdob.design import figure as design_figure
+    from ilcdob.validation import figures
+    from ilcdob.validation.figures import figure_png
+
+    res = run[0]
+    if which == "one_row_coincides":
+        second = res.scenarios[0].order[1]
+        systems = {k: res.scenarios[0].systems[k] if k == second else s
+                   for k, s in distinct[0].scenarios[0].systems.items()}
+        res = replace(res, scenarios=[replace(res.scenarios[0], systems=systems)])
+    fixed = _one(res, name)
+    titled = [ax for ax in fixed.axes if ax.get_title()]
+    assert all(ax.title.get_position()[1] == 1.0 for ax in titled)
+    if which == "one_row_coincides":
+        assert len(titled) == 3  # the two panels' titles, and the note above row 2
+    got = figure_png(fixed)
+    for module in (figures, design_figure):
+        monkeypatch.setattr(module, "TITLE_Y", None)
+    assert figure_png(_one(res, name)) == got
+
+
 def test_render_figures_in_workers_keeps_the_bytes_and_the_order(run):
     import multiprocessing
 
@@ -537,3 +566,47 @@ def test_minor_log_grid_draws_matplotlibs_minor_positions_as_one_collection():
         np.testing.assert_allclose(got, want, rtol=1e-12)
         assert lines[0].get_alpha() == 0.3
     np.testing.assert_allclose(sorted(axes[2].yaxis.get_minorticklocs()), expect_y, rtol=1e-12)
+
+
+def test_long_log_views_label_their_decades_as_matplotlib_does_without_mathtext():
+    """minor_log_grid relabels a long log view's decades in plain text: the labels matplotlib draws as mathtext
+    (``$\\mathdefault{10^{-2}}$``, read from a twin figure), each written as 10 and its exponent in Unicode
+    superscripts; a short view keeps matplotlib's own labels, and a formatter set by the caller is kept."""
+    import re
+
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import FormatStrFormatter
+
+    from ilcdob.design.figure import minor_log_grid
+
+    sup = {"-": "\u207b", "0": "\u2070", "1": "\u00b9", "2": "\u00b2", "3": "\u00b3", "4": "\u2074",
+           "5": "\u2075", "6": "\u2076", "7": "\u2077", "8": "\u2078", "9": "\u2079"}
+
+    def build():
+        fig = Figure(figsize=(6, 5))
+        axes = fig.subplots(3, 1)
+        axes[0].loglog([2e-6, 3e3], [1e-12, 5e-3])   # nine and nine decades
+        axes[1].loglog([1.0, 30.0], [2.0, 50.0])     # short views
+        axes[2].semilogx([1e-3, 1e3], [0, 1])
+        axes[2].xaxis.set_major_formatter(FormatStrFormatter("%g"))  # the caller's: kept
+        FigureCanvasAgg(fig)
+        return fig, axes
+
+    def labels(ax):
+        return [[(t.get_position(), t.get_text()) for t in ticks if t.get_text()]
+                for ticks in (ax.get_xticklabels(), ax.get_yticklabels())]
+
+    ref, ref_axes = build()
+    ref.canvas.draw()
+    fig, axes = build()
+    minor_log_grid(fig)
+    fig.canvas.draw()
+    for axis_ref, axis_got in zip(labels(ref_axes[0]), labels(axes[0])):
+        assert len(axis_ref) >= 4
+        want = []
+        for pos, text in axis_ref:
+            exponent = re.fullmatch(r"\$\\mathdefault\{10\^\{(−?-?\d+)\}\}\$", text).group(1).replace("−", "-")
+            want.append((pos, "10" + "".join(sup[c] for c in exponent)))
+        assert axis_got == want
+    assert labels(axes[1]) == labels(ref_axes[1]) and labels(axes[2]) == labels(ref_axes[2])
+    assert "$" not in "".join(text for axis in labels(axes[0]) for _, text in axis)

@@ -252,6 +252,8 @@ class Comparison:
         """
         from matplotlib.figure import Figure  # matplotlib only when the figure is made
 
+        from ilcdob.design.figure import TITLE_Y
+
         fig = Figure(figsize=(8, 3.8), layout="constrained")
         ax = fig.subplots()
         first = True
@@ -271,7 +273,7 @@ class Comparison:
         ax.set_yscale("log")
         ax.set_ylabel("||e_j|| / ||e'_j||")
         ax.set_title(f"Scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law})",
-                     fontsize=10)
+                     fontsize=10, y=TITLE_Y)
         ax.grid(True, axis="y", which="both", alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
         return fig

@@ -21,9 +21,9 @@ end, is drawn there too).
 figures are laid out for PNG at 110 dpi, :data:`FIGURE_DPI`).
 
 Rendering. Drawing the figures as PNG costs more than building them and, for the linear plant,
-more than the simulations. :func:`figure_png` draws a figure once: it lays it out (a
-constrained layout at :data:`FIGURE_DPI`; a tight layout was done when the figure was built)
-and renders it with the layout engine removed, where ``savefig`` lays the figure out in a first
+more than the simulations. :func:`figure_png` draws a figure once: it lays it out (its
+constrained or tight layout engine, at :data:`FIGURE_DPI`, with the renderer that draws it, so
+that text is measured once) and renders it with the layout engine removed, where ``savefig`` lays the figure out in a first
 full draw (rendering disabled) and renders it in a second; the PNG bytes are the same.
 :class:`FigureRenderer` builds and renders figures (built ones, or :class:`PendingFigure` to be
 built where they are rendered) in parallel: on Linux in forked worker processes, which take
@@ -52,8 +52,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ilcdob.design import LearningFilters
-from ilcdob.design.figure import (TE_GAIN_ERROR, BodeCurve, draw_bode, finish_bode_axes, frequency_grid, loop_maps,
-                                  magnitude_db, minor_log_grid, with_gain_error)
+from ilcdob.design.figure import (TE_GAIN_ERROR, TITLE_Y, BodeCurve, draw_bode, finish_bode_axes, frequency_grid,
+                                  loop_maps, magnitude_db, minor_log_grid, with_gain_error)
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import freqresp
@@ -89,7 +89,7 @@ def _subplots(nrows: int, ncols: int, figsize: tuple[float, float], **kwargs) ->
 
 def _done(fig: Figure) -> Figure:
     minor_log_grid(fig)
-    fig.tight_layout()
+    fig.set_layout_engine("tight")  # laid out where it is drawn, at the resolution it is drawn
     return fig
 
 
@@ -115,11 +115,11 @@ def _rmse_bars(res: ReproductionResult) -> Figure:
                    label=lab, color=_trial_color(k, res.iterations))
         ax.set_yscale("log")
         ax.set_xticks(np.arange(len(names)), names)
-        ax.set_title(f"Scenario {sr.scenario.id}: {sr.scenario.title}", fontsize=9)
+        ax.set_title(f"Scenario {sr.scenario.id}: {sr.scenario.title}", fontsize=9, y=TITLE_Y)
         ax.set_ylabel("tracking RMSE (m)")
         ax.grid(True, axis="y", which="both", alpha=0.3)
     _legend_below(fig, *axes[0][0].get_legend_handles_labels(), ncol=len(labels))
-    return fig
+    return minor_log_grid(fig)
 
 
 #: Line styles of the learning iterations 1, 2, ... (cycled), widest first so that iterations
@@ -260,9 +260,9 @@ def _per_system(sr, iterations: int, title: str, panels: tuple[str, str], ylabel
                 if r == 0:
                     titles[1] += "\n" + note
                 else:
-                    row[1].set_title(note, fontsize=7)
+                    row[1].set_title(note, fontsize=7, y=TITLE_Y)
     for ax, panel in zip(axes[0], titles):
-        ax.set_title(panel, fontsize=9 if "\n" not in panel else 7)
+        ax.set_title(panel, fontsize=9 if "\n" not in panel else 7, y=TITLE_Y)
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     fig.suptitle(suptitle, fontsize=11)
@@ -380,9 +380,9 @@ def _identified_models(fleet: Fleet) -> Figure | None:
         axes[0].fill_between(w, mag + magnitude_db(np.maximum(1 - bound, 1e-6)), mag + magnitude_db(1 + bound),
                              color=c, alpha=0.25)
         axes[1].loglog(w, bound, color=c, label=name)
-    axes[0].set_title("identified plants with 3-sigma uncertainty band")
+    axes[0].set_title("identified plants with 3-sigma uncertainty band", y=TITLE_Y)
     axes[0].set_ylabel("magnitude (dB)")
-    axes[1].set_title("|Delta(jw)|: 3-sigma multiplicative uncertainty")
+    axes[1].set_title("|Delta(jw)|: 3-sigma multiplicative uncertainty", y=TITLE_Y)
     for ax in axes:
         ax.set_xlabel("frequency (rad/s)")
         ax.grid(True, which="both", alpha=0.3)  # minor lines of long log views: minor_log_grid (_done)
@@ -397,7 +397,7 @@ class PendingFigure:
     Attributes
     ----------
     make : callable
-        ``make()`` builds the figure (a laid-out :class:`~matplotlib.figure.Figure`).
+        ``make()`` builds the figure (a :class:`~matplotlib.figure.Figure` with its layout engine).
     """
 
     make: Callable[[], Figure]
@@ -487,7 +487,8 @@ def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict
         ``rmse_bars.png``, ``error_s<N>.png`` and ``disturbance_s<N>.png`` per scenario
         (:func:`scenario_figures`), ``bode_loops.png``, ``identified_models.png`` (systems with
         an identified plant only), ``bode_learning.png`` and ``bode_te.png`` (when
-        ``res.filters`` holds pairs). Laid out; save each at :data:`FIGURE_DPI` (:func:`figure_png`).
+        ``res.filters`` holds pairs). Each lays itself out when drawn; save each at :data:`FIGURE_DPI`
+        (:func:`figure_png`).
     """
     makers: dict[str, Callable[[], Figure]] = {"rmse_bars.png": partial(_rmse_bars, res)}
     figs: dict[str, Figure | PendingFigure] = {}
@@ -512,7 +513,7 @@ def figure_png(fig: Figure) -> bytes:
     Parameters
     ----------
     fig : matplotlib.figure.Figure
-        A figure with a constrained layout, or laid out already (e.g. ``tight_layout``).
+        A figure with a layout engine (constrained or tight), or laid out already.
 
     Returns
     -------

@@ -955,18 +955,18 @@ def _theorem_figure(first: list[Any]) -> Any:
     """``theorem.png``: the paper's condition per source of the first order's checks."""
     from matplotlib.figure import Figure
 
-    from ilcdob.design.figure import minor_log_grid
+    from ilcdob.design.figure import TITLE_Y, minor_log_grid
 
     fig = Figure(figsize=(4.0 * len(first), 3.2))
     for ax, c in zip(fig.subplots(1, len(first), squeeze=False)[0], first):
         ax.loglog(c.w, c.delta, label="|Delta_(j-1)| (3 sigma)")
         ax.loglog(c.w, c.rhs, label="|1 + P C|_(j-1) / 2")
-        ax.set_title(f"source {c.source}", fontsize=9)
+        ax.set_title(f"source {c.source}", fontsize=9, y=TITLE_Y)
         ax.set_xlabel("frequency (rad/s)")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     minor_log_grid(fig)
-    fig.tight_layout()
+    fig.set_layout_engine("tight")
     return fig
 
 

@@ -182,6 +182,8 @@ class CampaignResult:
         sids = list(self.options.scenarios)
         from matplotlib.figure import Figure  # matplotlib only when the figure is made
 
+        from ilcdob.design.figure import TITLE_Y
+
         fig = Figure(figsize=(1.9 * len(methods) + 2.5, 4.2))
         ax = fig.subplots()
         width = 0.8 / len(sids)
@@ -209,9 +211,9 @@ class CampaignResult:
             ax.set_ylim(bottom=0.5 * floor)
         ax.set_ylabel("||e_j|| / ||e'_j||")
         ax.set_title(f"{self.options.samples} samples, true plants from {self.uncertainty} (box: quartiles, "
-                     "whiskers: range)", fontsize=9)
+                     "whiskers: range)", fontsize=9, y=TITLE_Y)
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-        fig.tight_layout()
+        fig.set_layout_engine("tight")
         return fig
 
     def files(self) -> dict[str, object]:
