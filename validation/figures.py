@@ -822,6 +822,7 @@ def _render_worker(content: Mapping[str, object], names: list[str], counter, con
     """A forked worker: render the next figure of ``names`` (shared ``counter``) until none is left,
     sending each to ``conn``; ``theirs``: the caller's ends of the pipes, closed here. It ends with
     ``os._exit``: nothing of the caller's state (buffered output, exit handlers) runs twice."""
+    import gc
     import signal
 
     try:
@@ -829,6 +830,9 @@ def _render_worker(content: Mapping[str, object], names: list[str], counter, con
         _die_with_parent(parent)
         for other in theirs:  # so that a send fails (and the worker ends) once the caller is gone
             other.close()
+        # one collection per figure instead of the collector's own runs while matplotlib builds thousands of
+        # artists: a figure is cycles of artists, all garbage once sent (the caller's objects are frozen)
+        gc.disable()
         while True:
             with counter.get_lock():
                 i = counter.value
@@ -846,6 +850,7 @@ def _render_worker(content: Mapping[str, object], names: list[str], counter, con
                     conn.send(("error", name, RuntimeError(f"{type(exc).__name__}: {exc}"), text))
                 return
             conn.send(("png", name, png))
+            gc.collect()
     except (BrokenPipeError, EOFError, OSError):
         return  # the caller is gone
     finally:
