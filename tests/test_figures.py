@@ -7,6 +7,7 @@ axes carry units, and no legend lies on the data."""
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import replace
 
 import control as ct
@@ -499,6 +500,39 @@ def test_submitted_figures_render_while_the_caller_goes_on(run):
     assert out["error_s4.png"] == _savefig_png(_one(res, "error_s4.png"))
     assert out["identified_models.png"] == _savefig_png(_one(res, "identified_models.png"))
     assert isinstance(out["README.md"], str) and not multiprocessing.active_children()
+
+
+def test_the_last_batch_starts_the_figures_with_most_axes_first(run, tmp_path, monkeypatch):
+    """finish renders the submitted figures no worker has started with the rest as one batch, ordered by
+    axes (most first, ties in the order given: the longest first, so that the workers end together); the
+    batch each forked worker took is recorded by the worker itself."""
+    from ilcdob.validation import figures
+    from ilcdob.validation.figures import FigureRenderer, PendingFigure
+
+    res = run[0]
+    pending = reproduction_figures(res, pending=True)
+    axes = {name: len(_one(res, name).axes) for name in pending}
+    assert all(p.axes == axes[name] for name, p in pending.items())  # each figure's count, as built
+    worker = figures._render_worker
+
+    def recording(content, names, *args):
+        (tmp_path / f"{os.getpid()}.txt").write_text("\n".join(names))
+        return worker(content, names, *args)
+
+    monkeypatch.setattr(figures, "_render_worker", recording)
+    small = PendingFigure(pending["rmse_bars.png"].make, axes=1)
+    with FigureRenderer(2) as renderer:
+        renderer.submit({"bode_loops.png": pending["bode_loops.png"]})  # started now (one worker)
+        renderer.submit({name: pending[name] for name in ("identified_models.png", "error_s4.png")})  # waits
+        out = renderer.finish({"small.png": small, "bode_te.png": pending["bode_te.png"],
+                               "disturbance_s4.png": pending["disturbance_s4.png"],
+                               **{name: pending[name] for name in ("bode_loops.png", "identified_models.png",
+                                                                   "error_s4.png")}})
+    batches = sorted(f.read_text().split("\n") for f in tmp_path.glob("*.txt"))
+    last = ["bode_te.png", "disturbance_s4.png", "error_s4.png", "identified_models.png", "small.png"]
+    assert batches == [["bode_loops.png"], last, last]  # one worker, then two on the last batch
+    assert axes["bode_te.png"] == axes["disturbance_s4.png"] == 6 > axes["identified_models.png"] == 2
+    assert all(isinstance(png, bytes) for png in out.values())
 
 
 def test_a_figure_that_fails_in_a_worker_fails_the_call_and_stops_the_workers(run):

@@ -398,9 +398,14 @@ class PendingFigure:
     ----------
     make : callable
         ``make()`` builds the figure (a :class:`~matplotlib.figure.Figure` with its layout engine).
+    axes : int
+        The axes the figure will have. Building and drawing a figure costs about in proportion to
+        its axes: :class:`FigureRenderer` starts the figures with more first, so that its workers end
+        together.
     """
 
     make: Callable[[], Figure]
+    axes: int = 1
 
     def build(self) -> Figure:
         """The figure, built now.
@@ -444,9 +449,10 @@ def scenario_figures(sr, iterations: int, pending: bool = False) -> dict[str, Fi
     -------
     dict of str to matplotlib.figure.Figure or PendingFigure
     """
-    makers = {f"{kind}_s{sr.scenario.id}.png": partial(_per_scenario, sr, iterations, kind)
-              for kind in ("error", "disturbance")}
-    return {name: PendingFigure(make) if pending else make() for name, make in makers.items()}
+    figs = {f"{kind}_s{sr.scenario.id}.png": PendingFigure(partial(_per_scenario, sr, iterations, kind),
+                                                            axes=2 * len(sr.order))
+            for kind in ("error", "disturbance")}
+    return _pending_or_built(figs, pending)
 
 
 def fleet_figures(fleet: Fleet, pending: bool = False) -> dict[str, Figure | PendingFigure]:
@@ -464,10 +470,10 @@ def fleet_figures(fleet: Fleet, pending: bool = False) -> dict[str, Figure | Pen
     dict of str to matplotlib.figure.Figure or PendingFigure
         ``bode_loops.png``, and ``identified_models.png`` when a system has an identified plant.
     """
-    makers: dict[str, Callable[[], Figure]] = {"bode_loops.png": partial(_bode_loops, fleet)}
+    figs = {"bode_loops.png": PendingFigure(partial(_bode_loops, fleet), axes=4)}
     if any(spec.identification is not None for spec in fleet.systems):  # the systems identified_bounds draws
-        makers["identified_models.png"] = partial(_identified_models, fleet)
-    return {name: PendingFigure(make) if pending else make() for name, make in makers.items()}
+        figs["identified_models.png"] = PendingFigure(partial(_identified_models, fleet), axes=2)
+    return _pending_or_built(figs, pending)
 
 
 def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict[str, Figure | PendingFigure]:
@@ -490,17 +496,18 @@ def reproduction_figures(res: ReproductionResult, pending: bool = False) -> dict
         ``res.filters`` holds pairs). Each lays itself out when drawn; save each at :data:`FIGURE_DPI`
         (:func:`figure_png`).
     """
-    makers: dict[str, Callable[[], Figure]] = {"rmse_bars.png": partial(_rmse_bars, res)}
-    figs: dict[str, Figure | PendingFigure] = {}
+    figs = {"rmse_bars.png": PendingFigure(partial(_rmse_bars, res), axes=len(res.scenarios))}
     for sr in res.scenarios:
-        makers.update({name: p.make for name, p in scenario_figures(sr, res.iterations, pending=True).items()})
-    makers.update({name: p.make for name, p in fleet_figures(res.fleet, pending=True).items()})
+        figs.update(scenario_figures(sr, res.iterations, pending=True))
+    figs.update(fleet_figures(res.fleet, pending=True))
     if res.filters:
-        makers["bode_learning.png"] = partial(_bode_learning, res.filters, res.fleet.sample_time)
-        makers["bode_te.png"] = partial(_bode_te, res.fleet, res.filters)
-    for name, make in makers.items():
-        figs[name] = PendingFigure(make) if pending else make()
-    return figs
+        figs["bode_learning.png"] = PendingFigure(partial(_bode_learning, res.filters, res.fleet.sample_time), axes=4)
+        figs["bode_te.png"] = PendingFigure(partial(_bode_te, res.fleet, res.filters), axes=6)
+    return _pending_or_built(figs, pending)
+
+
+def _pending_or_built(figs: dict[str, PendingFigure], pending: bool) -> dict[str, Figure | PendingFigure]:
+    return figs if pending else {name: p.make() for name, p in figs.items()}
 
 
 def figure_png(fig: Figure) -> bytes:
@@ -572,6 +579,11 @@ def _is_figure(content: object) -> bool:
     return isinstance(content, (Figure, PendingFigure))
 
 
+def _axes(content: object) -> int:
+    """Axes of a figure, built or pending (:attr:`PendingFigure.axes`)."""
+    return content.axes if isinstance(content, PendingFigure) else len(content.axes)
+
+
 def _figure_of(content: object) -> Figure:
     return content.build() if isinstance(content, PendingFigure) else content
 
@@ -604,8 +616,9 @@ class FigureRenderer:
     :meth:`finish` renders the rest of a content map and returns it with every figure as PNG
     bytes. While the caller works, the submitted figures use one worker fewer than
     ``workers`` (the caller's core); :meth:`finish` uses all, and renders the submitted figures
-    no worker has started yet with the rest, as one batch (a fork per worker, not per batch). With one worker (one usable core,
-    not Linux) everything is rendered in this process by :meth:`finish`. Use as a context
+    no worker has started yet with the rest, as one batch (a fork per worker, not per batch), the
+    figures with the most axes first (:attr:`PendingFigure.axes`). With one worker (one usable
+    core, not Linux) everything is rendered in this process by :meth:`finish`. Use as a context
     manager: leaving it with an exception stops the workers (module docstring, "Rendering").
 
     Parameters
@@ -674,13 +687,13 @@ class FigureRenderer:
         rest = {name: c for name, c in content.items() if _is_figure(c) and name not in self._content}
         if self.workers > 1:
             # the batches no worker has started join the rest: one batch, taken by every worker in turn,
-            # costs a fork per worker instead of one per figure; the rest first (a run's summary figures,
-            # the largest, are left for the end: started first, the workers end closer together)
+            # costs a fork per worker instead of one per figure; the figures with the most axes first (the
+            # longest first: the last ones taken are short, so the workers end closer together)
             waiting = [name for b in self._batches if b.counter is None for name in b.names]
             self._batches = [b for b in self._batches if b.counter is not None]
             self._content.update(rest)
             if waiting or rest:
-                self._batches.append(_Batch(list(rest) + waiting))
+                self._batches.append(_Batch(sorted([*rest, *waiting], key=lambda n: -_axes(self._content[n]))))
             while self._running or self._wanted() is not None:
                 self._start(self.workers)
                 self._collect(block=True)

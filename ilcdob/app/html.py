@@ -1058,7 +1058,7 @@ def report_files(fleet: Fleet, orders: list[list[str]], figures: bool = True, pe
         if pending:
             from ilcdob.validation.figures import PendingFigure
 
-            files["theorem.png"] = PendingFigure(lambda: _theorem_figure(first))
+            files["theorem.png"] = PendingFigure(lambda: _theorem_figure(first), axes=len(first))
         else:
             files["theorem.png"] = _theorem_figure(first)
     return files
