@@ -229,7 +229,7 @@ def draw_bode(mag_ax: Any, phase_ax: Any, w: np.ndarray, curves: Sequence[BodeCu
 #: title at every layout pass and draw: a tenth of the time of a reproduction's figures. Our axes
 #: draw nothing above them but a y offset text at the left corner, clear of a centred title, so the
 #: titles land where the automatic placement puts them, pixel for pixel (docs/performance.md,
-#: "Figures").
+#: "Reproduce and figures").
 TITLE_Y = 1.0
 
 
@@ -302,9 +302,9 @@ def minor_log_grid(fig: Figure, alpha: float = 0.3, min_decades: float = 2.0) ->
 
     matplotlib draws each minor grid line as part of a tick object (two marks, a grid line, two
     labels), built and laid out for every minor position of every axes: a six-panel Bode figure
-    holds hundreds, a third of its build and render time (docs/performance.md, "Figures"). Here
-    the positions matplotlib's own minor locator gives for the axis's view are drawn as a single
-    :class:`~matplotlib.collections.LineCollection` in the minor grid's style, and the minor
+    holds hundreds, a third of its build and render time (docs/performance.md, "Reproduce and
+    figures"). Here the positions matplotlib's own minor locator gives for the axis's view are drawn
+    as a single :class:`~matplotlib.collections.LineCollection` in the minor grid's style, and the minor
     locator is cleared: the grid looks the same, the small minor tick marks are gone. Only views
     of at least ``min_decades`` decades are changed (matplotlib labels no minor tick there); call it
     once the figure's data and limits are final (its limits are read, not changed).

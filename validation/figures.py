@@ -23,8 +23,9 @@ figures are laid out for PNG at 110 dpi, :data:`FIGURE_DPI`).
 Rendering. Drawing the figures as PNG costs more than building them and, for the linear plant,
 more than the simulations. :func:`figure_png` draws a figure once: it lays it out (its
 constrained or tight layout engine, at :data:`FIGURE_DPI`, with the renderer that draws it, so
-that text is measured once) and renders it with the layout engine removed, where ``savefig`` lays the figure out in a first
-full draw (rendering disabled) and renders it in a second; the PNG bytes are the same.
+that text is measured once) and renders it with the layout engine removed, where ``savefig``
+lays the figure out in a first full draw (rendering disabled) and renders it in a second; the
+PNG bytes are the same.
 :class:`FigureRenderer` builds and renders figures (built ones, or :class:`PendingFigure` to be
 built where they are rendered) in parallel: on Linux in forked worker processes, which take
 the next figure of their batch from a shared counter, build and render it and send the bytes
@@ -69,7 +70,7 @@ __all__ = ["reproduction_figures", "scenario_figures", "fleet_figures", "frequen
 #: Resolution the figures are made for (dots per inch of the PNG files).
 FIGURE_DPI = 110
 #: zlib level of the PNG files :func:`figure_png` writes: 5 % larger files than the default level
-#: 6 for a third less encoding time (docs/performance.md, "Figures").
+#: 6 for a third less encoding time (docs/performance.md, "Reproduce and figures").
 PNG_COMPRESS_LEVEL = 3
 #: Learning iterations whose curves differ by at most this share of their peak coincide: they
 #: are drawn as one line (0.1 %, well below a pixel of the figures).
