@@ -245,6 +245,10 @@ def against_qp(n: int = 3000) -> dict[str, float]:
     return {"ilcdob_s": t_ours, "cvxpy_qp_s": t_qp, "ratio": t_qp / t_ours, "relative_difference": rel}
 
 
+#: Samples per compiled call of the previous implementation (16 for every recursion then).
+PREVIOUS_UNROLL = dict.fromkeys(("gains", "backward", "forward", "simulate"), 16)
+
+
 @contextlib.contextmanager
 def previous_compiled():
     """Run the compiled recursions as they were before they skipped the system's zero entries.
@@ -253,17 +257,17 @@ def previous_compiled():
     accumulated state): the CasADi functions built are those of the previous implementation,
     instruction for instruction (they are cached under their own, dense, pattern).
     """
-    sparse = norm_optimal._pattern
+    sparse, unroll = norm_optimal._pattern, norm_optimal._UNROLL
 
     def all_entries(sys):
         nx = sys[0].shape[0]
         return nx, tuple(range(nx * nx)), tuple(range(nx)), tuple(range(nx)), True
 
-    norm_optimal._pattern = all_entries
+    norm_optimal._pattern, norm_optimal._UNROLL = all_entries, PREVIOUS_UNROLL
     try:
         yield
     finally:
-        norm_optimal._pattern = sparse
+        norm_optimal._pattern, norm_optimal._UNROLL = sparse, unroll
 
 
 def build_cost(n: int = 3000) -> dict[str, float]:

@@ -23,8 +23,8 @@ How it is computed (measurements in docs/performance.md, "Norm-optimal ILC"):
   sample instead of O(n^3), and ``P_t`` itself is never formed. It is the same recursion
   (an algebraic identity), to rounding; its two running sums are compensated (:func:`_base`).
 * The recursions (gains, the affine backward pass, the forward pass, plain simulation) run as
-  CasADi SX functions of 16 samples each, chained over blocks of samples by ``mapaccum`` and
-  evaluated in CasADi's virtual machine: compiled code that needs no C compiler. The system's
+  CasADi SX functions of a few samples each (``_UNROLL``), chained over blocks of samples by
+  ``mapaccum`` and evaluated in CasADi's virtual machine: compiled code that needs no C compiler. The system's
   nonzero entries travel in the accumulated state, so one function serves every system with the
   same zero entries (the fleet's maps share them), and its zeros cost no instructions: the
   products with them are left out, which changes no sum, so the results are those of dense
@@ -80,8 +80,12 @@ LIFTED_PEAK_MATRICES = 8
 _COMPACT_ROWS = 4
 _COMPACT_SIGNALS = 12
 
-#: Samples per call of the compiled recursions (the SX function is unrolled over them).
-_UNROLL = 16
+#: Samples per call of each compiled recursion (its SX function is unrolled over them), chosen by
+#: measurement (N = 300,000, UAV2, CPU): the gains run fastest in short functions (0.43 s with 4
+#: samples, 0.44 s with 2, 0.58-0.65 s with 8 to 32), the passes, which read and write a row per
+#: sample, in longer ones (0.27-0.28 s with 8 or 16, 0.34 s with 4, 0.46 s with 2). The results
+#: do not depend on it, bit for bit.
+_UNROLL = {"gains": 4, "backward": 16, "forward": 16, "simulate": 16}
 
 #: Calls per ``mapaccum`` block, largest first (a trial is run in blocks of these sizes).
 _BLOCKS = (512, 64, 8, 1)
@@ -162,8 +166,8 @@ _CACHED_PATTERNS = 16
 
 
 @lru_cache(maxsize=4 * _CACHED_PATTERNS)
-def _base(kind: str, pattern: _Pattern) -> Any:
-    """CasADi SX function running ``_UNROLL`` samples of recursion ``kind`` for systems of ``pattern``.
+def _base(kind: str, pattern: _Pattern, unroll: int) -> Any:
+    """CasADi SX function running ``unroll`` samples of recursion ``kind`` for systems of ``pattern``.
 
     Its first input and output are the accumulated state ``[A, b, c, d, 1, state]`` (the system's
     nonzero entries, :func:`_params`, passed through unchanged); the second input (if any) holds one
@@ -215,9 +219,9 @@ def _base(kind: str, pattern: _Pattern) -> Any:
         return cs.dot(b, v[:nx]) + v[nx]
 
     state = acc[npar:]
-    inputs = cs.SX.sym("in", nin, _UNROLL) if nin else None
+    inputs = cs.SX.sym("in", nin, unroll) if nin else None
     outs = []
-    for k in range(_UNROLL):
+    for k in range(unroll):
         if kind == "gains":
             y0, y1, g = state[:nz], state[nz: 2 * nz], state[2 * nz: 3 * nz]
             m11, m12, m22, re = state[3 * nz], state[3 * nz + 1], state[3 * nz + 2], state[3 * nz + 3]
@@ -255,9 +259,9 @@ def _base(kind: str, pattern: _Pattern) -> Any:
 
 
 @lru_cache(maxsize=4 * len(_BLOCKS) * _CACHED_PATTERNS)
-def _block(kind: str, pattern: _Pattern, calls: int) -> Any:
-    """``calls`` chained evaluations of :func:`_base` (``calls * _UNROLL`` samples)."""
-    return _base(kind, pattern).mapaccum(calls)
+def _block(kind: str, pattern: _Pattern, unroll: int, calls: int) -> Any:
+    """``calls`` chained evaluations of :func:`_base` (``calls * unroll`` samples)."""
+    return _base(kind, pattern, unroll).mapaccum(calls)
 
 
 def _run(kind: str, sys: _System, state: np.ndarray, steps: int,
@@ -276,20 +280,21 @@ def _run(kind: str, sys: _System, state: np.ndarray, steps: int,
     """
     pattern = _pattern(sys)
     acc = np.concatenate([_params(sys), state])
-    base = _base(kind, pattern)
+    unroll = _UNROLL[kind]
+    base = _base(kind, pattern, unroll)
     n_in = base.size1_in(1) if base.n_in() > 1 else 0
-    padded = -(-steps // _UNROLL) * _UNROLL
+    padded = -(-steps // unroll) * unroll
     out = np.empty((padded, base.size1_out(1)))
-    rows = np.empty((min(padded, _BLOCKS[0] * _UNROLL), n_in))
+    rows = np.empty((min(padded, _BLOCKS[0] * unroll), n_in))
     evaluators: dict[int, tuple[Any, Any, np.ndarray]] = {}
     done = 0
     while done < padded:
-        calls = next(c for c in _BLOCKS if c * _UNROLL <= padded - done)
+        calls = next(c for c in _BLOCKS if c * unroll <= padded - done)
         if calls not in evaluators:
-            buf, run = _block(kind, pattern, calls).buffer()
+            buf, run = _block(kind, pattern, unroll, calls).buffer()
             evaluators[calls] = (buf, run, np.empty((calls, acc.size)))
         buf, run, accs = evaluators[calls]
-        count = calls * _UNROLL
+        count = calls * unroll
         buf.set_arg(0, memoryview(acc))
         if n_in:
             fill(rows[:count], done, count)
