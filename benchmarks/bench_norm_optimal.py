@@ -7,10 +7,12 @@ lifted matrices.
    solve (the whole design, from the loop); baseline in the same process: cvxpy with the lifted
    (dense, lower-triangular Toeplitz) Gf, solved by Clarabel. The optima are compared.
 2. At N = 300,000 (``--big-n``): the compiled recursion of :mod:`ilcdob.design.norm_optimal`
-   (Chandrasekhar gains and the passes, CasADi virtual machine, the system's zero entries left
-   out) against the per-sample Python loop it replaced (kept below as :class:`LoopDesigner`, that
-   implementation verbatim) and against the previous compiled form, whose functions carried every
-   entry of the system (:func:`previous_compiled`); interleaved A B C A B C, medians of CPU time;
+   (Chandrasekhar gains and the passes, the system's zero entries left out, compiled to native code
+   by :mod:`ilcdob.native`) against the per-sample Python loop it replaced (kept below as
+   :class:`LoopDesigner`, that implementation verbatim) and against the earlier compiled forms
+   (:data:`FORMS`, :func:`compiled_form`): the same functions in CasADi's virtual machine, and the
+   first compiled form, whose functions carried every entry of the system; interleaved
+   A B C D A B C D, medians of CPU time (the native row only where a C compiler runs);
    the relative difference of the results, to each other and to the loop run in numpy's 80-bit
    extended precision (the rounding error of each). With numba installed, a further row runs the
    loop compiled by numba (a point of comparison only: numba is no dependency of ilcdob).
@@ -24,10 +26,11 @@ lifted matrices.
    at better conditioned weights. The previous loop is measured against the same reference.
 3. The compact law (:meth:`NormOptimalDesigner.law`) against the lifted matrices at N = 500 and
    1000 (``--lifted-n``): CPU time and tracemalloc peak, and the law's difference; then the
-   compact law at ``--big-n``, against itself with the previous compiled form (interleaved).
+   compact law at ``--big-n`` in each compiled form (interleaved).
 
-Building the compiled functions (once per process and sparsity pattern) is measured first, apart:
-sections 2 and 3 time warm functions.
+Building the compiled functions (once per process and sparsity pattern; the native libraries once
+per machine, here into an empty folder) is measured first, apart: sections 2 and 3 time warm
+functions.
 
 Run:  python benchmarks/bench_norm_optimal.py [--n 3000] [--big-n 300000] [--repeat 3]
 """
@@ -38,6 +41,7 @@ import argparse
 import contextlib
 import os
 import statistics
+import tempfile
 import time
 import tracemalloc
 
@@ -48,6 +52,7 @@ import ilcdob
 from ilcdob.design import simulate_map
 from ilcdob.design import norm_optimal
 from ilcdob.design.norm_optimal import NormOptimalDesigner, NormOptimalOptions
+from ilcdob.errors import NativeBuildError
 from ilcdob.lifted import lifted_operator, markov_parameters
 
 LAM, MU = 1e-6, 1e-5
@@ -249,60 +254,100 @@ def against_qp(n: int = 3000) -> dict[str, float]:
 PREVIOUS_UNROLL = dict.fromkeys(("gains", "backward", "forward", "simulate"), 16)
 
 
-@contextlib.contextmanager
-def previous_compiled():
-    """Run the compiled recursions as they were before they skipped the system's zero entries.
+#: The compiled forms compared, oldest first, with their labels.
+FORMS = {"previous": "VM, dense (first compiled)", "vm": "VM, sparse", "native": "native C, sparse (now)"}
 
-    Inside, every system counts as dense (all entries of ``A``, ``b``, ``c`` and ``d`` in the
-    accumulated state): the CasADi functions built are those of the previous implementation,
-    instruction for instruction (they are cached under their own, dense, pattern).
+
+@contextlib.contextmanager
+def compiled_form(name: str):
+    """Run the compiled recursions in form ``name`` of :data:`FORMS`.
+
+    * ``previous``: as they were before they skipped the system's zero entries: every system counts
+      as dense (all entries of ``A``, ``b``, ``c`` and ``d`` in the accumulated state) and every
+      recursion runs 16 samples per call, in CasADi's virtual machine; the functions built are those
+      of that implementation, instruction for instruction (cached under their own, dense, pattern).
+    * ``vm``: today's functions in CasADi's virtual machine (``ILCDOB_NATIVE=off``).
+    * ``native``: today's functions compiled to native code (``ILCDOB_NATIVE=required``).
     """
-    sparse, unroll = norm_optimal._pattern, norm_optimal._UNROLL
+    sparse, unroll, mode = norm_optimal._pattern, norm_optimal._UNROLL, os.environ.get("ILCDOB_NATIVE")
 
     def all_entries(sys):
         nx = sys[0].shape[0]
         return nx, tuple(range(nx * nx)), tuple(range(nx)), tuple(range(nx)), True
 
-    norm_optimal._pattern, norm_optimal._UNROLL = all_entries, PREVIOUS_UNROLL
+    if name == "previous":
+        norm_optimal._pattern, norm_optimal._UNROLL = all_entries, PREVIOUS_UNROLL
+    os.environ["ILCDOB_NATIVE"] = "required" if name == "native" else "off"
     try:
         yield
     finally:
         norm_optimal._pattern, norm_optimal._UNROLL = sparse, unroll
+        if mode is None:
+            os.environ.pop("ILCDOB_NATIVE")
+        else:
+            os.environ["ILCDOB_NATIVE"] = mode
 
 
-def build_cost(n: int = 3000) -> dict[str, float]:
-    """CPU of building the compiled functions (gains, passes; once per process and pattern): the first
-    design of a trial from empty caches, less a second one."""
+def native_available() -> bool:
+    """Whether this machine builds native libraries (a working C compiler)."""
+    fleet = ilcdob.default_fleet()
+    target, e0 = _hover(fleet, 64)
+    try:
+        with compiled_form("native"):
+            NormOptimalDesigner(target, 64).solve(e0)
+    except NativeBuildError as err:
+        print(f"   no native form on this machine: {err}")
+        return False
+    return True
+
+
+def _clear_caches() -> None:
+    for cached in (norm_optimal._base, norm_optimal._native, norm_optimal._block):
+        cached.cache_clear()
+
+
+def build_cost(forms: tuple[str, ...], n: int = 3000) -> dict[str, dict[str, float]]:
+    """Cost of building the compiled functions (gains, passes; once per process and pattern): the first
+    design of a trial from empty caches, less a second one. CPU of this process, wall time, and the
+    compiler's CPU (child processes; native only, built into an empty library folder)."""
     fleet = ilcdob.default_fleet()
     target, e0 = _hover(fleet, n)
     out = {}
-    for name in ("previous", "compiled"):
-        norm_optimal._base.cache_clear()
-        norm_optimal._block.cache_clear()
-        with previous_compiled() if name == "previous" else contextlib.nullcontext():
-            times = []
-            for _ in range(2):
-                t0 = time.process_time()
-                NormOptimalDesigner(target, n).solve(e0)
-                times.append(time.process_time() - t0)
-        out[name] = times[0] - times[1]
+    for name in forms:
+        _clear_caches()
+        with tempfile.TemporaryDirectory() as folder, compiled_form(name):
+            os.environ["ILCDOB_CACHE_DIR"] = folder
+            try:
+                runs = []
+                for _ in range(2):
+                    t0, w0, c0 = time.process_time(), time.perf_counter(), os.times()
+                    NormOptimalDesigner(target, n).solve(e0)
+                    c1 = os.times()
+                    runs.append((time.process_time() - t0, time.perf_counter() - w0,
+                                 c1.children_user + c1.children_system - c0.children_user - c0.children_system))
+            finally:
+                os.environ.pop("ILCDOB_CACHE_DIR")
+        _clear_caches()  # the libraries of the folder just removed are not used again
+        out[name] = {"cpu_s": runs[0][0] - runs[1][0], "wall_s": runs[0][1] - runs[1][1],
+                     "compiler_cpu_s": runs[0][2]}
     return out
 
 
-def against_loop(n: int, repeat: int, options: NormOptimalOptions, reference: bool = True) -> dict[str, object]:
-    """Section 2: compiled recursion against the Python loop, the previous compiled form (and numba),
-    interleaved, CPU medians; gains and solve timed apart for the compiled forms."""
+def against_loop(n: int, repeat: int, options: NormOptimalOptions, forms: tuple[str, ...],
+                 reference: bool = True) -> dict[str, object]:
+    """Section 2: the compiled forms against the Python loop (and numba), interleaved, CPU medians;
+    gains and solve timed apart for the compiled forms."""
     fleet = ilcdob.default_fleet()
     target, e0 = _hover(fleet, n)
-    NormOptimalDesigner(target, 10000, options).solve(np.zeros(10000))  # its functions, built once per process
-    with previous_compiled():
-        NormOptimalDesigner(target, 10000, options).solve(np.zeros(10000))
+    for name in forms:  # their functions (and native libraries), built once per process
+        with compiled_form(name):
+            NormOptimalDesigner(target, n, options).solve(np.zeros(n))
     numba_run = _numba_design()
     if numba_run is not None:
         numba_run(target, 64, options, np.zeros(64))  # compile outside the timing
-    names = ("loop", "previous", "compiled", "numba")
+    names = ("loop", *forms, "numba")
     rows: dict[str, list[float]] = {name: [] for name in names}
-    parts: dict[str, list[tuple[float, float]]] = {"previous": [], "compiled": []}
+    parts: dict[str, list[tuple[float, float]]] = {name: [] for name in forms}
     results: dict[str, np.ndarray] = {}
     for _ in range(repeat):
         for name in names:
@@ -312,7 +357,7 @@ def against_loop(n: int, repeat: int, options: NormOptimalOptions, reference: bo
             if name == "loop":
                 results[name] = LoopDesigner(target, n, options).solve(e0)
             elif name in parts:
-                with previous_compiled() if name == "previous" else contextlib.nullcontext():
+                with compiled_form(name):
                     des = NormOptimalDesigner(target, n, options)
                     t1 = time.process_time()
                     results[name] = des.solve(e0)
@@ -335,7 +380,7 @@ def against_loop(n: int, repeat: int, options: NormOptimalOptions, reference: bo
             if name in parts:
                 out[name]["gains_s"] = statistics.median(g for g, _ in parts[name])
                 out[name]["solve_s"] = statistics.median(v for _, v in parts[name])
-    out["identical_to_previous"] = bool(np.array_equal(results["compiled"], results["previous"]))
+    out["identical"] = all(np.array_equal(results[name], results["previous"]) for name in forms)
     # the floor: the loop itself with its input moved by one unit in the last place
     bumped = LoopDesigner(target, n, options).solve(np.nextafter(e0, np.inf))
     out["one_ulp_floor_rel_max"] = float(np.max(np.abs(bumped - ref)) / np.max(np.abs(ref)))
@@ -347,9 +392,10 @@ def against_loop(n: int, repeat: int, options: NormOptimalOptions, reference: bo
     return out
 
 
-def compact_against_lifted(sizes: tuple[int, ...], big_n: int, repeat: int = 3) -> list[dict[str, float]]:
+def compact_against_lifted(sizes: tuple[int, ...], big_n: int, forms: tuple[str, ...],
+                           repeat: int = 3) -> list[dict[str, float]]:
     """Section 3: the compact law against the lifted matrices (CPU time, tracemalloc peak, difference);
-    at ``big_n`` the compact law against itself with the previous compiled form (interleaved, medians)."""
+    at ``big_n`` the compact law in each compiled form (interleaved, medians)."""
     fleet = ilcdob.default_fleet()
     source, target = fleet.loops[0], fleet.loops[1]
     opts = NormOptimalOptions(1e-4, 1e-3)
@@ -375,17 +421,16 @@ def compact_against_lifted(sizes: tuple[int, ...], big_n: int, repeat: int = 3) 
             tracemalloc.stop()
             row["law_difference"] = float(np.max(np.abs(got - ref)) / np.max(np.abs(ref)))
         else:
-            times: dict[str, list[float]] = {"previous": [], "compiled": []}
+            times: dict[str, list[float]] = {name: [] for name in forms}
             out = {}
             for _ in range(repeat):
                 for name in times:
-                    with previous_compiled() if name == "previous" else contextlib.nullcontext():
+                    with compiled_form(name):
                         t0 = time.process_time()
                         out[name] = NormOptimalDesigner(target, n, opts).law(source, 1e-8).apply(e, df)
                         times[name].append(time.process_time() - t0)
-            row["compact_cpu_s"] = statistics.median(times["compiled"])
-            row["previous_cpu_s"] = statistics.median(times["previous"])
-            row["identical_to_previous"] = bool(np.array_equal(out["compiled"], out["previous"]))
+            row["forms_cpu_s"] = {name: statistics.median(t) for name, t in times.items()}
+            row["identical"] = all(np.array_equal(out[name], out["previous"]) for name in forms)
         rows.append(row)
     return rows
 
@@ -405,25 +450,26 @@ if __name__ == "__main__":
     print(f"\n1. N = {args.n}: ilcdob norm-optimal (gains + solve): {r['ilcdob_s']:.3f} s (target < 1 s)")
     print(f"   dense cvxpy QP (Clarabel):                  {r['cvxpy_qp_s']:.3f} s")
     print(f"   speed-up: {r['ratio']:.0f}x (target >= 20x); optima differ by {r['relative_difference']:.1e} (relative)")
-    b = build_cost()
-    print(f"\nbuilding the compiled functions (once per process and sparsity pattern): {b['compiled']:.3f} s of CPU "
-          f"(previous, dense: {b['previous']:.3f} s)")
+    forms = tuple(name for name in FORMS if name != "native" or native_available())
+    print("\nbuilding the compiled functions (once per process and sparsity pattern; native: once per machine):")
+    for name, b in build_cost(forms).items():
+        print(f"   {FORMS[name]:<28} {b['cpu_s']:.3f} s CPU, {b['wall_s']:.3f} s wall"
+              + (f" (the compiler: {b['compiler_cpu_s']:.3f} s CPU)" if name == "native" else ""))
     for opts in (NormOptimalOptions(), NormOptimalOptions(LAM, MU)):
-        r = against_loop(args.big_n, args.repeat, opts, not args.no_reference)
+        r = against_loop(args.big_n, args.repeat, opts, forms, not args.no_reference)
         loop = r["loop"]["cpu_s"]
         print(f"\n2. N = {args.big_n}, lam = {opts.lam:g}, mu = {opts.mu:g}: gains + one solve, median CPU of "
               f"{args.repeat} interleaved runs")
-        print(f"   {'':<28}{'CPU s':>9}{'ratio':>9}{'diff to loop (max)':>20}{'(2-norm)':>10}{'to 80-bit':>11}")
-        for name, label in (("loop", "Python loop (first form)"), ("previous", "compiled, dense (previous)"),
-                            ("compiled", "compiled, sparse (now)"), ("numba", "numba (not a dependency)")):
+        print(f"   {'':<28}{'CPU s':>9}{'ratio':>9}{'gains s':>9}{'solve s':>9}{'diff to loop (max)':>20}"
+              f"{'(2-norm)':>10}{'to 80-bit':>11}")
+        for name, label in (("loop", "Python loop (first form)"), *FORMS.items(), ("numba", "numba (not a dependency)")):
             if name in r:
                 row = r[name]
-                print(f"   {label:<28}{row['cpu_s']:9.3f}{loop / row['cpu_s']:8.1f}x{row['rel_max']:20.1e}"
+                split = f"{row['gains_s']:9.3f}{row['solve_s']:9.3f}" if "gains_s" in row else f"{'':18}"
+                print(f"   {label:<28}{row['cpu_s']:9.3f}{loop / row['cpu_s']:8.1f}x{split}{row['rel_max']:20.1e}"
                       f"{row['rel_2']:10.1e}{row['exact_max']:11.1e}")
-        prev, now = r["previous"], r["compiled"]
-        print(f"   compiled now / previous: {prev['cpu_s'] / now['cpu_s']:.2f}x (gains {prev['gains_s']:.3f} -> "
-              f"{now['gains_s']:.3f} s, solve {prev['solve_s']:.3f} -> {now['solve_s']:.3f} s); results "
-              f"{'bit-identical' if r['identical_to_previous'] else 'DIFFERENT'}")
+        now = r[forms[-1]]
+        print(f"   the compiled forms' results are {'bit-identical' if r['identical'] else 'DIFFERENT'}")
         print(f"   floor: the loop itself with e0 moved by 1 ulp differs by {r['one_ulp_floor_rel_max']:.1e} (max)")
         if "tolerance" in r:
             ok = now["exact_max"] <= r["tolerance"]
@@ -433,12 +479,12 @@ if __name__ == "__main__":
     print("\n3. compact law (gains of both recursions + sigma_max) against the lifted matrices, "
           "lam = 1e-4, mu = 1e-3, regularisation 1e-8")
     print(f"   {'N':>7}{'compact CPU s':>15}{'peak MB':>10}{'lifted CPU s':>14}{'peak MB':>10}{'law diff':>10}")
-    for row in compact_against_lifted(tuple(args.lifted_n), args.big_n, args.repeat):
+    for row in compact_against_lifted(tuple(args.lifted_n), args.big_n, forms, args.repeat):
         lifted = (f"{row['lifted_cpu_s']:14.3f}{row['lifted_peak_mb']:10.1f}{row['law_difference']:10.1e}"
                   if "lifted_cpu_s" in row else f"{'-':>14}{'-':>10}{'-':>10}")
         print(f"   {row['n']:>7}{row['compact_cpu_s']:15.3f}{row['compact_peak_mb']:10.1f}{lifted}")
-        if "previous_cpu_s" in row:
-            print(f"   N = {row['n']}, median of {args.repeat} interleaved: previous compiled form "
-                  f"{row['previous_cpu_s']:.3f} s, now {row['compact_cpu_s']:.3f} s: "
-                  f"{row['previous_cpu_s'] / row['compact_cpu_s']:.2f}x; laws "
-                  f"{'bit-identical' if row['identical_to_previous'] else 'DIFFERENT'}")
+        if "forms_cpu_s" in row:
+            cpu = row["forms_cpu_s"]
+            print(f"   N = {row['n']}, median of {args.repeat} interleaved: "
+                  + ", ".join(f"{FORMS[name]} {t:.3f} s" for name, t in cpu.items())
+                  + f"; laws {'bit-identical' if row['identical'] else 'DIFFERENT'}")

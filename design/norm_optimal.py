@@ -24,7 +24,10 @@ How it is computed (measurements in docs/performance.md, "Norm-optimal ILC"):
   (an algebraic identity), to rounding; its two running sums are compensated (:func:`_base`).
 * The recursions (gains, the affine backward pass, the forward pass, plain simulation) run as
   CasADi SX functions of a few samples each (``_UNROLL``), chained over blocks of samples by
-  ``mapaccum`` and evaluated in CasADi's virtual machine: compiled code that needs no C compiler. The system's
+  ``mapaccum``. They are compiled to native code where a C compiler runs (:mod:`ilcdob.native`:
+  once per machine and sparsity pattern, for trials of ``_NATIVE_MIN_SAMPLES`` samples or more,
+  8 to 9 times as fast) and otherwise evaluated in CasADi's virtual machine, with the same
+  results bit for bit. The system's
   nonzero entries travel in the accumulated state, so one function serves every system with the
   same zero entries (the fleet's maps share them), and its zeros cost no instructions: the
   products with them are left out, which changes no sum, so the results are those of dense
@@ -59,6 +62,7 @@ import numpy as np
 from ilcdob.errors import NumericalError, SpecError
 from ilcdob.lifted import lifted_operator, markov_parameters, relative_degree
 from ilcdob.loop import LoopSystem
+from ilcdob.native import NativeFunction
 from ilcdob.signals import as_signal
 
 from .closed_form import reconstruct_disturbance, simulate_map
@@ -86,6 +90,12 @@ _COMPACT_SIGNALS = 12
 #: sample, in longer ones (0.27-0.28 s with 8 or 16, 0.34 s with 4, 0.46 s with 2). The results
 #: do not depend on it, bit for bit.
 _UNROLL = {"gains": 4, "backward": 16, "forward": 16, "simulate": 16}
+
+#: Trials of at least this many samples build a recursion's native library (:mod:`ilcdob.native`)
+#: when none is on disk; shorter ones use a built one or the virtual machine. A build takes 0.1 to
+#: 0.4 s of compiler time per recursion (once per machine and sparsity pattern); below this length
+#: the virtual machine's gains and passes take under 0.06 s (UAV2).
+_NATIVE_MIN_SAMPLES = 20_000
 
 #: Calls per ``mapaccum`` block, largest first (a trial is run in blocks of these sizes).
 _BLOCKS = (512, 64, 8, 1)
@@ -258,10 +268,17 @@ def _base(kind: str, pattern: _Pattern, unroll: int) -> Any:
     return cs.Function(f"norm_optimal_{kind}_{nx}", args, results)
 
 
-@lru_cache(maxsize=4 * len(_BLOCKS) * _CACHED_PATTERNS)
-def _block(kind: str, pattern: _Pattern, unroll: int, calls: int) -> Any:
-    """``calls`` chained evaluations of :func:`_base` (``calls * unroll`` samples)."""
-    return _base(kind, pattern, unroll).mapaccum(calls)
+@lru_cache(maxsize=4 * _CACHED_PATTERNS)
+def _native(kind: str, pattern: _Pattern, unroll: int) -> NativeFunction:
+    """:func:`_base` and its build in native code (:mod:`ilcdob.native`)."""
+    return NativeFunction(_base(kind, pattern, unroll))
+
+
+@lru_cache(maxsize=8 * len(_BLOCKS) * _CACHED_PATTERNS)
+def _block(kind: str, pattern: _Pattern, unroll: int, calls: int, native: bool) -> Any:
+    """``calls`` chained evaluations of :func:`_base` (``calls * unroll`` samples), native or not."""
+    handle = _native(kind, pattern, unroll)
+    return (handle.loaded if native else handle.function).mapaccum(calls)
 
 
 def _run(kind: str, sys: _System, state: np.ndarray, steps: int,
@@ -281,7 +298,9 @@ def _run(kind: str, sys: _System, state: np.ndarray, steps: int,
     pattern = _pattern(sys)
     acc = np.concatenate([_params(sys), state])
     unroll = _UNROLL[kind]
-    base = _base(kind, pattern, unroll)
+    handle = _native(kind, pattern, unroll)
+    base = handle.get(build=steps >= _NATIVE_MIN_SAMPLES)
+    native = base is not handle.function
     n_in = base.size1_in(1) if base.n_in() > 1 else 0
     padded = -(-steps // unroll) * unroll
     out = np.empty((padded, base.size1_out(1)))
@@ -291,7 +310,7 @@ def _run(kind: str, sys: _System, state: np.ndarray, steps: int,
     while done < padded:
         calls = next(c for c in _BLOCKS if c * unroll <= padded - done)
         if calls not in evaluators:
-            buf, run = _block(kind, pattern, unroll, calls).buffer()
+            buf, run = _block(kind, pattern, unroll, calls, native).buffer()
             evaluators[calls] = (buf, run, np.empty((calls, acc.size)))
         buf, run, accs = evaluators[calls]
         count = calls * unroll

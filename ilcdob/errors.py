@@ -9,7 +9,7 @@ what is valid and, where there is one, the next step.
 from __future__ import annotations
 
 __all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError",
-           "NumericalError", "LearningLimitError", "LearningLimitWarning"]
+           "NumericalError", "NativeBuildError", "LearningLimitError", "LearningLimitWarning"]
 
 
 class IlcdobError(Exception):
@@ -40,6 +40,11 @@ class SignalError(IlcdobError, ValueError):
 class NumericalError(IlcdobError, ArithmeticError):
     """A computation produced no usable number: overflow, a non-finite result, a solver that
     failed (the command exits with status 3, not as bad input)."""
+
+
+class NativeBuildError(IlcdobError, RuntimeError):
+    """A CasADi function could not be compiled to native code or loaded (:mod:`ilcdob.native`);
+    the message names the function, the compiler and its first line of output."""
 
 
 class LearningLimitError(IlcdobError, ValueError):

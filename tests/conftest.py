@@ -1,7 +1,9 @@
-"""Shared fixtures: the built-in fleet, a writer for fleet files and the C compiler."""
+"""Shared fixtures: the built-in fleet, a writer for fleet files, the C compiler, and a folder of the
+session for native libraries."""
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -17,6 +19,21 @@ def cc() -> str:
     if path is None:
         pytest.skip("no C compiler: `cc` is not on PATH, the emitted C code cannot be compiled")
     return path
+
+
+@pytest.fixture(scope="session", autouse=True)
+def native_libraries(tmp_path_factory):
+    """Native libraries (ilcdob/native.py) built by this session go to a folder of its own, not the
+    user's cache: every session builds what it uses (as on a fresh machine); commands run as child
+    processes inherit it. A folder set by ``ILCDOB_CACHE_DIR`` before the session is kept."""
+    if os.environ.get("ILCDOB_CACHE_DIR"):
+        yield
+        return
+    os.environ["ILCDOB_CACHE_DIR"] = str(tmp_path_factory.mktemp("native"))
+    try:
+        yield
+    finally:
+        os.environ.pop("ILCDOB_CACHE_DIR", None)
 
 
 @pytest.fixture(scope="session")
