@@ -26,7 +26,7 @@ How it is computed (measurements in docs/performance.md, "Norm-optimal ILC"):
   CasADi SX functions of a few samples each (``_UNROLL``), chained over blocks of samples by
   ``mapaccum``. They are compiled to native code where a C compiler runs (:mod:`ilcdob.native`:
   once per machine and sparsity pattern, for trials of ``_NATIVE_MIN_SAMPLES`` samples or more,
-  8 to 9 times as fast) and otherwise evaluated in CasADi's virtual machine, with the same
+  about 8 times as fast) and otherwise evaluated in CasADi's virtual machine, with the same
   results bit for bit. The system's
   nonzero entries travel in the accumulated state, so one function serves every system with the
   same zero entries (the fleet's maps share them), and its zeros cost no instructions: the

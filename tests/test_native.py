@@ -159,3 +159,16 @@ def test_bad_mode(fleet, monkeypatch):
     monkeypatch.setenv("ILCDOB_NATIVE", "fast")
     with pytest.raises(SpecError, match=r"ILCDOB_NATIVE = 'fast' is not a mode; valid: auto, off, required"):
         NormOptimalDesigner(fleet.loops[1], 100)
+
+
+def test_unloadable_library(fleet, library_folder, monkeypatch, cc):
+    f = native.NativeFunction(no._base("simulate", no._pattern(no._state_space(fleet.loops[0].nominal.G_f)), 16))
+    path = f.library(native.compiler_command())
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"not a library")  # e.g. a disk that filled up under another tool's copy
+    with pytest.warns(RuntimeWarning, match=r"loading .* failed .*delete the file to build it again; running in "
+                                            r"CasADi's virtual machine"):
+        assert f.get() is f.function
+    monkeypatch.setenv("ILCDOB_NATIVE", "required")
+    with pytest.raises(NativeBuildError, match="delete the file"):
+        native.NativeFunction(f.function).get()
