@@ -93,8 +93,9 @@ _UNROLL = {"gains": 4, "backward": 16, "forward": 16, "simulate": 16}
 
 #: Trials of at least this many samples build a recursion's native library (:mod:`ilcdob.native`)
 #: when none is on disk; shorter ones use a built one or the virtual machine. A build takes 0.1 to
-#: 0.4 s of compiler time per recursion (once per machine and sparsity pattern); below this length
-#: the virtual machine's gains and passes take under 0.06 s (UAV2).
+#: 0.4 s of compiler time per recursion for the built-in fleet, up to 3.4 s at 109 states (once per
+#: machine and sparsity pattern); below this length the virtual machine's gains and passes take
+#: under 0.06 s (UAV2).
 _NATIVE_MIN_SAMPLES = 20_000
 
 #: Calls per ``mapaccum`` block, largest first (a trial is run in blocks of these sizes).
