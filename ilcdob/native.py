@@ -26,9 +26,10 @@ Where it applies, set by environment variables (read at every call):
     else ``cc``.
 ``ILCDOB_CACHE_DIR``
     Where the libraries are kept; default ``$XDG_CACHE_HOME/ilcdob/native``, else
-    ``~/.cache/ilcdob/native``. A library's name carries a hash of its C source, the compiler's
-    version line, the flags, the CasADi version and the platform, so a change of any of them
-    builds a new one and a stale one is never loaded. Deleting the folder is always safe.
+    ``~/.cache/ilcdob/native`` (with no home folder, one in the temporary folder). A library's
+    name carries a hash of its C source, the compiler's version line, the flags, the CasADi
+    version and the platform, so a change of any of them builds a new one and a stale one is
+    never loaded. Deleting the folder is always safe.
 
 A library is written atomically (:func:`~ilcdob.atomic.atomic_path`), so processes building the
 same one at once (a campaign's workers) each replace it with a complete file.
@@ -97,7 +98,12 @@ def cache_dir() -> Path:
     """The folder of the built libraries (``ILCDOB_CACHE_DIR``, module docstring)."""
     if os.environ.get("ILCDOB_CACHE_DIR"):
         return Path(os.environ["ILCDOB_CACHE_DIR"]).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    base = os.environ.get("XDG_CACHE_HOME")
+    if not base:
+        try:
+            base = Path.home() / ".cache"
+        except RuntimeError:  # no home folder known (no HOME, no password entry): the temporary folder
+            base = Path(tempfile.gettempdir()) / f"ilcdob-cache-{os.getuid() if hasattr(os, 'getuid') else 0}"
     return Path(base) / "ilcdob" / "native"
 
 

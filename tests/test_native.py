@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -172,3 +173,19 @@ def test_unloadable_library(fleet, library_folder, monkeypatch, cc):
     monkeypatch.setenv("ILCDOB_NATIVE", "required")
     with pytest.raises(NativeBuildError, match="delete the file"):
         native.NativeFunction(f.function).get()
+
+
+def test_library_folder_defaults(monkeypatch, tmp_path):
+    monkeypatch.delenv("ILCDOB_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert native.cache_dir() == tmp_path / "xdg" / "ilcdob" / "native"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert native.cache_dir() == tmp_path / "home" / ".cache" / "ilcdob" / "native"
+
+    def no_home():
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.setattr(Path, "home", staticmethod(no_home))
+    assert native.cache_dir().parts[-2:] == ("ilcdob", "native")
+    assert native.cache_dir().is_relative_to(Path(tempfile.gettempdir()))
