@@ -269,7 +269,7 @@ def compiled_form(name: str):
     * ``vm``: today's functions in CasADi's virtual machine (``ILCDOB_NATIVE=off``).
     * ``native``: today's functions compiled to native code (``ILCDOB_NATIVE=required``).
     """
-    sparse, unroll, mode = norm_optimal._pattern, norm_optimal._UNROLL, os.environ.get("ILCDOB_NATIVE")
+    sparse, unroll = norm_optimal._pattern, norm_optimal._UNROLL
 
     def all_entries(sys):
         nx = sys[0].shape[0]
@@ -277,15 +277,25 @@ def compiled_form(name: str):
 
     if name == "previous":
         norm_optimal._pattern, norm_optimal._UNROLL = all_entries, PREVIOUS_UNROLL
-    os.environ["ILCDOB_NATIVE"] = "required" if name == "native" else "off"
+    try:
+        with environment("ILCDOB_NATIVE", "required" if name == "native" else "off"):
+            yield
+    finally:
+        norm_optimal._pattern, norm_optimal._UNROLL = sparse, unroll
+
+
+@contextlib.contextmanager
+def environment(name: str, value: str):
+    """Environment variable ``name`` set to ``value`` inside, as it was (or unset) afterwards."""
+    before = os.environ.get(name)
+    os.environ[name] = value
     try:
         yield
     finally:
-        norm_optimal._pattern, norm_optimal._UNROLL = sparse, unroll
-        if mode is None:
-            os.environ.pop("ILCDOB_NATIVE")
+        if before is None:
+            os.environ.pop(name, None)
         else:
-            os.environ["ILCDOB_NATIVE"] = mode
+            os.environ[name] = before
 
 
 def native_available() -> bool:
@@ -315,18 +325,15 @@ def build_cost(forms: tuple[str, ...], n: int = 3000) -> dict[str, dict[str, flo
     out = {}
     for name in forms:
         _clear_caches()
-        with tempfile.TemporaryDirectory() as folder, compiled_form(name):
-            os.environ["ILCDOB_CACHE_DIR"] = folder
-            try:
-                runs = []
-                for _ in range(2):
-                    t0, w0, c0 = time.process_time(), time.perf_counter(), os.times()
-                    NormOptimalDesigner(target, n).solve(e0)
-                    c1 = os.times()
-                    runs.append((time.process_time() - t0, time.perf_counter() - w0,
-                                 c1.children_user + c1.children_system - c0.children_user - c0.children_system))
-            finally:
-                os.environ.pop("ILCDOB_CACHE_DIR")
+        with (tempfile.TemporaryDirectory() as folder, compiled_form(name),
+              environment("ILCDOB_CACHE_DIR", folder)):
+            runs = []
+            for _ in range(2):
+                t0, w0, c0 = time.process_time(), time.perf_counter(), os.times()
+                NormOptimalDesigner(target, n).solve(e0)
+                c1 = os.times()
+                runs.append((time.process_time() - t0, time.perf_counter() - w0,
+                             c1.children_user + c1.children_system - c0.children_user - c0.children_system))
         _clear_caches()  # the libraries of the folder just removed are not used again
         out[name] = {"cpu_s": runs[0][0] - runs[1][0], "wall_s": runs[0][1] - runs[1][1],
                      "compiler_cpu_s": runs[0][2]}

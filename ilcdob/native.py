@@ -137,6 +137,7 @@ class NativeFunction:
 
     function: Any
     loaded: Any = field(default=None, init=False, repr=False)
+    _digests: dict[str, str] = field(default_factory=dict, init=False, repr=False)
 
     @cached_property
     def source(self) -> str:
@@ -166,9 +167,11 @@ class NativeFunction:
         identity = _compiler_identity(tuple(command))
         if identity is None:
             return None
-        key = "\0".join([self.source, identity, " ".join(FLAGS), cs.__version__, sys.platform,
-                         platform.machine()])
-        digest = hashlib.sha256(key.encode()).hexdigest()[:20]
+        if identity not in self._digests:  # once per compiler: the source is tens to hundreds of kB
+            key = "\0".join([self.source, identity, " ".join(FLAGS), cs.__version__, sys.platform,
+                             platform.machine()])
+            self._digests[identity] = hashlib.sha256(key.encode()).hexdigest()[:20]
+        digest = self._digests[identity]
         suffix = ".dll" if os.name == "nt" else ".so"
         return cache_dir() / f"{self.function.name()}-{digest}{suffix}"
 
@@ -203,10 +206,11 @@ class NativeFunction:
                                        f"(ILCDOB_CC, else CC, else cc) does not run; install one, set ILCDOB_CC, "
                                        f"or unset ILCDOB_NATIVE to run in CasADi's virtual machine")
             return self.function
-        if not path.exists() and mode == "auto" and (not build or tuple(command) in _FAILED):
+        missing = not path.exists()
+        if missing and mode == "auto" and (not build or tuple(command) in _FAILED):
             return self.function
         try:
-            if not path.exists():
+            if missing:
                 self._build(command, path)
             self.loaded = self._load(path)
         except NativeBuildError as err:
