@@ -135,8 +135,12 @@ def _peak_relative(x, ref):
     return float(np.max(np.abs(np.asarray(x, np.longdouble) - ref)) / np.max(np.abs(ref)))
 
 
+@pytest.mark.parametrize("mode", ["off", "required"])  # CasADi's virtual machine; native code (ilcdob/native.py)
 @pytest.mark.parametrize("lam, mu, tol", [(1e-8, 1e-8, 1e-11), (1e-6, 1e-5, 1e-12)])
-def test_compiled_recursion_equals_the_per_sample_loop(fleet, lam, mu, tol):
+def test_compiled_recursion_equals_the_per_sample_loop(fleet, lam, mu, tol, mode, monkeypatch, request):
+    if mode == "required":
+        request.getfixturevalue("cc")  # skipped without a C compiler
+    monkeypatch.setenv("ILCDOB_NATIVE", mode)
     target, n = fleet.loops[1], 1500
     _, d = _hover(fleet, n)
     e0 = -simulate_map(target.G_d, d)
