@@ -20,20 +20,22 @@ from __future__ import annotations
 import errno
 import json
 import os
+import stat
 import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
-from .errors import IlcdobError
+from .errors import IlcdobError, OutputError
+from .inputs import file_kind
 
 try:
     import fcntl
 except ImportError:  # Windows: no advisory locks (see locked)
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "current_umask", "stale_entries",
+__all__ = ["atomic_path", "check_replaceable", "write_text_atomic", "write_json_atomic", "current_umask", "stale_entries",
            "make_folders", "remove_folders", "locked", "LockTimeoutError", "LOCK_TIMEOUT_S"]
 
 #: How long :func:`locked` waits for another process's lock, s.
@@ -174,14 +176,45 @@ def stale_entries(folder: Path, prefix: str) -> list[Path]:
     return stale
 
 
+def check_replaceable(path: str | Path, what: str = "output file") -> None:
+    """Refuse to write ``path`` when it exists as something other than a regular file.
+
+    A device (``/dev/null``, a terminal), a FIFO or a socket given as an output would be
+    replaced by a regular file (:func:`atomic_path` renames over it), which breaks whatever used
+    the node; a folder cannot be replaced by a file. A symbolic link is judged by its target.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file about to be written.
+    what : str
+        What it is, for messages.
+
+    Raises
+    ------
+    OutputError
+        ``path`` (or the target of a link ``path``) is a folder, a device, a FIFO or a socket.
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        return  # missing, a dangling link or an unreadable parent: the write itself says so
+    if not stat.S_ISREG(st.st_mode):
+        raise OutputError(f"{what} {path}: is {file_kind(st.st_mode)}, not a regular file; results are written to "
+                          "regular files only, never over a folder, device, FIFO or socket: give another path")
+
+
 @contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def atomic_path(path: str | Path, *, mode: int | None = None) -> Iterator[Path]:
     """Context manager: a temporary path beside ``path``, renamed to ``path`` on success.
 
     Parameters
     ----------
     path : str or Path
-        The file to write; its folder is created if missing.
+        The file to write; its folder is created if missing. An existing ``path`` that is not a
+        regular file (a device, FIFO, socket or folder) is refused (:func:`check_replaceable`).
+    mode : int, optional
+        The file's permission bits (default: ``0o666`` less the umask, as ``open`` gives).
 
     Yields
     ------
@@ -190,8 +223,14 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         block ends normally it replaces ``path`` (with the usual file mode); when it raises,
         the temporary file and the folders created for it are removed and ``path`` is left
         as it was.
+
+    Raises
+    ------
+    OutputError
+        ``path`` exists and is not a regular file.
     """
     path = Path(path)
+    check_replaceable(path)
     created = make_folders(path.parent)
     done = False
     try:
@@ -203,7 +242,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         tmp_path = Path(tmp)
         try:
             yield tmp_path
-            os.chmod(tmp_path, 0o666 & ~current_umask())  # mkstemp makes 0600; give the file the usual mode
+            os.chmod(tmp_path, 0o666 & ~current_umask() if mode is None else mode)  # mkstemp makes 0600
             os.replace(tmp_path, path)
             done = True
         finally:

@@ -9,7 +9,7 @@ what is valid and, where there is one, the next step.
 from __future__ import annotations
 
 __all__ = ["IlcdobError", "SpecError", "FleetError", "ModelFileError", "UnstableLoopError", "SignalError",
-           "NumericalError", "NativeBuildError", "LearningLimitError", "LearningLimitWarning"]
+           "NumericalError", "NativeBuildError", "OutputError", "LearningLimitError", "LearningLimitWarning"]
 
 
 class IlcdobError(Exception):
@@ -40,6 +40,11 @@ class SignalError(IlcdobError, ValueError):
 class NumericalError(IlcdobError, ArithmeticError):
     """A computation produced no usable number: overflow, a non-finite result, a solver that
     failed (the command exits with status 3, not as bad input)."""
+
+
+class OutputError(IlcdobError, ValueError):
+    """An output location cannot be written: a device, FIFO or socket where a file is expected,
+    not a folder, not writable, or not ilcdob's to replace."""
 
 
 class NativeBuildError(IlcdobError, RuntimeError):

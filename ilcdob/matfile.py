@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .atomic import atomic_path
+from .atomic import atomic_path, check_replaceable
 from .errors import SpecError
 from .identified import model_from_dict
 
@@ -79,6 +79,8 @@ def check_mat_path(path: str | os.PathLike, what: str) -> Path:
     ------
     SpecError
         Not a path, a name ending in a slash or not in ``.mat``, or an existing folder.
+    OutputError
+        An existing device, FIFO or socket (:func:`~ilcdob.atomic.check_replaceable`).
     """
     if not isinstance(path, (str, os.PathLike)):
         raise SpecError(f"`path` of the {what} .mat file: got {path!r:.80}, expected a file name ending in .mat")
@@ -95,6 +97,7 @@ def check_mat_path(path: str | os.PathLike, what: str) -> Path:
     if out.is_dir():
         raise SpecError(f"`path` of the {what} .mat file: {text!r} is a folder; give a file name inside it, "
                         f"e.g. {str(out / (what + '.mat'))!r}")
+    check_replaceable(out, f"`path` of the {what} .mat file")
     return out
 
 

@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from ilcdob.atomic import atomic_path, current_umask, make_folders, remove_folders, stale_entries
-from ilcdob.errors import IlcdobError
+from ilcdob.errors import IlcdobError, OutputError
 from ilcdob.inputs import file_kind, read_json, read_text
 
 __all__ = ["FIGURE_DPI", "MANIFEST", "OutputError", "OutputFolder", "Provenance", "check_output_path",
@@ -62,10 +62,6 @@ MANIFEST = "manifest.json"
 FIGURE_DPI = 110
 _STAGING = ".ilcdob-staging-"
 _RENAME_EXCHANGE = 2
-
-
-class OutputError(IlcdobError, ValueError):
-    """An output location cannot be written (not a folder, not writable, not ours to replace)."""
 
 
 def version() -> str:
