@@ -266,7 +266,7 @@ def _refuse(path: Path, reason: str, what: str) -> None:
     if (str(path), reason) in _WARNED:
         return
     _WARNED.add((str(path), reason))
-    warnings.warn(f"native code: {what} {path} is not used: {reason}. ilcdob loads only libraries from a place no other "
+    warnings.warn(f"native code: {what} {path.absolute()} is not used: {reason}. ilcdob loads only libraries from a place no other "
                   f"user can write; this process keeps its libraries in {private_dir()} instead. Fix the owner or "
                   f"mode, delete the path, or set ILCDOB_CACHE_DIR to a folder of your own",
                   RuntimeWarning, stacklevel=4)

@@ -2347,10 +2347,103 @@ def family_encodings() -> list[Case]:
 
 # ============================================================================ all cases, the report
 
+# ============================================================================ family: native
+
+#: The norm-optimal design whose libraries the native cases plant (a short trial: it only loads what is there).
+NATIVE_DESIGN = ["design", "--from", "UAV1", "--to", "UAV2", "--method", "norm-optimal"]
+#: A library whose constructor runs at load time and leaves a file beside the working folder (then INJECTION).
+PLANTED_C = ('#include <stdio.h>\n__attribute__((constructor)) static void planted(void) {\n'
+             '    FILE *f = fopen(MARKER, "w"); if (f) { fputs("planted code ran", f); fclose(f); }\n}\n')
+#: A user id that is not the probe's (given files with chown, as root).
+OTHER_UID = 54321
+
+
+def _native_names(fx: Path, opts: Options) -> None:
+    """The libraries NATIVE_DESIGN loads, built once (ILCDOB_NATIVE=required) into the fixture
+    ``native-names``: the cases plant files under their names."""
+    run = execute(cli(*NATIVE_DESIGN, "--out", str(fx / "native-scratch")), fx, opts, timeout=300,
+                  env={"ILCDOB_NATIVE": "required", "ILCDOB_CACHE_DIR": str(fx / "native-names")})
+    if run.returncode != 0 or not any((fx / "native-names").iterdir()):
+        raise RuntimeError(f"fixture native-names failed (exit {run.returncode}): {run.stderr.strip()[-2000:]}")
+
+
+FIXTURES["native-names"] = ((), _native_names)
+
+
+def _planted(layout: str) -> Callable[[Ctx], None]:
+    """A setup planting a library under every name NATIVE_DESIGN loads, in the folder ``cache`` of the
+    working folder, arranged as ``layout`` says."""
+    def setup(ctx: Ctx) -> None:
+        names = sorted(p.name for p in (ctx.fixtures / "native-names").iterdir())
+        cache = ctx.p("cache")
+        target = cache / "inner" if layout == "open folder above" else cache
+        target.mkdir(mode=0o700, parents=True)
+        source = ctx.base / "planted.c"
+        source.write_text(PLANTED_C, encoding="utf-8")
+        for name in names:
+            if layout == "fifo":
+                os.mkfifo(target / name)
+                continue
+            subprocess.run(["cc", "-shared", "-fPIC", f'-DMARKER="{ctx.base / "planted-code-ran"}"', str(source),
+                            "-o", str(target / name)], check=True, timeout=120)
+            if layout == "0666 library":
+                (target / name).chmod(0o666)
+            elif layout == "another user's library":
+                os.chown(target / name, OTHER_UID, OTHER_UID)
+        if layout in ("open folder", "open folder above"):
+            cache.chmod(0o777)
+        elif layout in ("another user's folder", "link to another user's folder"):
+            os.chown(cache, OTHER_UID, OTHER_UID)
+            if layout.startswith("link"):
+                ctx.p("link").symlink_to("cache")
+    return with_fixtures(setup, "native-names")
+
+
+def _said_once(ctx: Ctx, run: Run) -> Verdict | None:
+    """One warning for a refused folder, or one per refused library (each path named once)."""
+    said = [line for line in run.stderr.splitlines() if "native code:" in line and "is not used" in line]
+    libraries = [line for line in said if "native code: the library folder" not in line]
+    expected = len(list((ctx.fixtures / "native-names").iterdir())) if libraries else 1
+    if len(said) != expected or len(set(said)) != len(said):
+        return "SILENT", f"{len(said)} warnings that a planted path is not used, expected {expected}, each once"
+    return None
+
+
+def family_native() -> list[Case]:
+    """Libraries another local user planted where the design looks for its native code: none may be
+    loaded (the constructor would leave a file beside the working folder: INJECTION), none may block
+    the command (HANG), each is named once; and bad native-code settings are clear errors."""
+    layouts = {  # layout -> (ILCDOB_CACHE_DIR relative to the working folder, needs)
+        "open folder": ("cache", ("cc",)),
+        "open folder above": ("cache/inner", ("cc",)),
+        "0666 library": ("cache", ("cc",)),
+        "fifo": ("cache", ("cc",)),
+        "another user's library": ("cache", ("cc", "root")),
+        "another user's folder": ("cache", ("cc", "root")),
+        "link to another user's folder": ("link", ("cc", "root")),
+    }
+    cases = []
+    for layout, (folder, needs) in layouts.items():
+        for mode in ("auto", "required"):
+            cases.append(case("native", f"{layout}, {mode}", [*NATIVE_DESIGN, "--out", "out"], A, out="out",
+                              setup=_planted(layout), env={"ILCDOB_CACHE_DIR": folder, "ILCDOB_NATIVE": mode},
+                              needs=needs, quiet=False, verify=_said_once, timeout=180,
+                              why="the planted files are not loaded; the design runs on what this user builds"))
+    for label, env in (("unterminated ILCDOB_CC", {"ILCDOB_CC": "gcc 'unterminated", "ILCDOB_NATIVE": "required"}),
+                       ("ILCDOB_CACHE_DIR of an unknown user", {"ILCDOB_CACHE_DIR": "~nosuchuser-probe/x",
+                                                                "ILCDOB_NATIVE": "required"}),
+                       ("bad ILCDOB_NATIVE", {"ILCDOB_NATIVE": "fast"})):
+        cases.append(case("native", label, [*NATIVE_DESIGN, "--out", "out"], E, env=env))
+    cases.append(case("native", "ILCDOB_CACHE_DIR a FIFO", [*NATIVE_DESIGN, "--out", "out"], A, out="out",
+                      setup=specials(cachefifo="fifo"), env={"ILCDOB_CACHE_DIR": "cachefifo", "ILCDOB_NATIVE": "required"},
+                      needs=("cc",), quiet=False, verify=_said_once, timeout=180))
+    return cases
+
+
 FAMILIES: dict[str, Callable[[], list[Case]]] = {
     "baseline": family_baseline, "names": family_names, "documents": family_documents, "special": family_special,
     "outputs": family_outputs, "options": family_options, "races": family_races, "disk": family_disk,
-    "kills": family_kills, "encodings": family_encodings,
+    "kills": family_kills, "encodings": family_encodings, "native": family_native,
 }
 
 
