@@ -35,7 +35,8 @@ try:
 except ImportError:  # Windows: no advisory locks (see locked)
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["atomic_path", "check_replaceable", "write_text_atomic", "write_json_atomic", "current_umask", "stale_entries",
+__all__ = ["atomic_path", "check_replaceable", "write_text_atomic", "write_json_atomic", "current_umask",
+           "stale_entries",
            "make_folders", "remove_folders", "locked", "LockTimeoutError", "LOCK_TIMEOUT_S"]
 
 #: How long :func:`locked` waits for another process's lock, s.

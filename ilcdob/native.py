@@ -127,7 +127,8 @@ def compiler_command() -> list[str]:
             words = shlex.split(value)
         except ValueError as err:
             raise SpecError(f"{name} = {value!r}: cannot be split into words as a shell would ({err}); give the "
-                            f"compiler command with balanced quotes, e.g. {name}='gcc' or {name}='ccache gcc'") from None
+                            f"compiler command with balanced quotes, e.g. {name}='gcc' or {name}='ccache gcc'"
+                            ) from None
         if words:
             return words
     return ["cc"]
@@ -150,8 +151,9 @@ def cache_dir() -> Path:
         try:
             return Path(given).expanduser()
         except RuntimeError as err:  # ~nosuchuser, or ~ where no home folder is known
-            raise SpecError(f"ILCDOB_CACHE_DIR = {given!r}: {err.args[0] if err.args else err} (its leading ~ names "
-                            "no known home folder); give an absolute path, e.g. ILCDOB_CACHE_DIR=/path/to/cache") from None
+            raise SpecError(f"ILCDOB_CACHE_DIR = {given!r}: {err.args[0] if err.args else err} (its leading ~ "
+                            "names no known home folder); give an absolute path, e.g. ILCDOB_CACHE_DIR=/path/to/cache"
+                            ) from None
     base = os.environ.get("XDG_CACHE_HOME")
     if base and os.path.isabs(base):  # a relative one is to be ignored (XDG base directory specification)
         return Path(base) / "ilcdob" / "native"
@@ -179,7 +181,7 @@ def _remove_private(pid: int) -> None:
 
 
 def _writers(st: os.stat_result) -> str | None:
-    """Who other than the owner may write a file of ``st`` ("group", "others", ...), None: no one."""
+    """Who other than the owner may write a file of ``st`` ("its group", "every user" or both), None: no one."""
     who = [name for bit, name in ((stat.S_IWGRP, "its group"), (stat.S_IWOTH, "every user")) if st.st_mode & bit]
     return " and ".join(who) or None
 
@@ -253,9 +255,11 @@ def untrusted_library(path: Path) -> str | None:
         return f"it cannot be examined ({err.strerror or err})"
     if not stat.S_ISREG(st.st_mode):
         return f"it is {file_kind(st.st_mode)}, not a regular file"
-    if hasattr(os, "geteuid") and st.st_uid != os.geteuid():
+    if not hasattr(os, "geteuid"):
+        return None
+    if st.st_uid != os.geteuid():
         return f"it belongs to user id {st.st_uid}, not to this user ({os.geteuid()})"
-    writers = _writers(st) if hasattr(os, "geteuid") else None
+    writers = _writers(st)
     if writers:
         return f"it can be written by {writers} (mode {stat.S_IMODE(st.st_mode):04o})"
     return None
@@ -266,9 +270,9 @@ def _refuse(path: Path, reason: str, what: str) -> None:
     if (str(path), reason) in _WARNED:
         return
     _WARNED.add((str(path), reason))
-    warnings.warn(f"native code: {what} {path.absolute()} is not used: {reason}. ilcdob loads only libraries from a place no other "
-                  f"user can write; this process keeps its libraries in {private_dir()} instead. Fix the owner or "
-                  f"mode, delete the path, or set ILCDOB_CACHE_DIR to a folder of your own",
+    warnings.warn(f"native code: {what} {path.absolute()} is not used: {reason}. ilcdob loads only libraries from a "
+                  f"place no other user can write; this process keeps its libraries in {private_dir()} instead. Fix "
+                  "the owner or mode, delete the path, or set ILCDOB_CACHE_DIR to a folder of your own",
                   RuntimeWarning, stacklevel=4)
 
 
@@ -454,7 +458,8 @@ class NativeFunction:
         """Write the C source and compile it into ``path`` (atomically, mode 0644 less the umask)."""
         name = self.function.name()
         try:
-            with tempfile.TemporaryDirectory(prefix="ilcdob-native-") as work, atomic_path(path, mode=0o644 & ~current_umask()) as tmp:
+            with (tempfile.TemporaryDirectory(prefix="ilcdob-native-") as work,
+                  atomic_path(path, mode=0o644 & ~current_umask()) as tmp):
                 source = Path(work) / f"{name}.c"
                 source.write_text(self.source, encoding="utf-8")
                 done = subprocess.run([*command, *FLAGS, str(source), "-o", str(tmp)], capture_output=True,

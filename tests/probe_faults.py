@@ -2435,7 +2435,8 @@ def family_native() -> list[Case]:
                        ("bad ILCDOB_NATIVE", {"ILCDOB_NATIVE": "fast"})):
         cases.append(case("native", label, [*NATIVE_DESIGN, "--out", "out"], E, env=env))
     cases.append(case("native", "ILCDOB_CACHE_DIR a FIFO", [*NATIVE_DESIGN, "--out", "out"], A, out="out",
-                      setup=specials(cachefifo="fifo"), env={"ILCDOB_CACHE_DIR": "cachefifo", "ILCDOB_NATIVE": "required"},
+                      setup=specials(cachefifo="fifo"),
+                      env={"ILCDOB_CACHE_DIR": "cachefifo", "ILCDOB_NATIVE": "required"},
                       needs=("cc",), quiet=False, verify=_said_once, timeout=180))
     return cases
 
