@@ -82,7 +82,7 @@ from ilcdob.signals import as_signal
 
 __all__ = ["LearningBand", "NoiseEstimate", "estimate_noise", "choose_band", "check_bandwidth", "learning_horizon",
            "fold_start", "fade_out", "END_FIT_S", "FILTER_ORDER", "SNR_MIN", "NOISE_RESOLUTION", "NOISE_SHARE",
-           "AMPLIFICATION_TOL", "OFF_FRACTION", "PAD_PERIODS", "MAX_PAD_SAMPLES"]
+           "AMPLIFICATION_TOL", "OFF_FRACTION", "PAD_PERIODS", "MAX_PAD_SAMPLES", "NOISE_SAMPLES"]
 
 #: Length of the trial end fitted by the line that extends it (:func:`learning_horizon`), s.
 END_FIT_S = 0.25
@@ -108,6 +108,9 @@ OFF_FRACTION = 0.5
 PAD_PERIODS = 6
 #: Most samples added at each end of a trial: the lowest corner is the one whose padding this is.
 MAX_PAD_SAMPLES = 1_000_000
+
+#: Fewest samples of a trial whose noise floor :func:`estimate_noise` estimates (one Welch window).
+NOISE_SAMPLES = 64
 
 _LOWEST = 1e-3   # lowest corner, as a share of the Nyquist frequency
 
@@ -475,7 +478,7 @@ def estimate_noise(e: object, ts: float) -> NoiseEstimate:
     Parameters
     ----------
     e : array, m
-        The trial's measured tracking error (at least 64 samples).
+        The trial's measured tracking error (at least :data:`NOISE_SAMPLES` samples).
     ts : float
         Sample time, s.
 
@@ -484,8 +487,9 @@ def estimate_noise(e: object, ts: float) -> NoiseEstimate:
     NoiseEstimate
     """
     e = as_signal(e, "e_prev")
-    if e.size < 64:
-        raise SpecError(f"`e_prev`: got {e.size} samples, expected at least 64 to estimate the noise floor")
+    if e.size < NOISE_SAMPLES:
+        raise SpecError(f"`e_prev`: got {e.size} samples, expected at least {NOISE_SAMPLES} to estimate the noise "
+                        "floor")
     nper = int(min(4096, max(64, 2 ** round(math.log2(e.size / 8)))))
     f, p = sps.welch(e, fs=1.0 / ts, nperseg=nper, detrend="linear")
     nyq = 0.5 / ts

@@ -83,6 +83,7 @@ import numpy as np
 from scipy import signal
 
 from ilcdob.errors import SpecError
+from ilcdob.fleet import AXES
 from ilcdob.names import c_comment, c_identifier
 from ilcdob.signals import as_signal
 
@@ -735,14 +736,47 @@ def _robust_parts(filters: dict[str, Any]) -> _RobustSet | None:
                       _state_space(maps.get("one_minus_q"), "law_maps.one_minus_q"))
 
 
+def _design_parts(filters: dict[str, Any]) -> None:
+    """``method``, ``law``, ``axis``, ``limit`` and ``c`` of ``filters.json``, checked.
+
+    Raises
+    ------
+    SpecError
+        An entry of the wrong type or value, naming its key.
+    """
+    for key in ("method", "law"):
+        if not isinstance(filters.get(key, ""), str):
+            raise SpecError(f"`{key}`: got {filters.get(key)!r:.80}, expected a string")
+    if filters.get("axis", "x") not in AXES:
+        raise SpecError(f"`axis`: got {filters.get('axis')!r:.80}, expected one of {list(AXES)}")
+    limit = filters.get("limit")
+    if limit is not None:
+        if not isinstance(limit, dict):
+            raise SpecError(f"`limit`: got {limit!r:.80}, expected a mapping such as {{'acceleration_m_s2': 6.7}}")
+        accel = limit.get("acceleration_m_s2")
+        if accel is not None and (isinstance(accel, bool) or not isinstance(accel, (int, float))
+                                  or not (math.isfinite(accel) and accel > 0)):
+            raise SpecError(f"`limit.acceleration_m_s2`: got {accel!r:.80}, expected the learning vehicle's "
+                            "acceleration limit, a number > 0 (m/s^2)")
+    code = filters.get("c")
+    if code is not None:
+        if not isinstance(code, dict):
+            raise SpecError(f"`c`: got {code!r:.80}, expected a mapping such as {{'prefix': 'ilcdob_uav1_uav2_'}}")
+        prefix = code.get("prefix")
+        if prefix is not None and not (isinstance(prefix, str) and _C_IDENTIFIER.fullmatch(prefix)):
+            raise SpecError(f"`c.prefix`: got {prefix!r:.80}, expected the start of a C identifier: an ASCII letter "
+                            "followed by letters, digits or '_' (e.g. 'uav1_uav2_')")
+
+
 def check_filters(filters: object, source: str) -> dict[str, Any]:
     """The content of a ``filters.json`` read from a file, checked before it is used.
 
     Checks every entry the learning law (:func:`~ilcdob.design.export.apply_learning`) and
     the C code (:func:`c_code`) read: ``from``/``to`` names, ``sample_time`` (s), ``L1`` and
     ``L2`` (``advance`` at most :data:`MAX_ADVANCE`, finite sections or polynomials,
-    look-ahead taps), ``band`` and ``disturbance``, and a robust-set design's ``law_maps``,
-    ``F`` and ``trial_ends``.
+    look-ahead taps), ``band`` and ``disturbance``, a robust-set design's ``law_maps``,
+    ``F`` and ``trial_ends``, and ``method``/``law`` (strings), ``axis``, ``limit`` (its
+    ``acceleration_m_s2`` a number > 0, m/s^2, or null) and ``c`` (its ``prefix``).
 
     Parameters
     ----------
@@ -776,6 +810,7 @@ def check_filters(filters: object, source: str) -> dict[str, Any]:
                 check_filter_entry(filters[key], key)
         _learning_parts(filters)
         _robust_parts(filters)
+        _design_parts(filters)
     except SpecError as exc:
         raise SpecError(f"{source}: {exc}") from None
     return filters

@@ -121,7 +121,7 @@ from scipy.signal import fftconvolve
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.lifted import markov_parameters
 from ilcdob.loop import LoopSystem, freqresp
-from ilcdob.signals import as_signal
+from ilcdob.signals import as_signal, check_grid
 
 from .band import fade_out, fold_start
 from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus, reconstruct_disturbance,
@@ -1037,9 +1037,11 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         The SOCP solver failed.
     SpecError
         ``margin = 0`` over the disc (``structure`` None) where the disc reaches system j-1's stability
-        boundary: no FIR has a finite worst case there.
+        boundary: no FIR has a finite worst case there; or ``options.finite_trial_s`` longer than
+        :data:`ilcdob.signals.MAX_GRID_SAMPLES` samples.
     """
     o = options or RobustSetOptions()
+    check_grid(o.finite_trial_s, source.ts, "robust-set design: `finite_trial_s`, the whole-trial figure's trial")
     lf = closed_form_filters(source, target)
     # F depends on system j-1 and its bound only: designs of several targets from one source share it
     key = (repr(source.nominal.spec), source.ts, np.asarray(w_bound, float).tobytes(),

@@ -25,7 +25,7 @@ from scipy.optimize import brentq
 
 from ilcdob.errors import SignalError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
-from ilcdob.signals import FlightData
+from ilcdob.signals import FlightData, check_grid
 
 
 __all__ = [
@@ -345,6 +345,7 @@ def _grid(ts: float, duration: float, owner: str) -> np.ndarray:
     ts = _finite("ts", ts, owner)
     if ts <= 0:
         raise SpecError(f"{owner}.sample: `ts`: got {ts!r}, expected a sample time > 0 (s)")
+    check_grid(duration, ts, f"{owner}.sample")
     n = int(math.floor(duration / ts + 1e-9)) + 1
     if n < 2:
         raise SpecError(f"{owner}.sample: `ts`: got {ts!r} s, longer than the duration {duration!r} s")

@@ -68,7 +68,7 @@ from .specs import DOBSpec, PIDSpec, PlantSpec
 
 __all__ = ["zoh_with_delay", "discretize_plant", "discretize_pid", "q_filter", "discretize_q", "discretize_m",
            "DiscreteBlock", "plant_block", "pid_block", "q_block", "m_block", "tustin_map", "rhp_zeros", "cancel_roots",
-           "MAX_DELAY_SAMPLES"]
+           "MAX_DELAY_SAMPLES", "MAX_Q_SPAN"]
 
 
 @dataclass(frozen=True)
@@ -177,6 +177,20 @@ def _check_ts_delay(ts: float, delay: float) -> None:
         raise SpecError(f"`delay`: got {delay:g} s, {delay / ts:.4g} samples of {ts:g} s; expected at most "
                         f"{MAX_DELAY_SAMPLES} samples ({MAX_DELAY_SAMPLES * ts:g} s): every sample of delay is a "
                         "state of the discretised loop (a plant input delay is milliseconds; check its unit)")
+
+
+#: Most sample times the DOB's time constant may be, and least (its reciprocal): Q's matrices hold
+#: ``(Ts/tau)^k / k!`` and M's gain ``1/tau^q_order`` (``q_order`` up to 20), in double range up to here.
+#: A time constant a million times the sample time (or a millionth of it) is a unit slip, not a DOB.
+MAX_Q_SPAN = 1e6
+
+
+def _check_q_time_constant(dob: DOBSpec, ts: float) -> None:
+    tau = dob.q_time_constant
+    if not 1.0 / MAX_Q_SPAN <= tau / ts <= MAX_Q_SPAN:
+        raise SpecError(f"`dob.q_time_constant`: got {tau:g} s, {tau / ts:.4g} sample times of {ts:g} s; expected "
+                        f"{ts / MAX_Q_SPAN:g} to {ts * MAX_Q_SPAN:g} s (within {MAX_Q_SPAN:g} times the sample time "
+                        "either way; the DOB bandwidth is about 1/q_time_constant rad/s: check its unit, s)")
 
 
 def _augment_delay(phi: np.ndarray, phi_m1: np.ndarray, g0: np.ndarray, g1: np.ndarray, c: np.ndarray,
@@ -734,8 +748,15 @@ def q_block(dob: DOBSpec, model: PlantSpec, ts: float) -> DiscreteBlock:
     -------
     DiscreteBlock
         Poles ``e^{-Ts/tau}`` (``q_order`` times) and 0 (one per delay state).
+
+    Raises
+    ------
+    SpecError
+        A bad sample time or delay, or ``dob.q_time_constant`` more than :data:`MAX_Q_SPAN`
+        sample times (or less than its reciprocal).
     """
     _check_ts_delay(ts, model.delay)
+    _check_q_time_constant(dob, ts)
     n, tau = dob.q_order, dob.q_time_constant
     rhp = rhp_zeros(model)
     if rhp.size:
@@ -828,9 +849,11 @@ def m_block(dob: DOBSpec, model: PlantSpec, ts: float) -> DiscreteBlock:
     Raises
     ------
     SpecError
-        ``M`` is improper, or a model zero lies at ``s = 2/Ts``.
+        ``M`` is improper, a model zero lies at ``s = 2/Ts``, or ``dob.q_time_constant`` is more
+        than :data:`MAX_Q_SPAN` sample times (or less than its reciprocal).
     """
     _check_ts_delay(ts, 0.0)
+    _check_q_time_constant(dob, ts)
     num = np.trim_zeros(np.asarray(model.num, dtype=float), "f")
     den = np.trim_zeros(np.asarray(model.den, dtype=float), "f")
     tau, n = dob.q_time_constant, dob.q_order

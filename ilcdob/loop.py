@@ -41,7 +41,7 @@ import control as ct
 import numpy as np
 
 from .discretize import DiscreteBlock, m_block, pid_block, plant_block, q_block
-from .errors import SpecError, UnstableLoopError
+from .errors import IlcdobError, SpecError, UnstableLoopError
 from .specs import SystemSpec
 
 __all__ = ["LoopSystem", "build_loop", "freqresp", "delta_poles", "loop_eigenvalues", "STABILITY_MARGIN"]
@@ -288,7 +288,21 @@ def build_loop(spec: SystemSpec, ts: float) -> LoopSystem:
     UnstableLoopError
         If the DOB loop or the plain PID loop has a pole on or outside the unit circle;
         the message names the system and the offending poles.
+    SpecError
+        A block that cannot be discretised (:mod:`ilcdob.discretize`) or a loop whose matrices
+        overflow; the message names the system first, whichever step failed.
     """
+    try:
+        return _build_loop(spec, ts)
+    except IlcdobError as exc:
+        named = f"system {spec.name!r}: "
+        if str(exc).startswith(named):
+            raise
+        raise type(exc)(named + str(exc)) from exc
+
+
+def _build_loop(spec: SystemSpec, ts: float) -> LoopSystem:
+    """:func:`build_loop` without its naming of the system in errors that do not name it."""
     model = spec.nominal_plant
     blocks = {"P": plant_block(spec.plant, ts), "C": pid_block(spec.controller, ts),
               "Q": q_block(spec.dob, model, ts), "M": m_block(spec.dob, model, ts)}

@@ -388,12 +388,13 @@ class NativeFunction:
     def get(self, build: bool = True) -> Any:
         """The native function if there is (or, with ``build``, can be) one, else the virtual machine's.
 
+        A folder or library that fails the checks of the module docstring is not used (one
+        warning): the library is built in, or looked for in, :func:`private_dir` instead.
+
         Parameters
         ----------
         build : bool
             Build the library when none is on disk (mode ``auto``; ``required`` always builds).
-        A folder or library that fails the checks of the module docstring is not used (one
-        warning): the library is built in, or looked for in, :func:`private_dir` instead.
 
         Returns
         -------

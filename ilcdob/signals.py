@@ -18,8 +18,8 @@ from .atomic import atomic_path
 from .errors import SignalError, SpecError
 from .names import csv_field
 
-__all__ = ["FlightData", "as_signal", "check_time", "check_signal", "extend_smoothly", "resample_onto",
-           "segments", "MIN_WINDOW_SAMPLES"]
+__all__ = ["FlightData", "as_signal", "check_time", "check_signal", "check_grid", "extend_smoothly",
+           "resample_onto", "segments", "MIN_WINDOW_SAMPLES", "MAX_GRID_SAMPLES", "SAMPLE_GAP_FACTOR"]
 
 #: Relative tolerance on the spacing of a "uniform" time grid.
 UNIFORM_RTOL = 1e-6
@@ -29,6 +29,24 @@ UNIFORM_RTOL = 1e-6
 #: ``metadata["gaps"]`` and :meth:`FlightData.pieces` cuts the record there, instead of
 #: fitting a model to the straight line that interpolation draws across it.
 GAP_FACTOR = 5.0
+
+#: A step between two time stamps of a signal longer than this many median steps has at least one
+#: sample missing: :meth:`FlightData.from_samples` records every such step in
+#: ``metadata["sample_gaps"]`` (beside the :data:`GAP_FACTOR` gaps, where identification cuts),
+#: and a trial to learn from, which must hold a sample at every ``k Ts``, is refused with any
+#: (:meth:`FlightData.missing_samples`). 1.5 is midway between a step of the log (1) and a step
+#: with one sample missing (2): a logger's jitter moves a stamp by a few percent of a step (a late
+#: stamp makes one step longer and the next shorter by as much), so the steps of a complete log
+#: stay far below it, and a step over a missing sample stays above it until the jitter reaches
+#: half a step.
+SAMPLE_GAP_FACTOR = 1.5
+
+#: Most samples one time grid (a trial, a flight, a resampled log, a wind series) may hold: 5 million,
+#: 83 min at 1 ms, the shortest sample time the designs are tested at (the scenarios last 40 to 60 s:
+#: 60,000 samples at 1 ms, 1.5 million at a 10 kHz loop). A longer grid comes from a sample time or a
+#: duration in the wrong unit, and is refused (:func:`check_grid`) before anything is allocated: a
+#: flight holds about ten signals of 8 bytes a sample, 400 MB at this bound.
+MAX_GRID_SAMPLES = 5_000_000
 
 #: Fewest samples a window of :func:`segments` may hold.
 MIN_WINDOW_SAMPLES = 10
@@ -140,6 +158,34 @@ def check_time(t: np.ndarray, source: str, signal: str = "time") -> np.ndarray:
     return t
 
 
+def check_grid(duration: float, ts: float, what: str) -> None:
+    """Check the length of a time grid before it is allocated: ``duration / ts`` samples, at most
+    :data:`MAX_GRID_SAMPLES`.
+
+    Parameters
+    ----------
+    duration : float
+        Length of the grid, s.
+    ts : float
+        Its sample time, s (> 0).
+    what : str
+        What the grid is for, for the message (e.g. ``"scenario 1"``).
+
+    Raises
+    ------
+    SpecError
+        ``duration / ts`` is more than :data:`MAX_GRID_SAMPLES`, or not a number, or ``ts <= 0``: the
+        message names the sample time, the duration, the number of samples and the bound.
+    """
+    duration, ts = float(duration), float(ts)
+    n = duration / ts if ts > 0 else np.inf
+    if not n <= MAX_GRID_SAMPLES:
+        raise SpecError(f"{what}: a duration of {duration:g} s at a sample time of {ts:g} s is {n:.4g} samples; "
+                        f"expected at most {MAX_GRID_SAMPLES:,} samples a trial ({MAX_GRID_SAMPLES * ts:.4g} s at "
+                        "this sample time; a sample time of 1 ms to 50 ms is what ilcdob is built for): check that "
+                        "the sample time and the duration are in s")
+
+
 def check_signal(x: object, t: np.ndarray, source: str, name: str) -> np.ndarray:
     """A signal as a float array with one finite value per time stamp in ``t``.
 
@@ -174,10 +220,11 @@ def check_signal(x: object, t: np.ndarray, source: str, name: str) -> np.ndarray
     return arr
 
 
-def _merge_intervals(intervals: list[list[float]]) -> list[list[float]]:
+def _merge_intervals(intervals: list[list[float]], touching: bool = True) -> list[list[float]]:
+    """Overlapping intervals merged (and, with ``touching``, those sharing an end)."""
     out: list[list[float]] = []
     for lo, hi in sorted(intervals):
-        if out and lo <= out[-1][1]:
+        if out and (lo <= out[-1][1] if touching else lo < out[-1][1]):
             out[-1][1] = max(out[-1][1], hi)
         else:
             out.append([lo, hi])
@@ -247,7 +294,9 @@ class FlightData:
 
         The common grid spans the overlap of all signals; each signal is interpolated linearly
         onto it. Steps longer than :data:`GAP_FACTOR` median steps of a signal are recorded as
-        gaps (``metadata["gaps"]``: ``[t_before, t_after]`` pairs, s).
+        gaps (``metadata["gaps"]``: ``[t_before, t_after]`` pairs, s), and steps longer than
+        :data:`SAMPLE_GAP_FACTOR` median steps, each with a sample or more missing, as
+        ``metadata["sample_gaps"]`` (the same pairs; :meth:`missing_samples`).
 
         Parameters
         ----------
@@ -259,7 +308,7 @@ class FlightData:
             Unit of each signal.
         metadata : dict, optional
             Free-form; ``original_rates_hz`` (each signal's median rate) is added unless given,
-            and ``gaps`` when there are any.
+            and ``gaps`` and ``sample_gaps`` when there are any.
         source : str
             File name or description, for messages.
 
@@ -271,8 +320,8 @@ class FlightData:
         Raises
         ------
         SignalError
-            No signals, bad time stamps or samples, a bad ``ts``, or signals that do not
-            overlap in time.
+            No signals, bad time stamps or samples, a bad ``ts``, signals that do not overlap in
+            time, or a grid of more than :data:`MAX_GRID_SAMPLES` samples.
         """
         if not series:
             raise SignalError(f"{source}: no signals given")
@@ -288,17 +337,25 @@ class FlightData:
         t1 = min(t[-1] for t, _ in checked.values())
         if t1 <= t0:
             raise SignalError(f"{source}: the signals {sorted(checked)} do not overlap in time")
+        if not (t1 - t0) / ts <= MAX_GRID_SAMPLES:  # before the grid is allocated
+            raise SignalError(f"{source}: the common time grid of the signals {sorted(checked)}, {t0:.6g} to "
+                              f"{t1:.6g} s at a step of {ts:g} s (`ts`, else the finest median step of a signal), "
+                              f"is {(t1 - t0) / ts:.4g} samples; expected at most {MAX_GRID_SAMPLES:,}: give a "
+                              "longer `ts`, cut the log with start/stop, or check the unit of the time stamps")
         grid = t0 + np.arange(int(np.floor((t1 - t0) / ts + 1e-9)) + 1) * ts
         rates = {name: 1.0 / float(np.median(np.diff(t))) for name, (t, _) in checked.items()}
         meta = dict(metadata or {})
         meta.setdefault("original_rates_hz", rates)
-        gaps = []
+        gaps, missing = [], []
         for t, _ in checked.values():
             dt = np.diff(t)
-            for k in np.flatnonzero(dt > GAP_FACTOR * np.median(dt)):
-                gaps.append([float(t[k]), float(t[k + 1])])
+            step = np.median(dt)
+            gaps += [[float(t[k]), float(t[k + 1])] for k in np.flatnonzero(dt > GAP_FACTOR * step)]
+            missing += [[float(t[k]), float(t[k + 1])] for k in np.flatnonzero(dt > SAMPLE_GAP_FACTOR * step)]
         if gaps:
             meta["gaps"] = _merge_intervals(gaps)
+        if missing:  # two gaps around one sample stay two
+            meta["sample_gaps"] = _merge_intervals(missing, touching=False)
         return cls(t=grid, signals={n: resample_onto(t, x, grid) for n, (t, x) in checked.items()},
                    units=dict(units or {}), metadata=meta, source=source)
 
@@ -355,6 +412,27 @@ class FlightData:
                               f"(data span {self.t[0]:.6g} to {self.t[-1]:.6g} s)")
         return FlightData(self.t[keep], {n: x[keep] for n, x in self.signals.items()}, dict(self.units),
                           {**self.metadata, "segment": [lo, hi]}, self.source)
+
+    def missing_samples(self) -> list[tuple[float, float, int]]:
+        """Where the original time stamps of this record miss samples, inside its span.
+
+        From ``metadata["sample_gaps"]`` (:meth:`from_samples`: steps longer than
+        :data:`SAMPLE_GAP_FACTOR` median steps, which the resampled grid fills by interpolation);
+        a gap outside ``t[0]`` to ``t[-1]`` (a segment cut before or after it) is left out.
+
+        Returns
+        -------
+        list of (float, float, int)
+            Per gap, in time order: the last stamp before it and the first after it (s, on the
+            clock of ``t``) and the samples of :attr:`ts` missing between them (at least 1).
+        """
+        ts = self.ts
+        tol = 1e-6 * ts
+        out = []
+        for lo, hi in self.metadata.get("sample_gaps") or []:
+            if lo < self.t[-1] - tol and hi > self.t[0] + tol:
+                out.append((float(lo), float(hi), max(1, int(round((hi - lo) / ts)) - 1)))
+        return out
 
     def pieces(self) -> list["FlightData"]:
         """The record cut at its gaps (``metadata["gaps"]``): the samples strictly between

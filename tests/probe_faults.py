@@ -1236,6 +1236,8 @@ def _csv_mutations(make: Callable[[], str], value_col: int) -> dict[str, tuple[C
         "crlf": (lambda: make().replace("\n", "\r\n"), A),
         "comment-inside": (_csv_edit(make, lambda ls: [*ls[:20], "# a note", *ls[20:]]), A),
         "huge-values": (_csv_edit(make, lambda ls: _set_cell(ls, 10, value_col, "1e300")), EAC),
+        "gap-50-rows": (_csv_edit(make, lambda ls: [*ls[:2 + 200], *ls[2 + 250:]]), E),
+        "one-missing-row": (_csv_edit(make, lambda ls: [*ls[:2 + 100], *ls[2 + 101:]]), E),
     }
 
 
@@ -1248,6 +1250,10 @@ def family_documents() -> list[Case]:
                           setup=writes({"fleet.toml": make})))
     cases.append(case(f, "fleet/sparse-600mib", ["check", "--fleet", "fleet.toml"],
                       setup=lambda ctx: sparse(ctx.p("fleet.toml"), 600 * 2**20)))
+    tiny_ts = fleet_with(("sample_time = 0.02", "sample_time = 1e-7"))  # 10^8 samples a second of trial
+    for cmd in ("reproduce", "compare", "campaign", "extensions", "learn-fleet", "design"):
+        cases.append(case(f, f"fleet-{cmd}/sample-time-1e-7", tiny(cmd, "--fleet", "fleet.toml"), E,
+                          uses=with_uses(cmd), setup=writes({"fleet.toml": tiny_ts})))
     for label in FLEET_SUBSET:
         make = fleet_mut[label][0]
         for cmd in ("design", "reproduce", "compare", "campaign", "extensions", "learn-fleet", "identify-fleet"):
@@ -1280,7 +1286,8 @@ def family_documents() -> list[Case]:
         case(f, "trial/200k-rows", tiny("learn"), EA, uses=("design",), out="out",
              setup=writes({"trial.csv": lambda: _trial_csv(200_000)})),
     ]
-    for label in ("non-numeric", "nan-cell", "empty", "binary", "duplicate-time", "overflow-1e400"):
+    for label in ("non-numeric", "nan-cell", "empty", "binary", "duplicate-time", "overflow-1e400", "gap-50-rows",
+                  "huge-values"):
         cases.append(case(f, f"design-trial/{label}", tiny("design", "--trial", "trial.csv"), E,
                           setup=writes({"trial.csv": trial_mut[label][0]})))
     flight_mut = _csv_mutations(_flight_csv, 2)
@@ -1375,6 +1382,9 @@ def _tampered_folders() -> list[Case]:
         "results-binary": (raw("run/results.json", bytes(range(128, 256)) * 8), E),
         "fleet-json-wrong-type": (forged("run/fleet.json", lambda d: d.update(sample_time="fast")), E),
         "theorem-json-wrong-type": (forged("run/theorem.json", lambda d: d.update(orders="none")), E),
+        "theorem-worst-w-string": (forged("run/theorem.json",
+                                          lambda d: d["orders"][0]["pairs"][0].update(worst_w="abc")), E),
+        "theorem-unknown-key": (forged("run/theorem.json", lambda d: d.update(worst_w="abc")), EA),
         "figure-not-png": (raw("run/rmse_bars.png", b"\x89PNG\r\n\x1a\n" + b"\x00" * 64), E),
     }
     cases = [case(f, f"run-report/{label}", rep, expect, uses=("run",), setup=setup,
@@ -1443,6 +1453,9 @@ def _tampered_folders() -> list[Case]:
         "fifo": (special_file("design/filters.json", "fifo"), E),
         "folder": (lambda ctx: (ctx.p("design/filters.json").unlink(), ctx.p("design/filters.json").mkdir()), E),
         "manifest-removed": (remove("design/manifest.json"), EA),
+        "limit-string-no-manifest": (chain(forged("design/filters.json",
+                                                  lambda d: d["limit"].update(acceleration_m_s2="abc"), forge=False),
+                                           remove("design/manifest.json")), E),
     }
     cases += [case(f, f"design-folder/{label}", tiny("learn"), expect, uses=with_uses("learn"), setup=setup,
                    out="out" if "ACCEPTED" in expect else None)

@@ -50,3 +50,9 @@ def test_low_altitude_parameters_and_sampling():
         DrydenWind(10.0, 0.01, sigma=(1.0, -1.0, 0.0))
     with pytest.raises(SpecError, match="`ts`"):
         DrydenWind(10.0, 20.0)
+
+
+def test_a_series_too_long_is_refused_before_it_is_allocated():
+    with pytest.raises(SpecError, match=r"DrydenWind: a duration of 1e\+12 s at a sample time of 0\.001 s is "
+                                        r"1e\+15 samples; expected at most 5,000,000"):
+        DrydenWind(1e12, 0.001)  # 24 PB of white noise

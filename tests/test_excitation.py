@@ -134,6 +134,12 @@ def test_chirp_sample_checks_nyquist_of_the_given_ts():
         c.sample()
 
 
+def test_chirp_sample_refuses_a_grid_too_long_before_it_is_allocated():
+    with pytest.raises(SpecError, match=r"Chirp\.sample: a duration of 5 s at a sample time of 1e-15 s is 5e\+15 "
+                                        r"samples; expected at most 5,000,000"):
+        Chirp(0.1, 20.0, 5.0, 1.0).sample(1e-15)  # 40 PB
+
+
 # ----------------------------------------------------------------------------- band
 
 def test_suggest_band_rule_and_nyquist_cap():

@@ -147,6 +147,14 @@ def test_fleet_q_order_of_a_million(tmp_path, capsys):
     assert "UAV1" in line and "`dob.q_order`: got 1000000" in line and "1 to 20" in line
 
 
+@pytest.mark.parametrize("value", ["1e300", "1e-300"])
+def test_fleet_q_time_constant_beyond_double_range(tmp_path, capsys, value):
+    """Q's matrices and M's gain overflowed (OverflowError: an internal error, exit 3)."""
+    fleet = _fleet(tmp_path, "q_time_constant = 0.15", f"q_time_constant = {value}")
+    line = _error(capsys, ["check", "--fleet", fleet])
+    assert "system 'UAV1'" in line and "`dob.q_time_constant`: got" in line and "2e-08 to 20000 s" in line
+
+
 @pytest.mark.parametrize("argv, words", [
     (["compare", "--scenario", "1", "--duration", "2", "--methods", "closed-form", "--seed", "-1"],
      ["argument --seed", "'-1'", "integer >= 0"]),
@@ -169,10 +177,12 @@ def test_check_scale_with_a_bound_is_refused(capsys):
     assert "`scale`: got 2.0 with `bound` 0.2" in line and "give one of them" in line
 
 
-def test_identify_min_fit_nan_is_bad_input_not_a_failed_check(tmp_path, capsys):
+@pytest.mark.parametrize("value", ["nan", "101", "inf", "-inf"])
+def test_identify_min_fit_nan_is_bad_input_not_a_failed_check(tmp_path, capsys, value):
+    # a fit in % is at most 100: a --min-fit above it could never hold, refused before the fit runs
     line = _error(capsys, ["identify", str(tmp_path / "f.csv"), "--input", "u", "--output", "y", "--poles", "2",
-                           "--min-fit", "nan", "--out", str(tmp_path / "m.json")])
-    assert "--min-fit" in line and "'nan'" in line and "<= 100" in line
+                           f"--min-fit={value}", "--out", str(tmp_path / "m.json")])
+    assert "--min-fit" in line and repr(value) in line and "a finite number <= 100" in line
 
 
 def test_reproduce_bandwidth_too_low_to_pad(tmp_path, capsys):
@@ -471,6 +481,28 @@ def test_learn_refuses_a_tampered_design_folder(design_and_trial, tmp_path, caps
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("change, words", [
+    (lambda f: f["limit"].update(acceleration_m_s2="abc"), "`limit.acceleration_m_s2`: got 'abc'"),
+    (lambda f: f["limit"].update(acceleration_m_s2=True), "`limit.acceleration_m_s2`: got True"),
+    (lambda f: f["limit"].update(acceleration_m_s2=-1.0), "`limit.acceleration_m_s2`: got -1.0"),
+    (lambda f: f.update(limit="abc"), "`limit`: got 'abc'"),
+    (lambda f: f.update(c="abc"), "`c`: got 'abc'"),
+    (lambda f: f["c"].update(prefix=5), "`c.prefix`: got 5"),
+    (lambda f: f.update(axis="w"), "`axis`: got 'w'"),
+    (lambda f: f.update(method=[1]), "`method`: got [1]"),
+])
+def test_learn_type_checks_a_design_folder_without_manifest(design_and_trial, tmp_path, capsys, change, words):
+    """A folder without a manifest is used (provenance unknown), so every entry of its filters.json that
+    learn uses is type-checked: a limit of "abc" ended in exit 3, True was taken as 1 m/s^2, an axis or
+    prefix of any type was used, and a bad prefix was blamed on --c-prefix."""
+    design = _tampered_design(design_and_trial, tmp_path, change, False)
+    (design / "manifest.json").unlink()
+    line = _error(capsys, ["learn", str(design_and_trial / "trial.csv"), "--design", str(design), "--error",
+                           "error", "--out", str(tmp_path / "out")])
+    assert str(design / "filters.json") in line and words in line, line
+    assert not (tmp_path / "out").exists()
+
+
 def test_learn_refuses_absurd_trial_values(design_and_trial, tmp_path, capsys):
     """An error of 1e300 m overflowed the limit check's RMS and ended in exit 3."""
     text = (design_and_trial / "trial.csv").read_text(encoding="utf-8").splitlines()
@@ -481,10 +513,40 @@ def test_learn_refuses_absurd_trial_values(design_and_trial, tmp_path, capsys):
     assert "1e+300 m at sample 10" in line
 
 
+@pytest.mark.parametrize("column, words", [
+    (1, "the error (column `error`) is 1e+300 m at sample 10"),
+    (2, "the learning signal (column `learning`) is 1e+300 m/s^2 at sample 10"),
+])
+def test_design_trial_refuses_absurd_values(design_and_trial, tmp_path, capsys, column, words):
+    """``design --trial`` read the file without learn's value check: the limit check's RMS overflowed (exit 3)."""
+    rows = (design_and_trial / "trial.csv").read_text(encoding="utf-8").splitlines()[2:]
+    cells = [row.split(",") + ["0"] for row in rows]
+    cells[10][column] = "1e300"
+    trial = tmp_path / "trial.csv"
+    trial.write_text("time,error,learning\n" + "".join(",".join(c) + "\n" for c in cells), encoding="utf-8")
+    line = _error(capsys, [*DESIGN, "--trial", str(trial), "--out", str(tmp_path / "out")])
+    assert str(trial) in line and words in line, line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command", ["design", "learn"])
+def test_a_trial_too_short_for_the_auto_band_names_the_file(tmp_path, capsys, command):
+    """``--bandwidth auto`` on a 3-sample trial was refused as "`e_prev`: got 3 samples" (no file named)."""
+    trial = tmp_path / "short.csv"
+    trial.write_text("time,error,learning\n0,0.01,0\n0.02,0.01,0\n0.04,0.01,0\n", encoding="utf-8")
+    argv = ([*DESIGN, "--trial", str(trial)] if command == "design" else
+            ["learn", str(trial), "--from", "UAV1", "--to", "UAV2", "--error", "error"])
+    line = _error(capsys, [*argv, "--out", str(tmp_path / "out")])
+    assert f"{trial}: 3 samples" in line and "at least 64" in line and "--bandwidth" in line, line
+
+
 @pytest.mark.parametrize("contents, words", [
     ({"methods": [1, 2]}, 'key "methods": got [1, 2], expected an object'),
     ({"methods": {"fir": {"ratio_nominal": "big"}}}, "methods.fir.ratio_nominal"),
     ({"methods": {}, "scenarios": {"s1": {"methods": "all"}}}, "scenarios.s1.methods"),
+    ({"samples": "abc", "methods": {}}, 'key "samples": got \'abc\', expected a number or null'),
+    ({"wall_time_s": [1], "methods": {}}, 'key "wall_time_s": got [1]'),
+    ({"rmse_without_learning": {"nominal": "abc"}, "methods": {}}, 'key "rmse_without_learning.nominal"'),
 ])
 def test_report_type_checks_compare_and_campaign_tables(tmp_path, capsys, contents, words):
     """The method tables of compare.json and campaign.json were rendered whatever they held."""

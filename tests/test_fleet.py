@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import tomllib
+
 import pytest
 
 import ilcdob
@@ -52,6 +54,23 @@ def test_bad_fleet_files_name_file_system_and_key(fleet_file, good_fleet_text, o
     assert str(path) in msg
     for part in must_name:
         assert part in msg, msg
+
+
+@pytest.mark.parametrize("value", ["1e-7", "5e-5", "2.0", "20", "1e300", "1e-300"])
+def test_sample_times_outside_the_stated_range_are_refused(fleet_file, good_fleet_text, value):
+    # 1e-7 s would make a 60 s scenario 600 million samples a flight; 20 is ms written as s
+    path = fleet_file(good_fleet_text.replace("sample_time = 0.02", f"sample_time = {value}"))
+    with pytest.raises(FleetError) as info:
+        ilcdob.load_fleet(path)
+    msg = str(info.value)
+    assert str(path) in msg and "`sample_time`" in msg and f"got {tomllib.loads(f'v = {value}')['v']!r}" in msg
+    assert "0.0001 to 1 s" in msg
+
+
+@pytest.mark.parametrize("value", ["1e-4", "0.001", "0.05"])
+def test_sample_times_inside_the_range_load(fleet_file, good_fleet_text, value):
+    path = fleet_file(good_fleet_text.replace("sample_time = 0.02", f"sample_time = {value}"))
+    assert ilcdob.load_fleet(path).sample_time == float(value)
 
 
 def test_unreadable_and_invalid_toml(fleet_file, tmp_path):

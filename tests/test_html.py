@@ -325,6 +325,42 @@ def test_a_folder_mixing_runs_is_refused_and_old_folders_say_what_they_lack(tmp_
     assert "min margin" not in html and "rmse_bars.png" in html  # the RMSE numbers and figures still render
 
 
+def _forged(paper_dir: Path, folder: Path, name: str, change) -> Path:
+    """A copy of ``paper_dir`` with ``change(data)`` applied to its ``name`` and the manifest's SHA-256 of it
+    recomputed, so that only the type checks stand between the edit and the report."""
+    import hashlib
+
+    shutil.copytree(paper_dir, folder)
+    data = json.loads((folder / name).read_text())
+    change(data)
+    (folder / name).write_text(json.dumps(data))
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["files"][name] = hashlib.sha256((folder / name).read_bytes()).hexdigest()
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    return folder
+
+
+@pytest.mark.parametrize("name, change, key, value", [
+    ("theorem.json", lambda d: d["orders"][0]["pairs"][0].update(worst_w="abc"), "orders[0].pairs[0].worst_w",
+     "'abc'"),
+    ("theorem.json", lambda d: d["orders"][0]["pairs"][1].update(delta_source=5), "orders[0].pairs[1].delta_source",
+     "5"),
+    ("results.json", lambda d: d["scenarios"][0].update(duration_s="abc"), "scenarios[0].duration_s", "'abc'"),
+    ("results.json", lambda d: d["scenarios"][0]["systems"]["UAV2"].update(peak_d_f_learning=[1.0, "x"]),
+     "scenarios[0].systems.UAV2.peak_d_f_learning", "[1.0, 'x']"),
+    ("results.json", lambda d: d.update(sensor_noise_std_m=True), "sensor_noise_std_m", "True"),
+])
+def test_a_forged_result_number_is_refused_naming_the_file_key_and_value(tmp_path, paper_dir, name, change, key,
+                                                                        value):
+    """A number of a result file that is not one (the manifest recomputed, as a forger would) was accepted."""
+    folder = _forged(paper_dir, tmp_path / "forged", name, change)
+    with pytest.raises(ReportError) as info:
+        build_report([folder])
+    assert f'{folder / name}: key "{key}": got {value}, expected ' in str(info.value)
+    assert main(["--quiet", "report", str(folder), "--out", str(tmp_path / "r.html")]) == 2
+    assert not (tmp_path / "r.html").exists()
+
+
 _PROBE = """<img id="control" alt="control" src="data:image/png;base64,AAAA"><script>
 window.addEventListener("load", function () {
   for (const img of document.images) {

@@ -63,16 +63,34 @@ def test_unstable_loop_is_a_clear_error(fleet):
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning", "ignore::scipy.signal.BadCoefficients")
-def test_overflowing_loop_is_a_spec_error_naming_the_system(fleet):
-    # Each block discretises to finite matrices (plant gain 1e100, kp 1e100 are both in range),
-    # but the interconnection's products (about 1e100 * 1e100 * 1e100) overflow to inf: the
-    # loop check must say so as a SpecError naming the system, not end in another exception.
-    spec = replace(fleet.systems[0], plant=PlantSpec([1e100], [0.1, 1.0, 0.0, 0.0]), model=None,
-                   controller=PIDSpec(1e100, 0.3, 2.4, 0.05))
+@pytest.mark.parametrize("plant, controller", [
+    # the plant's zero-order hold overflows: a pole at s = +1e5 rad/s grows by e^2000 in one sample
+    (PlantSpec([1.0], [1.0, -1e5, 0.0, 0.0]), None),
+    # huge plant gain and kp: the interconnection's products (1e100 * 1e100 * 1e100) overflow, or, with some
+    # SciPy versions, already the plant's zero-order hold
+    (PlantSpec([1e100], [0.1, 1.0, 0.0, 0.0]), PIDSpec(1e100, 0.3, 2.4, 0.05)),
+    # huge gains with a normal plant: every block discretises, the interconnection's products overflow
+    (None, PIDSpec(1e308, 1e308, 1e308, 0.05)),
+])
+def test_overflowing_loop_is_a_spec_error_naming_the_system(fleet, plant, controller):
+    # whichever step overflows first (a block's discretisation or the interconnection), the SpecError
+    # names the system and says the numbers overflowed
+    spec = fleet.systems[0]
+    spec = replace(spec, plant=plant or spec.plant, model=None, controller=controller or spec.controller)
     with pytest.raises(SpecError) as info:
         build_loop(spec, 0.02)
     msg = str(info.value)
-    assert "'UAV1'" in msg and "non-finite" in msg and "PID loop without DOB" in msg
+    assert msg.startswith("system 'UAV1': ") and "non-finite" in msg and "overflow" in msg
+
+
+@pytest.mark.parametrize("tau", [1e300, 1e-300])
+def test_q_time_constant_out_of_range_is_a_spec_error_naming_the_system(fleet, tau):
+    # Q's matrices hold (Ts/tau)^k / k! and M's gain 1/tau^q_order: these overflowed (OverflowError, an
+    # internal error) instead of being refused as the input they come from
+    with pytest.raises(SpecError) as info:
+        build_loop(replace(fleet.systems[0], dob=DOBSpec(3, tau)), 0.02)
+    msg = str(info.value)
+    assert msg.startswith("system 'UAV1': `dob.q_time_constant`: got ") and "2e-08 to 20000 s" in msg
 
 
 def test_closed_loop_delta_form_matches_the_loop(fleet):

@@ -284,3 +284,9 @@ def test_invalid_flight_arguments(fleet, vehicles):
     # a plain PIDSpec works as well as the SystemSpec
     fd = fly(p, PIDSpec(kp=3.0, ki=0.3, kd=2.42, derivative_filter=0.05), 0.5)
     assert len(fd) == 26
+
+
+def test_a_flight_too_long_is_refused_before_it_is_allocated(fleet, vehicles):
+    with pytest.raises(SpecError, match=r"fly: the inner loop's grid \(inner_rate_hz = 500\): a duration of 1e\+12 s "
+                                        r"at a sample time of 0\.002 s is 5e\+14 samples; expected at most 5,000,000"):
+        fly(vehicles["UAV1"], _spec(fleet, "UAV1"), 1e12)  # 4 PB of inner-loop disturbance samples

@@ -184,6 +184,45 @@ def test_scenario_ids_are_validated():
         run_scenario(None, scenario(1), 0)
 
 
+def test_a_sample_time_too_short_for_memory_is_refused_before_anything_is_flown(fleet):
+    """A fleet whose sample time makes a scenario's grid enormous: the grid is checked before it is allocated
+    (1e-12 s first: 6e13 samples, more than any machine's address space holds, so the check of the old code
+    fails at once instead of allocating)."""
+    with pytest.raises(SpecError, match=r"1e-12 s is 6e\+13 samples"):
+        reproduce(dataclasses.replace(fleet, sample_time=1e-12), [1], 1)
+    with pytest.raises(SpecError) as info:  # the fault's fleet: 60 s at 1e-7 s, 600 million samples a flight
+        reproduce(dataclasses.replace(fleet, sample_time=1e-7), [1], 1)
+    msg = str(info.value)
+    assert "scenario 1" in msg and "1e-07 s" in msg and "60 s" in msg and "6e+08 samples" in msg
+    assert "at most 5,000,000 samples" in msg
+
+
+def test_flights_beyond_the_memory_bound_are_refused_before_anything_is_flown(fleet):
+    from ilcdob.validation.reproduce import MAX_FLIGHTS_BYTES  # (the old code has no bound: this stops it here)
+
+    # 4 scenarios, 220 s at 0.02 s (11,000 samples), 3 systems, 10**6 + 2 flights of 10 arrays: 2,640 GB
+    with pytest.raises(SpecError) as info:
+        reproduce(fleet, [1, 2, 3, 4], 10**6)
+    msg = str(info.value)
+    assert "220 s at a sample time of 0.02 s" in msg and "3 systems" in msg and "1000002 flights" in msg
+    assert "2.64e+03 GB" in msg and f"at most {MAX_FLIGHTS_BYTES / 1e9:g} GB" in msg
+    with pytest.raises(SpecError, match="GB"):
+        run_scenario(fleet, scenario(1), 10**7)
+
+
+def test_cli_refuses_a_fleet_whose_sample_time_is_out_of_range(tmp_path, capsys, good_fleet_text):
+    from ilcdob import FleetError, load_fleet
+
+    path = tmp_path / "f.toml"
+    path.write_text(good_fleet_text.replace("sample_time = 0.02", "sample_time = 1e-7"), encoding="utf-8")
+    with pytest.raises(FleetError):  # (the old code loads it: this stops it before the command runs)
+        load_fleet(path)
+    out = tmp_path / "d"
+    assert main(["reproduce", "--fleet", str(path), "--scenarios", "1", "--iterations", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "`sample_time`: got 1e-07" in err and "0.0001 to 1 s" in err and not out.exists()
+
+
 def test_cli_writes_results_json_and_figures(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["reproduce", "--scenarios", "1", "--iterations", "2", "--out", str(out)]) == 0

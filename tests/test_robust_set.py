@@ -181,6 +181,14 @@ def test_time_domain_ratio_on_sampled_plants(fleet, design_uav2):
     assert max(ratios) <= design_uav2.rho_guaranteed + 0.05, ratios
 
 
+def test_a_whole_trial_figure_too_long_is_refused_before_the_design(fleet):
+    # 1e15 s at 0.02 s: 5e16 samples a trial; refused before anything is designed or allocated
+    with pytest.raises(SpecError, match=r"robust-set design: `finite_trial_s`.*: a duration of 1e\+15 s at a sample "
+                                        r"time of 0\.02 s is 5e\+16 samples; expected at most 5,000,000"):
+        design_robust_set(fleet.loop("UAV1"), fleet.loop("UAV2"), np.array([1.0]), np.array([0.3]),
+                          RobustSetOptions(rho=0.8, finite_trial_s=1e15, **FAST))
+
+
 def test_pair_design_and_options(fleet):
     deltas = fleet_delta_sets(fleet, ["UAV2", "UAV3"], k=1, bound=0.3)
     d = design_pair(fleet, "UAV2", "UAV3", "robust-set", deltas=deltas, robust_set=RobustSetOptions(rho=0.8, **FAST))

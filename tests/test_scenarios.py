@@ -101,3 +101,13 @@ def test_check_order_keeps_a_valid_order_and_names_what_is_wrong():
         check_order(names, ["UAV1", 3])
     with pytest.raises(SpecError, match=r"`order`: got None, expected a list of system names"):
         check_order(names, None)
+
+
+def test_a_time_grid_too_long_is_refused_before_it_is_allocated():
+    # 60 s at 1e-12 s: 6e13 samples (480 TB); the message names the sample time, the duration, the samples and the bound
+    assert SCENARIOS[1].time(0.001).size == 60_000
+    with pytest.raises(SpecError) as info:
+        SCENARIOS[1].time(1e-12)
+    msg = str(info.value)
+    assert "scenario 1" in msg and "1e-12 s" in msg and "60 s" in msg and "6e+13 samples" in msg
+    assert "5,000,000" in msg

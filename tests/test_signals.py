@@ -1,11 +1,12 @@
-"""FlightData helpers: cutting flights into windows (:func:`ilcdob.signals.segments`)."""
+"""FlightData helpers: cutting flights into windows (:func:`ilcdob.signals.segments`), the gaps of resampled
+time stamps, and the bound on a time grid's length."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ilcdob.errors import SpecError
+from ilcdob.errors import SignalError, SpecError
 from ilcdob.signals import MIN_WINDOW_SAMPLES, FlightData, segments
 
 
@@ -65,3 +66,49 @@ def test_windows_too_short_name_the_samples_and_the_minimum():
     # 0.1 s at 0.02 s is 5 samples, below MIN_WINDOW_SAMPLES = 10 (0.2 s)
     assert MIN_WINDOW_SAMPLES == 10
     assert "`--segment`" in msg and "5 samples" in msg and "f.csv" in msg and "at least 0.2 s" in msg
+
+
+def test_resampling_records_every_missing_sample_apart_from_the_gaps_identification_cuts_at():
+    one = np.delete(np.arange(500) * 0.02, 300)  # a step of 2 median steps: below GAP_FACTOR, one sample missing
+    fd = FlightData.from_samples({"x": (one, np.sin(one))})
+    assert "gaps" not in fd.metadata and len(fd.pieces()) == 1  # identification as before: one piece
+    assert fd.metadata["sample_gaps"] == [[pytest.approx(5.98), pytest.approx(6.02)]]
+    assert fd.missing_samples() == [(pytest.approx(5.98), pytest.approx(6.02), 1)]
+    many = np.delete(np.arange(500) * 0.02, list(range(200, 250)) + [400])  # t = 4.0 to 4.98 s, and 8.0 s
+    fd = FlightData.from_samples({"x": (many, np.cos(many)), "y": (many, many)})
+    assert len(fd) == 500 and fd.metadata["gaps"] == [[pytest.approx(3.98), pytest.approx(5.0)]]
+    assert [g[2] for g in fd.missing_samples()] == [50, 1]
+    # a segment before, between or after the gaps has none; one across a gap keeps it
+    assert fd.segment(None, 3.98).missing_samples() == [] and fd.segment(5.0, 7.98).missing_samples() == []
+    assert fd.segment(8.02, None).missing_samples() == []
+    assert [g[2] for g in fd.segment(4.5, 7.0).missing_samples()] == [50]
+
+
+def test_a_jittered_but_complete_log_misses_no_sample_and_a_missing_row_is_still_seen():
+    rng = np.random.default_rng(7)
+    t = np.arange(500) * 0.02 + rng.uniform(-0.03, 0.03, 500) * 0.02  # every stamp off by up to 3 % of a step
+    assert FlightData.from_samples({"x": (t, np.sin(t))}).missing_samples() == []
+    t = np.delete(t, 300)
+    assert [g[2] for g in FlightData.from_samples({"x": (t, np.sin(t))}).missing_samples()] == [1]
+
+
+def test_a_grid_too_long_for_memory_is_refused_before_it_is_allocated():
+    # a median step of 1e-12 s over 100 s: 1e14 samples (800 TB); the message names the step, the span and the bound
+    t = np.concatenate([np.arange(99) * 1e-12, [100.0]])
+    with pytest.raises(SignalError) as info:
+        FlightData.from_samples({"x": (t, np.ones(t.size))}, source="f.csv")
+    msg = str(info.value)
+    assert "f.csv" in msg and "1e-12 s" in msg and "0 to 100 s" in msg and "1e+14 samples" in msg
+    assert "5,000,000" in msg
+
+
+def test_check_grid_names_the_sample_time_the_duration_the_samples_and_the_bound():
+    from ilcdob.signals import MAX_GRID_SAMPLES, check_grid
+
+    check_grid(60.0, 0.001, "scenario 1")  # 60,000 samples
+    check_grid(MAX_GRID_SAMPLES * 0.001, 0.001, "the longest")
+    with pytest.raises(SpecError) as info:  # 1e-7 s over 1e9 s: 1e16 samples, 80 PB
+        check_grid(1e9, 1e-7, "scenario 1")
+    msg = str(info.value)
+    assert "scenario 1" in msg and "1e-07 s" in msg and "1e+09 s" in msg and "1e+16 samples" in msg
+    assert "5,000,000" in msg

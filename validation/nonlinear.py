@@ -70,8 +70,8 @@ from ilcdob.signals import as_signal
 from ilcdob.specs import check_noise_std
 from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
 
-from .reproduce import (ReproductionResult, ScenarioResult, SystemResult, check_iterations, learning_chain,
-                        pair_designs)
+from .reproduce import (FLIGHT_ARRAYS, ReproductionResult, ScenarioResult, SystemResult, check_flights_memory,
+                        check_iterations, learning_chain, pair_designs)
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, rmse
 
@@ -563,6 +563,8 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     vehicles = _check_vehicles(base, vehicles, settings.inner_rate_hz)
     order = None if order is None else check_order(base.names, order)
     scs = list(scenarios) if scenarios is not None else [scenario(sid) for sid in scenario_ids]
+    check_flights_memory(base.sample_time, scs, len(base.names if order is None else order), iterations,
+                         FLIGHT_ARRAYS + 1)  # and d_est
     n_ident = len(base.names) if settings.identify else 0
     total = n_ident + len(scs)
     say = progress if progress is not None else (lambda done, total_, what: None)

@@ -53,14 +53,25 @@ from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
 from ilcdob.specs import check_noise_std
 from ilcdob.fleet import Fleet
+from ilcdob.signals import check_grid
 from ilcdob.display import html_table
 
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, simulate_flight
 
-__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "check_iterations", "learning_chain",
-           "law_delta_sets", "pair_designs", "run_scenario", "reproduce", "markdown_index", "json_document",
-           "FIGURE_TEXT"]
+__all__ = ["SystemResult", "ScenarioResult", "ReproductionResult", "check_iterations", "check_flights_memory",
+           "learning_chain", "law_delta_sets", "pair_designs", "run_scenario", "reproduce", "markdown_index",
+           "json_document", "FIGURE_TEXT", "FLIGHT_ARRAYS", "MAX_FLIGHTS_BYTES"]
+
+#: Arrays of samples one flight holds (:class:`~ilcdob.validation.simulate.Flight`: t, r, y, e, d, d_hat,
+#: d_f, u2, y_meas, e_meas; a nonlinear flight one more, d_est).
+FLIGHT_ARRAYS = 10
+
+#: Most memory the flights of one reproduction may hold, bytes: every flight is kept for the report. The
+#: largest run ilcdob is built for, the four scenarios (220 s) at 1 ms, three systems, 100 iterations
+#: (``reproduce``'s most: 102 flights a system), holds 220,000 x 3 x 102 x 10 x 8 bytes = 5.4 GB; the
+#: paper's run at 20 ms and 3 iterations, 13 MB.
+MAX_FLIGHTS_BYTES = 8e9
 
 #: Caption of each figure in the report's README.md (``error_s<N>`` and ``disturbance_s<N>``
 #: are captioned per scenario by :func:`markdown_index`).
@@ -369,6 +380,47 @@ def check_iterations(iterations: object) -> int:
     return iterations
 
 
+def check_flights_memory(ts: float, scenarios: list[Scenario], systems: int, iterations: int,
+                         arrays: int = FLIGHT_ARRAYS) -> None:
+    """Check, before anything is flown, that the flights of a run fit :data:`MAX_FLIGHTS_BYTES`.
+
+    Each scenario's grid is checked first (:func:`ilcdob.signals.check_grid`); then ``systems``
+    systems fly every scenario ``iterations + 2`` times (no DOB, DOB only, the learning
+    iterations), each flight ``arrays`` arrays of 8-byte samples.
+
+    Parameters
+    ----------
+    ts : float
+        Sample time, s.
+    scenarios : list of Scenario
+        The scenarios flown.
+    systems : int
+        Systems flown in each.
+    iterations : int
+        Learning iterations.
+    arrays : int
+        Arrays of samples a flight holds (:data:`FLIGHT_ARRAYS`).
+
+    Raises
+    ------
+    SpecError
+        A scenario of more than :data:`ilcdob.signals.MAX_GRID_SAMPLES` samples, or flights of more
+        than :data:`MAX_FLIGHTS_BYTES` (the message names the sample time, the durations, the
+        counts and the bound).
+    """
+    for sc in scenarios:
+        check_grid(sc.duration, ts, f"scenario {sc.id} ({sc.title})")
+    seconds = sum(sc.duration for sc in scenarios)
+    samples = seconds / ts
+    size = samples * systems * (iterations + 2) * arrays * 8.0
+    if size > MAX_FLIGHTS_BYTES:
+        raise SpecError(f"the flights of {len(scenarios)} scenario(s), {seconds:g} s at a sample time of {ts:g} s "
+                        f"({samples:.4g} samples), {systems} systems, {iterations + 2} flights each (no DOB, DOB "
+                        f"only, {iterations} learning), {arrays} arrays of 8-byte samples a flight: {size / 1e9:.3g} "
+                        f"GB, all kept for the report; expected at most {MAX_FLIGHTS_BYTES / 1e9:g} GB: fly fewer "
+                        "iterations or scenarios, or at a longer sample time")
+
+
 def learning_chain(order: list[str], iterations: int, first: Flight,
                    step: Callable[[str, str, Flight], Flight]) -> tuple[dict[str, list[Flight]], list[tuple[str, str]]]:
     """Pass learning around ``order`` cyclically (module docstring), starting from ``first``.
@@ -506,6 +558,7 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
     noise_std = check_noise_std(sensor_noise_std, "sensor_noise_std")
     filters = {} if filters is None else filters
     ts = fleet.sample_time
+    check_flights_memory(ts, [sc], len(fleet.names if order is None else order), iterations)
     t = sc.time(ts)
     r = sc.reference(t)
     a_ref = sc.acceleration(t)
@@ -602,6 +655,8 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
     law = check_law(law)
     order = None if order is None else check_order(fleet.names, order)
     noise_std = check_noise_std(sensor_noise_std, "sensor_noise_std")
+    check_flights_memory(fleet.sample_time, [scenario(sid) for sid in scenario_ids],
+                         len(fleet.names if order is None else order), check_iterations(iterations))
     start = time.perf_counter()
     filters: dict = {}
     deltas = law_delta_sets(fleet) if law == "multi-source" else None

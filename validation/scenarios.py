@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 
 from ilcdob.errors import SpecError
+from ilcdob.signals import check_grid
 
 __all__ = ["Scenario", "SCENARIOS", "scenario", "parse_scenarios", "check_order", "ALTITUDE"]
 
@@ -90,7 +91,14 @@ class Scenario:
         ----------
         ts : float
             Sample time, s.
+
+        Raises
+        ------
+        SpecError
+            More than :data:`ilcdob.signals.MAX_GRID_SAMPLES` samples (checked before the grid is
+            allocated).
         """
+        check_grid(self.duration, ts, f"scenario {self.id} ({self.title})")
         return np.arange(int(round(self.duration / ts))) * ts
 
     def order(self, names: list[str]) -> list[str]:

@@ -33,7 +33,7 @@ from ilcdob.design.flown import DISTURBANCE_PATHS
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, fleet_from_systems
 from ilcdob.loop import LoopSystem, build_loop
-from ilcdob.signals import FlightData
+from ilcdob.signals import FlightData, check_grid
 from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.interface import AXES, Vehicle, fly_vehicle
@@ -103,7 +103,8 @@ def rough_loop(ts: float) -> LoopSystem:
 
 
 def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: float, axis: str = "x") -> FlightData:
-    loop = rough_loop(ts)
+    loop = rough_loop(ts)  # checks ts
+    check_grid(duration, ts, f"the chirp flight of {name}")
     n = int(round(duration / ts))
     t = np.arange(n) * ts
     inj = 0.5 * np.sin(2 * np.pi * (0.1 * t + (3.0 - 0.1) * t**2 / (2 * duration)))  # 0.1 -> 3 Hz

@@ -330,14 +330,18 @@ def check_stamps(t: np.ndarray, source: str, what: str, rows: np.ndarray | None 
         k = int(bad[0])
         raise SignalError(f"{source}: {what}: non-finite time stamp {float(t[k])!r} at {at(k)}")
     dt = np.diff(t)
-    if np.any(dt == 0):
-        k = int(np.flatnonzero(dt == 0)[0])
+    same, back = np.flatnonzero(dt == 0), np.flatnonzero(dt < 0)
+    if same.size:
+        k = int(same[0])
+        also = f", and {back.size} step(s) back" if back.size else ""
         raise SignalError(f"{source}: {what}: duplicated time stamp {float(t[k]):.9g} s at {at(k)} and "
-                          f"{at(k + 1)}; expected strictly increasing time stamps")
-    if np.any(dt < 0):
-        k = int(np.flatnonzero(dt < 0)[0])
+                          f"{at(k + 1)} ({same.size} repeated stamp(s) in all{also}); expected strictly "
+                          "increasing time stamps, one per sample: choose start/stop to exclude them")
+    if back.size:
+        k = int(back[0])
         raise SignalError(f"{source}: {what}: time stamps not increasing at {at(k + 1)} "
-                          f"({float(t[k]):.9g} -> {float(t[k + 1]):.9g} s); expected strictly increasing")
+                          f"({float(t[k]):.9g} -> {float(t[k + 1]):.9g} s), {back.size} step(s) back in all; "
+                          "expected strictly increasing, one stamp per sample: choose start/stop to exclude them")
 
 
 def check_values(x: np.ndarray, t: np.ndarray, source: str, what: str,

@@ -565,7 +565,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         Learning law (:mod:`ilcdob.design.laws`).
     trial : str or Path, optional
         CSV of the source's trial: time (s), error (m), learning (m/s^2) [, reference (m),
-        acceleration (m/s^2)].
+        acceleration (m/s^2)]; a sample at every ``k Ts``, or it is refused (:func:`_check_learning_trial`).
     c_prefix : str, optional
         closed-form, fir and robust-set only (the methods with C code): prefix of the C symbols.
     c_float : bool
@@ -661,6 +661,12 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         if "acceleration" in _csv_header(trial):
             columns["a"] = "acceleration"
     data = load_csv(trial, columns) if trial else None
+    if data is not None:
+        _check_learning_trial(data, trial, options=False)
+        what = {"e": ("error", "m"), "d_f": ("learning signal", "m/s^2"), "r": ("reference", "m"),
+                "a": ("acceleration", "m/s^2")}
+        _check_trial_values(trial, {f"{what[key][0]} (column `{column}`)": (data[key], what[key][1])
+                                    for key, column in columns.items()})
     if data is not None and abs(data.ts - flt.sample_time) > 1e-9:
         raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
     if data is not None and n is not None and n != len(data):
@@ -682,6 +688,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                          law=law, bandwidth=bandwidth, disturbance=disturbance, on_limit=on_limit,
                          lifted=lifted, **reference)
     if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
+        _check_noise_samples(trial, len(data))
         e_in = design.reference.error_in(data["e"]) if design.reference is not None else data["e"]
         design = design_with_band(design, design.band_for(e_in, data["d_f"]))
     filters = {**design.filters, "axis": axis}
@@ -727,6 +734,67 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
 #: Largest magnitude of a trial's error (m) or learning signal (m/s^2) accepted: a million km
 #: (or km/s^2) is no flight, and squares of larger values overflow the limit check's RMS.
 MAX_TRIAL_VALUE = 1e9
+
+
+def _check_learning_trial(data: Any, path: str | Path, options: bool = True) -> None:
+    """Refuse a recorded trial to learn from whose time stamps miss samples.
+
+    ILC relates sample k of one trial to sample k of the next, so a trial must hold a sample at
+    every ``k Ts``; the loaders' resampling fills a gap with a straight line, which no vehicle flew.
+    A step of the original stamps longer than :data:`ilcdob.signals.SAMPLE_GAP_FACTOR` median steps
+    inside the trial (:meth:`ilcdob.signals.FlightData.missing_samples`) is refused; repeated and
+    decreasing stamps the loaders refuse already.
+
+    Parameters
+    ----------
+    data : FlightData
+        The loaded trial.
+    path : str or Path
+        Its file, for the message.
+    options : bool
+        Whether the command cuts the trial with ``--start``/``--stop`` (``learn``; ``design --trial``
+        reads the whole file), for the message.
+
+    Raises
+    ------
+    SignalError
+        Samples are missing: the message names the first gap (the stamps on either side, the
+        samples missing), how many gaps there are, and the parts without any.
+    """
+    gaps = data.missing_samples()
+    if not gaps:
+        return
+    ts = data.ts
+    origin = float(data.metadata.get("time_origin_s", 0.0))  # the file's clock, where --start/--stop are read
+    digits = max(0, 2 - int(np.floor(np.log10(ts))))
+
+    def at(v: float) -> str:
+        return f"{v + origin:.{digits}f}".rstrip("0").rstrip(".")
+
+    def count(lo: float, hi: float) -> int:
+        return int(round((hi - lo) / ts)) + 1
+
+    lo, hi, missing = gaps[0]
+    where = f"at t = {at(lo + ts)} s" if missing == 1 else f"from t = {at(lo + ts)} to {at(hi - ts)} s"
+    edges = [v for g in gaps for v in g[:2]][1:] + [float(data.t[-1])]  # after each gap, to the next or the end
+    a, b = max(zip(edges[::2], edges[1::2]), key=lambda part: part[1] - part[0])  # the longest
+    a, b = max(a, float(data.t[0])), min(b, float(data.t[-1]))
+    first, later = count(float(data.t[0]), lo), count(a, b)
+    parts = []
+    if first >= 2:
+        parts.append(f"{f'--stop {at(lo)}' if options else f'the part up to {at(lo)} s'} keeps the {first} samples "
+                     "from the trial's start, where they were flown")
+    if later >= 2:
+        parts.append(f"a later part ({f'--start {at(a)} --stop {at(b)}' if options else f'{at(a)} to {at(b)} s'}, "
+                     f"the longest: {later} samples) starts in mid-flight, so its learning signal starts with a "
+                     "transient and the next vehicle must fly it from that time of the reference")
+    raise SignalError(
+        f"{path}: {len(gaps)} gap(s) in the time stamps, {sum(g[2] for g in gaps)} sample(s) of {ts:g} s missing in "
+        f"all; the first: no sample {where} ({missing} missing between the stamps {at(lo)} s and {at(hi)} s). A "
+        "trial to learn from needs a sample at every k Ts: ILC relates sample k of this trial to sample k of the "
+        "next, and across a gap there is only the straight line the loader draws. Fly the trial again, or cut "
+        f"{'it with --start/--stop' if options else 'the file'} to a part without gaps, which the learning signal "
+        "then covers alone" + (": " + "; ".join(parts) if parts else ""))
 
 
 @dataclass(frozen=True)
@@ -775,15 +843,33 @@ class TrialColumns(LogClock):
         if self.learning is not None:
             fields["d_f"] = self.learning
         data = self.load_fields([path], fields)[0]
+        _check_learning_trial(data, path)
         e = np.asarray(data["e"] if self.error is not None else data["r"] - data["y"], float)
         df = np.asarray(data["d_f"], float) if self.learning is not None else np.zeros(len(data))
-        for name, values, unit in (("error", e, "m"), ("learning", df, "m/s^2")):
-            big = np.flatnonzero(np.abs(values) > MAX_TRIAL_VALUE)
-            if big.size:
-                raise SignalError(f"{path}: the {name} is {float(values[big[0]]):.4g} {unit} at sample {big[0]} "
-                                  f"({big.size} sample(s) beyond {MAX_TRIAL_VALUE:g} {unit}); a flown trial's values "
-                                  "are far smaller: check the column and its units")
+        error = f"column `{self.error}`" if self.error is not None else f"`{self.reference}` - `{self.position}`"
+        _check_trial_values(path, {f"error ({error})": (e, "m"),
+                                   f"learning signal (column `{self.learning}`)": (df, "m/s^2")})
         return data, e, df
+
+
+def _check_trial_values(path: str | Path, signals: dict[str, tuple[np.ndarray, str]]) -> None:
+    """Refuse a trial signal beyond :data:`MAX_TRIAL_VALUE` (``signals``: what -> (values, unit)), naming the file."""
+    for name, (values, unit) in signals.items():
+        big = np.flatnonzero(np.abs(values) > MAX_TRIAL_VALUE)
+        if big.size:
+            raise SignalError(f"{path}: the {name} is {float(values[big[0]]):.4g} {unit} at sample {big[0]} "
+                              f"({big.size} sample(s) beyond {MAX_TRIAL_VALUE:g} {unit}); a flown trial's values "
+                              "are far smaller: check the column and its units")
+
+
+def _check_noise_samples(trial: str | Path, n: int) -> None:
+    """Refuse a trial too short for ``--bandwidth auto`` to estimate its noise floor, naming the file."""
+    from ilcdob.design.band import NOISE_SAMPLES
+
+    if n < NOISE_SAMPLES:
+        raise SignalError(f"{trial}: {n} samples; `--bandwidth auto` chooses the learning band from the trial's "
+                          f"noise floor, which needs at least {NOISE_SAMPLES} samples: give a longer trial, or "
+                          "--bandwidth RAD_S (or off)")
 
 
 def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *, source: str | None = None,
@@ -808,7 +894,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     out : str or Path
         Output folder.
     trial : str or Path
-        The source's recorded trial (.csv, .parquet, .ulg, .bin).
+        The source's recorded trial (.csv, .parquet, .ulg, .bin): a sample at every ``k Ts``, or it is
+        refused (:func:`_check_learning_trial`: missing samples; the loaders: repeated or decreasing stamps).
     columns : TrialColumns
         Its signals.
     source, target : str, optional
@@ -889,6 +976,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit,
                            fir=None if fir_unattainable is None else FIROptions(unattainable=fir_unattainable))
         if made.choose is not None:
+            _check_noise_samples(trial, e.size)
             made = design_with_band(made, made.band_for(e, df_prev))
         filters = {**made.filters, "axis": axis or "x"}
         origin = f"designed here ({method})"

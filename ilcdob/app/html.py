@@ -54,8 +54,9 @@ file of its run: a folder holding a file that is missing, changed or not listed 
 from different runs, edited files) is refused, naming the file
 (:func:`ilcdob.app.output.verify_manifest`); a folder without any manifest (written before
 manifests existed) is rendered with its provenance stated as unknown. The fields of
-``results.json``, ``fleet.json`` and ``theorem.json`` that the report uses, and the method
-tables of ``compare.json`` and ``campaign.json``, are type-checked
+``results.json``, ``fleet.json`` and ``theorem.json`` that the report uses, the other numbers
+their writer puts there (a Theorem pair's ``worst_w``, a scenario's ``duration_s``, ...), and
+the numeric settings and method tables of ``compare.json`` and ``campaign.json``, are type-checked
 when read, and a file that is not standard JSON is refused, each error naming the file and
 the key. Every value is HTML-escaped (:func:`ilcdob.names.html_text`) where it is rendered.
 """
@@ -341,6 +342,8 @@ def _check_results(path: Path, data: Any) -> None:
         s.text(data["law"], "law")
     if "sample_time" in data:
         s.real(data["sample_time"], "sample_time", null=True, positive=True)
+    if "sensor_noise_std_m" in data:
+        s.real(data["sensor_noise_std_m"], "sensor_noise_std_m", null=True)
     longest = 0
     for i, sc in enumerate(s.seq(data.get("scenarios"), "scenarios", "scenario objects")):
         where = f"scenarios[{i}]"
@@ -348,6 +351,8 @@ def _check_results(path: Path, data: Any) -> None:
         s.integer(sc.get("id"), f"{where}.id", least=0)
         if "title" in sc:
             s.text(sc["title"], f"{where}.title")
+        if "duration_s" in sc:
+            s.real(sc["duration_s"], f"{where}.duration_s", null=True, positive=True)
         systems = s.obj(sc.get("systems"), f"{where}.systems")
         if sc.get("order") is not None:
             order = s.texts(sc["order"], f"{where}.order")
@@ -359,10 +364,11 @@ def _check_results(path: Path, data: Any) -> None:
             for field_ in ("rmse_no_dob", "rmse_dob", "rmse_dhat_dob"):
                 if field_ in m:
                     s.real(m[field_], f"{key}.{field_}", null=True)
-            for field_ in ("rmse_learning", "rmse_dhat_learning"):
+            for field_ in ("rmse_learning", "rmse_dhat_learning", "peak_d_f_learning"):
                 if field_ in m:
                     s.reals(m[field_], f"{key}.{field_}", null=True)
-                    longest = max(longest, len(m[field_]))
+                    if field_ != "peak_d_f_learning":
+                        longest = max(longest, len(m[field_]))
     if data.get("iterations") is not None:
         s.integer(data["iterations"], "iterations", least=0)
         if data["iterations"] != longest:
@@ -402,7 +408,9 @@ def _check_theorem(path: Path, data: Any) -> None:
             s.text(c.get("source"), f"{key}.source")
             s.text(c.get("target"), f"{key}.target")
             s.flag(c.get("holds_everywhere"), f"{key}.holds_everywhere")
-            s.real(c.get("min_margin"), f"{key}.min_margin", null=True)
+            for field_ in ("min_margin", "worst_w"):
+                s.real(c.get(field_), f"{key}.{field_}", null=True)
+            s.text(c.get("delta_source"), f"{key}.delta_source", null=True)
             band = c.get("failing_band")
             if band is not None and not (isinstance(band, list) and len(band) == 2 and all(map(_is_real, band))):
                 raise s.fail(f"{key}.failing_band", band, "null or [low, high] in rad/s")
@@ -416,6 +424,11 @@ def _check_theorem(path: Path, data: Any) -> None:
 #: The numeric fields of a method's row in ``compare.json`` and ``campaign.json`` (number or null).
 _METHOD_NUMBERS = ("rmse_nominal", "ratio_nominal", "rmse_worst", "ratio_worst", "ratio_median", "improved_share",
                    "design_time_s", "median", "p95", "worst", "share_improved")
+
+
+#: The numeric settings at the top level of ``compare.json`` and ``campaign.json`` (number or null).
+_SETTING_NUMBERS = ("scenario", "samples", "seed", "scale", "robust_models", "rho", "duration", "runs_per_method",
+                    "rejected_plants", "resumed_samples", "workers", "wall_time_s", "sample_time_s", "sample_cpu_s")
 
 
 def _check_method_table(s: _Schema, table: Any, key: str) -> None:
@@ -436,10 +449,17 @@ def _check_method_table(s: _Schema, table: Any, key: str) -> None:
 
 
 def _check_methods(path: Path, data: Any) -> None:
-    """``compare.json`` / ``campaign.json``: an object whose ``methods`` (and each campaign scenario's
-    ``methods``) map method names to rows with numeric fields, typed as their writers write them."""
+    """``compare.json`` / ``campaign.json``: an object whose numeric settings (:data:`_SETTING_NUMBERS`) are
+    numbers and whose ``methods`` (and each campaign scenario's ``methods``) map method names to rows with
+    numeric fields, typed as their writers write them."""
     s = _Schema(path)
     s.obj(data)
+    for field_ in _SETTING_NUMBERS:
+        if field_ in data:
+            s.real(data[field_], field_, null=True)
+    if "rmse_without_learning" in data:  # compare's
+        for name, value in s.obj(data["rmse_without_learning"], "rmse_without_learning").items():
+            s.real(value, _key("rmse_without_learning", name), null=True)
     if "methods" in data:
         _check_method_table(s, data["methods"], "methods")
     if isinstance(data.get("scenarios"), dict):  # the campaign's (compare's scenario is a number)

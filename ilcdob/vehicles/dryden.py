@@ -29,6 +29,7 @@ import numpy as np
 from scipy import signal as sps
 
 from ilcdob.errors import SpecError
+from ilcdob.signals import check_grid
 
 __all__ = ["DrydenWind"]
 
@@ -63,6 +64,7 @@ class DrydenWind:
             raise SpecError(f"`duration`: got {duration!r}, expected a length > 0 s")
         if not (np.isfinite(ts) and 0 < ts < duration):
             raise SpecError(f"`ts`: got {ts!r}, expected a sample time in (0, duration) s")
+        check_grid(duration, ts, "DrydenWind")
         self.mean = self._vector(mean, "mean", lambda v: np.all(np.isfinite(v)), "finite m/s")
         self.sigma = self._vector(sigma, "sigma", lambda v: np.all(v >= 0), "intensities >= 0 m/s")
         self.length = self._vector(length, "length", lambda v: np.all(v > 0), "length scales > 0 m")

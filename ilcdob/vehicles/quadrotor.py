@@ -70,7 +70,7 @@ from scipy.signal import lfilter, ss2tf
 
 from ilcdob.discretize import discretize_pid
 from ilcdob.errors import SignalError, SpecError
-from ilcdob.signals import FlightData
+from ilcdob.signals import FlightData, check_grid
 from ilcdob.specs import PIDSpec, SystemSpec
 
 __all__ = [
@@ -464,6 +464,7 @@ def linear_equivalent_tau(att_gain: float, rate_gain: float, rate_d_gain: float,
     float
         The equivalent first-order time constant, s.
     """
+    check_grid(horizon, inner_dt, "linear_equivalent_tau: the step response")
     n = int(round(horizon / inner_dt)) + 1
     y = _linear_pitch_step(att_gain, rate_gain, rate_d_gain, motor_time_constant, inner_dt, n)
     return fit_first_order(np.arange(n) * inner_dt, y)[0]
@@ -828,6 +829,7 @@ def fly(params: QuadrotorParams, controller_spec: PIDSpec | SystemSpec, t_end: f
         rng, seed_meta = np.random.default_rng(int(seed)), int(seed)
     else:
         raise SpecError(f"`seed`: got {seed!r}, expected an integer >= 0 or a numpy Generator")
+    check_grid(t_end, params.inner_dt, f"fly: the inner loop's grid (inner_rate_hz = {params.inner_rate_hz:g})")
     n_out = int(math.floor(t_end / ts + 1e-9)) + 1
     t = np.arange(n_out) * ts
     r = _sample_input(reference, t, "reference")
@@ -893,6 +895,7 @@ def equivalent_tau(params: QuadrotorParams, step: float = 0.1, horizon: float | 
         horizon = 10.0 * params.tau if params.tau else 1.0
     horizon = _finite("horizon", horizon, lo=0.0)
     ts = params.inner_dt * max(1, int(round(0.02 * params.inner_rate_hz)))
+    check_grid(horizon, params.inner_dt, "equivalent_tau: the step response")
     n_out = int(math.ceil(horizon / ts)) + 1
     nin = int(round(ts * params.inner_rate_hz))
     pid = x_controller or PIDSpec(kp=1.0, ki=0.0, kd=1.4, derivative_filter=0.05)
