@@ -43,7 +43,8 @@ from ilcdob.design.fir import FIRFilter
 from ilcdob.design.pair import fleet_delta_sets
 from ilcdob.design.robust_set import (_DESIGN_DIRECTIONS, _DIRECT_METHOD, _OK, _STATIC_REGULARISATION,
                                       RobustSetDesign, RobustSetOptions, RobustSetSolverError, bound_on_grid,
-                                      mask_intervals, structured_set, uncertainty_cones)
+                                      structured_set)
+from ilcdob.design.worst_case import mask_intervals, uncertainty_cones
 from ilcdob.design.value_set import DIRECTIONS, EllipseFamily, ValueSet, complementary_sensitivity, worst_over_set
 from ilcdob.errors import SpecError
 

@@ -56,7 +56,7 @@ A robust-set design (:mod:`.robust_set`, ``filters.json`` keys ``law_maps``, ``F
 
 with ``Gf`` and ``1 - Q_j`` run as state space from rest, ``Ginv = Gd_hat_{j-1}^{-1}`` as the
 apply function ``PREFIX_ginv_apply`` above, ``d_hat`` continued past the trial's end along its
-Hann-weighted trend (:func:`~ilcdob.design.robust_set.end_continuation`) and the FIR ``Fr``'s
+Hann-weighted trend (:func:`~ilcdob.design.trial_edges.end_continuation`) and the FIR ``Fr``'s
 output before ``t = 0`` folded onto the first samples; band, ``W`` and fold around it as above.
 Its scratch is ``3 (n + 2 pad) + advance(Fr)`` doubles, and it uses ``cos`` (``-lm``).
 
@@ -1023,7 +1023,7 @@ def _robust_c(prefix: str, rp: _RobustSet) -> str:
     if rp.advance:
         out.append(f"""
 /* d[0..n) continued {macro}F_ADVANCE samples past its end into d[n..n + F_ADVANCE) along its trend
-   (ilcdob.design.robust_set.end_continuation): the least-squares line through the FIT =
+   (ilcdob.design.trial_edges.end_continuation): the least-squares line through the FIT =
    min(2 F_ADVANCE, n - m) samples before the last m = min({macro}FADE, n), weighted by the Hann
    window w_i = 0.5 - 0.5 cos(2 pi (i + 1)/(FIT + 1)) (numpy.hanning(FIT + 2)[1:-1]), on the
    centred abscissa; the last m samples blended into it, d + f_k (line - d)... exactly

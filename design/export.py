@@ -63,14 +63,12 @@ from ilcdob.signals import as_signal, extend_smoothly
 from ilcdob.statespace import simulate
 
 from .band import fold_start, learning_horizon
-from .closed_form import inverse_gd_filter, one_minus
+from .closed_form import LearningFilters, inverse_gd_filter, one_minus
 from .noncausal import LOOKAHEAD_MAX, ZPKFilter, lookahead
-from .robust_set import fir_on_trial
+from .trial_edges import fir_on_trial
 
 if TYPE_CHECKING:
     import control as ct
-
-    from .robust_set import RobustSetDesign
 
 __all__ = ["zpk_to_coefficients", "inversion_note", "order_sections", "section_growth", "order_grid",
            "apply_coefficients", "apply_lookahead", "lookahead_taps", "coefficients_freqresp", "apply_learning",
@@ -536,13 +534,14 @@ def apply_state_space(ss: dict[str, Any], x: object) -> np.ndarray:
     return simulate(a.reshape(b.size, b.size), b, c, float(ss["D"]), x).reshape(-1)
 
 
-def robust_set_maps(design: RobustSetDesign) -> dict[str, Any]:
+def robust_set_maps(lf: LearningFilters) -> dict[str, Any]:
     """The maps a robust-set design's learning law runs on a trial (``filters.json`` key ``law_maps``).
 
     Parameters
     ----------
-    design : RobustSetDesign
-        A design with its closed-form filters (:func:`~.robust_set.design_robust_set`).
+    lf : LearningFilters
+        The closed-form filters of the design (:attr:`~.robust_set.RobustSetDesign.filters`), whose
+        loops give the maps.
 
     Returns
     -------
@@ -551,7 +550,6 @@ def robust_set_maps(design: RobustSetDesign) -> dict[str, Any]:
         ``inverse_gd``: ``Gd_hat_{j-1}^{-1}`` in coefficient form (:func:`zpk_to_coefficients`, a
         non-causal filter); ``one_minus_q``: ``1 - Q_j`` of the target (state space); ``rule``.
     """
-    lf = design.filters
     return {"source_gf": state_space_to_dict(lf.source.nominal.G_f),
             "inverse_gd": zpk_to_coefficients(inverse_gd_filter(lf.source, model=True)),
             "one_minus_q": state_space_to_dict(one_minus(lf.target.Q)),

@@ -69,11 +69,12 @@ from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 
 from .band import LearningBand, end_fit_samples, fade_out
-from .closed_form import LearningFilters, inverse_gd_filter, one_minus
+from .closed_form import LearningFilters, inverse_gd_filter
 from .noncausal import ZPKFilter, lookahead
+from .trial_edges import trend_weights
 
 __all__ = ["LinearMap", "causal_map", "sos_map", "zero_phase_map", "horizon_map", "zpk_map", "fir_map",
-           "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio", "finite_horizon_ratio",
+           "trend_map", "odd_start_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio", "finite_horizon_ratio",
            "PairTrials"]
 
 _CUBIC_FIT = 16  # samples extend_smoothly fits its cubic to (ilcdob.signals.extend_smoothly default)
@@ -367,10 +368,18 @@ def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | 
     return LinearMap(n_x, n, fwd, adj, "FIR")
 
 
-def _trend_map(n: int, advance: int, fade: int) -> LinearMap:
-    """:func:`~ilcdob.design.robust_set.end_continuation` as a linear map ``n -> n + advance``."""
-    from .robust_set import trend_weights
+def trend_map(n: int, advance: int, fade: int) -> LinearMap:
+    """:func:`~ilcdob.design.trial_edges.end_continuation` as a linear map ``n -> n + advance``.
 
+    Parameters
+    ----------
+    n : int
+        Samples of the trial.
+    advance : int
+        Samples the trend continues past its end.
+    fade : int
+        Samples at the end blended into the trend.
+    """
     m = min(int(fade), n)
     fit = min(2 * int(advance), n - m)
     n_line = m + int(advance)
@@ -400,8 +409,16 @@ def _trend_map(n: int, advance: int, fade: int) -> LinearMap:
     return LinearMap(n, n + int(advance), fwd, adj, "trend")
 
 
-def _odd_start(n: int, m: int) -> LinearMap:
-    """``x -> [-x[m-1], ..., -x[0], x[0], ..., x[n-1]]``: ``m`` samples of the odd extension before the trial."""
+def odd_start_map(n: int, m: int) -> LinearMap:
+    """``x -> [-x[m-1], ..., -x[0], x[0], ..., x[n-1]]``: ``m`` samples of the odd extension before the trial.
+
+    Parameters
+    ----------
+    n : int
+        Samples of the trial.
+    m : int
+        Samples of the extension (at most ``n``).
+    """
 
     def fwd(x: np.ndarray) -> np.ndarray:
         return np.concatenate([-x[:m][::-1], x])
@@ -415,30 +432,14 @@ def _odd_start(n: int, m: int) -> LinearMap:
 
 
 def _method_map(method: Any, n: int) -> LinearMap:
-    """The method's learning filter on a trial of ``n`` samples, the source flying without learning."""
-    from .robust_set import RobustSetDesign  # robust_set imports this module's neighbours
-
+    """The method's learning filter on a trial of ``n`` samples, the source flying without learning:
+    ``L1`` of closed-form filters, else the method's own ``trial_map(n)`` (a robust-set design's,
+    :meth:`~.robust_set.RobustSetDesign.trial_map`)."""
     if isinstance(method, LearningFilters):
         return zpk_map(method.L1, n)
-    if isinstance(method, RobustSetDesign):
-        inv = zpk_map(inverse_gd_filter(method.filters.source, model=True), n)
-        a = method.F.advance
-        if method.projected(n):  # -P F_N Gd_hat_j {d_hat}, P the least-squares inverse of Gf_hat_j
-            ti = method.trial_inverse(n)
-            proj = LinearMap(n, n, ti.solve, ti.adjoint, "Gf_j^+")
-            gd_t = causal_map(method.filters.target.nominal.G_d, n, "Gd_hat_j")
-            m = min(a, n)
-            fn = fir_map(method.F.h, a + m, n, fold=False, n_in=n + m) @ _odd_start(n, m)
-            return proj @ fn @ gd_t @ inv
-        steps = [-inv]
-        if a:
-            steps.append(_trend_map(n, a, method.end_fade))
-        steps.append(fir_map(method.F.h, a, n, n_in=n + a))
-        steps.append(causal_map(one_minus(method.filters.target.Q), n, "1 - Q_j"))
-        out = steps[0]
-        for s in steps[1:]:
-            out = s @ out
-        return out
+    trial_map = getattr(method, "trial_map", None)
+    if callable(trial_map):
+        return trial_map(n)
     raise SpecError(f"finite-horizon map: method filter {type(method).__name__} is not supported; give a closed-form "
                     "(LearningFilters) or robust-set (RobustSetDesign) design")
 
@@ -465,15 +466,11 @@ def law_map(design: Any, n: int, band: LearningBand | None = None, path: np.ndar
     -------
     LinearMap
     """
-    from .pair import PairDesign
-
-    if isinstance(design, PairDesign):
-        if design.law != "paper":
-            raise SpecError(f"finite-horizon map: law {design.law!r}; only the paper's law is linear in the "
-                            "error alone")
-        band = design.band if band is None else band
-        path = design.path if path is None else path
-        method = getattr(design.raw, "__self__", None)
+    parts = getattr(design, "linear_law", None)  # a PairDesign: its method's filter, band and airframe path
+    if callable(parts):
+        method, own_band, own_path = parts()
+        band = own_band if band is None else band
+        path = own_path if path is None else path
     else:
         method = design
     n = int(n)

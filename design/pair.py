@@ -233,6 +233,21 @@ class PairDesign:
         d_f, report = enforce_limit(d_f, self.limits, self.on_limit, what, band.describe())
         return LearningSignal(d_f, band, report)
 
+    def linear_law(self) -> tuple[Any, LearningBand | None, np.ndarray | None]:
+        """The parts of the paper's law that :func:`~.finite_horizon.law_map` makes a linear map of:
+        the method's filter (closed-form ``LearningFilters``, a ``RobustSetDesign``, or None for a
+        method without one), the fixed band (:attr:`band`) and the airframe path (:attr:`path`).
+
+        Raises
+        ------
+        SpecError
+            The law is not the paper's (only it is linear in the error alone).
+        """
+        if self.law != "paper":
+            raise SpecError(f"finite-horizon map: law {self.law!r}; only the paper's law is linear in the "
+                            "error alone")
+        return getattr(self.raw, "__self__", None), self.band, self.path
+
     def finite_trial(self, n: int, source: LoopSystem | None = None, target: LoopSystem | None = None) -> Any:
         """The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` of this law over ``n`` samples.
 
@@ -526,7 +541,7 @@ def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, 
                                   else "; no C code (the projected law solves a least-squares problem per trial)"),
                    "delta_set": {source: deltas[source].source}, **rs.to_dict()}
         if rs.trial == "extended":
-            filters["law_maps"] = robust_set_maps(rs)
+            filters["law_maps"] = robust_set_maps(rs.filters)
         return PairDesign(method, filters, rs.apply)
     if method == "robust":
         opts = robust or RobustOptions()

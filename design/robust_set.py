@@ -123,23 +123,23 @@ from ilcdob.lifted import markov_parameters
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal, check_grid
 
-from .band import fade_out, fold_start
 from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus, reconstruct_disturbance,
                           simulate_map)
 from .fir import FIRFilter
 from .noncausal import lookahead
+from .trial_edges import fir_on_trial
 from .trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
-from .value_set import BoundFamily, EllipseFamily, complementary_sensitivity, family_cones, worst_over_set
+from .value_set import BoundFamily, EllipseFamily, family_cones, worst_over_set
+from .worst_case import mask_intervals, uncertainty_cones
 
 #: A structured Delta set of the source (:mod:`.value_set`).
 StructuredSet = BoundFamily | EllipseFamily
 
 if TYPE_CHECKING:
-    from .finite_horizon import FiniteHorizonRatio
+    from .finite_horizon import FiniteHorizonRatio, LinearMap
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
-           "uncertainty_cones", "worst_case_ratio", "ratio_for_delta", "design_robust_set", "bound_on_grid",
-           "admissible", "end_continuation", "fir_on_trial", "trend_weights", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
+           "design_robust_set", "bound_on_grid", "admissible", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
 
 _OK = ("optimal", "optimal_inaccurate")
 #: Choices of :attr:`RobustSetOptions.delta_set`.
@@ -431,177 +431,6 @@ def structured_set(spec, source: str, bound: np.ndarray, choice: str = "auto") -
     return BoundFamily(float(np.max(bound)))
 
 
-def uncertainty_cones(source: LoopSystem, w: np.ndarray, W: np.ndarray,
-                      margin: float = 0.5) -> tuple[np.ndarray, ...]:
-    """Worst-case data ``(a, b, R, T0, kind)`` of system j-1's Delta set on ``w``.
-
-    For every admissible ``Delta`` at ``w``, ``(1 + Delta)/(1 + T0 Delta)`` lies in a disc, so
-    ``|T| = |1 - F (1+Delta)/(1+T0 Delta)| <= (|a - b F| + R |F|) / a`` with ``a > 0``
-    (module docstring):
-
-    * ``kind == 0``, the exact image of the whole disc ``|Delta| <= W`` (needs ``s > 0``):
-      ``a = s = 1 - |T0|^2 W^2``, ``b = 1 - conj(T0) W^2``, ``R = |1 - T0| W``;
-    * ``kind == 1``, where ``W |T0| > 1 - margin`` and this bound is tighter (or the first does not
-      exist): the Deltas that keep ``|1 + T0 Delta| >= margin``,
-      ``(1+Delta)/(1+T0 Delta) = 1/T0 + (1 - 1/T0)/(1 + T0 Delta)`` in the disc with centre
-      ``1/T0`` and radius ``|1 - 1/T0| / margin``: ``a = |T0|``, ``b = |T0|/T0``, ``R = |T0 - 1|/margin``.
-
-    Where ``W |T0| <= 1 - margin`` every Delta of the disc has ``|1 + T0 Delta| >= margin``, so the
-    first (exact) bound is used and nothing is excluded.
-
-    Parameters
-    ----------
-    source : LoopSystem
-        System j-1 (its nominal loop is used).
-    w : array, rad/s
-    W : array
-        Multiplicative bound on ``w``.
-    margin : float
-        Stability margin ``m`` in [0, 1) assumed of system j-1's true loop where the disc reaches
-        its stability boundary; 0 keeps the whole disc everywhere (then ``kind == 1`` never
-        occurs and ``a <= 0`` marks frequencies with an unbounded worst case).
-    """
-    t0 = complementary_sensitivity(source, w)
-    W = np.asarray(W, float)
-    s = 1 - np.abs(t0) ** 2 * W**2
-    b1 = 1 - np.conj(t0) * W**2
-    r1 = np.abs(1 - t0) * W
-    a, b, r = s.copy(), b1.copy(), r1.copy()
-    kind = np.zeros(np.shape(w), dtype=int)
-    if margin > 0:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a2, b2, r2 = np.abs(t0), np.abs(t0) / t0, np.abs(t0 - 1) / margin
-            use2 = (W * np.abs(t0) > 1 - margin) & ((s <= 1e-12) | (r2 / np.abs(b2) < r1 / np.abs(b1)))
-        a, b, r = np.where(use2, a2, a), np.where(use2, b2, b), np.where(use2, r2, r)
-        kind[use2] = 1
-    return a, b, r, t0, kind
-
-
-def worst_case_ratio(F: np.ndarray, a: np.ndarray, b: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Bound ``max |T(w)|`` per frequency, ``(|a - b F| + R |F|) / a`` (exact for the whole disc).
-
-    ``inf`` where ``a <= 0`` (unbounded image: the disc reaches the stability boundary) and
-    ``F != 0``; 1 there if ``F = 0``.
-
-    Parameters
-    ----------
-    F : array_like
-        Response of the robustness filter on the grid (complex).
-    a, b, R : numpy.ndarray
-        Cone data of :func:`uncertainty_cones` on the same grid.
-
-    Returns
-    -------
-    numpy.ndarray
-        The worst-case ``|T(w)|`` per frequency.
-    """
-    F = np.asarray(F, complex)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = (np.abs(a - b * F) + R * np.abs(F)) / a
-    return np.where(a > 0, out, np.where(np.abs(F) == 0, 1.0, np.inf))
-
-
-def ratio_for_delta(F: np.ndarray, t0: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """``|T(w)| = |1 - F (1 + Delta)/(1 + T0 Delta)|`` for one given ``Delta(w)`` (module docstring).
-
-    Parameters
-    ----------
-    F : array_like
-        Response of the robustness filter (complex).
-    t0 : numpy.ndarray
-        ``T0``, complementary sensitivity of system j-1's nominal DOB loop, same grid.
-    delta : array_like
-        The multiplicative model error ``Delta(w)`` (complex), same grid.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``|T(w)|``.
-    """
-    delta = np.asarray(delta, complex)
-    return np.abs(1 - np.asarray(F, complex) * (1 + delta) / (1 + t0 * delta))
-
-
-def trend_weights(n: int) -> np.ndarray:
-    """Weights of the trend's least-squares fit over ``n`` samples: ``numpy.hanning(n + 2)[1:-1]`` (all > 0).
-
-    Parameters
-    ----------
-    n : int
-        Samples of the fit.
-    """
-    return np.hanning(int(n) + 2)[1:-1]
-
-
-def end_continuation(d_hat: np.ndarray, advance: int, fade: int) -> np.ndarray:
-    """``d_hat`` continued ``advance`` samples past the trial along its trend (:meth:`RobustSetDesign.apply`).
-
-    The line fitted by least squares, weighted by :func:`trend_weights` (a Hann window), to the
-    ``2 advance`` samples before the last ``fade`` ones (fewer when the trial is shorter; a constant
-    from one sample; zero without any), blended into over the last ``fade`` samples with
-    :func:`~.band.fade_out` and continued for ``advance`` samples. The weights make the fit blind
-    to oscillations of the window (unweighted, a disturbance near the Nyquist frequency tilts the
-    line, and the whole-trial figure ``rho_N`` rose to 36-560).
-
-    Parameters
-    ----------
-    d_hat : numpy.ndarray
-        The reconstructed disturbance, ``n`` samples.
-    advance : int
-        Samples to continue.
-    fade : int
-        Samples at the end to blend into the line.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``n + advance`` samples.
-    """
-    n = d_hat.size
-    m = min(int(fade), n)
-    fit = min(2 * int(advance), n - m)
-    k_out = np.arange(n - m, n + advance, dtype=float)
-    if fit >= 2:
-        coef = np.polyfit(np.arange(n - m - fit, n - m, dtype=float), d_hat[n - m - fit:n - m], 1,
-                          w=np.sqrt(trend_weights(fit)))
-        line = np.polyval(coef, k_out)
-    else:
-        line = np.full(k_out.size, d_hat[n - m - 1] if fit == 1 else 0.0)
-    out = np.concatenate([d_hat, line[m:]])
-    out[n - m:n] = line[:m] + fade_out(m) * (d_hat[n - m:] - line[:m])
-    return out
-
-
-def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> np.ndarray:
-    """The robustness FIR over a trial of the reconstructed disturbance (:meth:`RobustSetDesign.apply`, extended).
-
-    ``d_hat`` is continued past the trial along its trend (:func:`end_continuation`), taken as zero
-    before it, and filtered by ``output(k) = sum_i h[i] d_hat(k + advance - i)``; the output before
-    ``t = 0`` is added, time-reversed, to the trial's first samples (:func:`~.band.fold_start`).
-
-    Parameters
-    ----------
-    d_hat : numpy.ndarray
-        The reconstructed disturbance, ``n`` samples, m/s^2.
-    h : numpy.ndarray
-        The FIR's taps.
-    advance : int
-        Its look-ahead, samples.
-    fade : int
-        Samples at the end blended into the trend (:attr:`RobustSetDesign.end_fade`).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``n`` samples.
-    """
-    n = d_hat.size
-    if advance:
-        d_hat = end_continuation(d_hat, advance, fade)
-    full = np.convolve(d_hat, h)  # F's output at times -advance, -advance + 1, ...
-    return fold_start(full[:advance + n], advance, n) if advance else full[:n].copy()
-
-
 def admissible(source: LoopSystem, source_true: LoopSystem, w_bound: np.ndarray, bound: np.ndarray,
                margin: float = 0.5, n: int = 3000) -> tuple[bool, str]:
     """Whether a true plant of system j-1 lies in the set the design guarantees (module docstring).
@@ -710,6 +539,36 @@ class RobustSetDesign:
     delta_set: str = "disc |Delta| <= W"
     finite: FiniteHorizonRatio | None = None
     trial: str = "extended"
+
+    def trial_map(self, n: int) -> "LinearMap":
+        """The law on a trial of ``n`` samples, the source flying without learning, as a linear map
+        (``e'_{j-1} -> d_f,j``, :mod:`.finite_horizon`): what :meth:`apply` computes.
+
+        Parameters
+        ----------
+        n : int
+            Samples of the trial.
+        """
+        from .finite_horizon import LinearMap, causal_map, fir_map, odd_start_map, trend_map, zpk_map
+
+        inv = zpk_map(inverse_gd_filter(self.filters.source, model=True), n)
+        a = self.F.advance
+        if self.projected(n):  # -P F_N Gd_hat_j {d_hat}, P the least-squares inverse of Gf_hat_j
+            ti = self.trial_inverse(n)
+            proj = LinearMap(n, n, ti.solve, ti.adjoint, "Gf_j^+")
+            gd_t = causal_map(self.filters.target.nominal.G_d, n, "Gd_hat_j")
+            m = min(a, n)
+            fn = fir_map(self.F.h, a + m, n, fold=False, n_in=n + m) @ odd_start_map(n, m)
+            return proj @ fn @ gd_t @ inv
+        steps = [-inv]
+        if a:
+            steps.append(trend_map(n, a, self.end_fade))
+        steps.append(fir_map(self.F.h, a, n, n_in=n + a))
+        steps.append(causal_map(one_minus(self.filters.target.Q), n, "1 - Q_j"))
+        out = steps[0]
+        for s in steps[1:]:
+            out = s @ out
+        return out
 
     def apply(self, e_prev: object, df_prev: object) -> np.ndarray:
         """Learning signal of system j, ``(1 - Q_j){F{d_hat}}`` with ``d_hat = -Gd_{j-1}^{-1}{e'_{j-1}}``.
@@ -875,32 +734,6 @@ class RobustSetDesign:
                  "meaning": "largest ||e_j|| / ||e'_j|| over every disturbance of a whole trial (design/"
                             "finite_horizon.py); rho_guaranteed bounds it per frequency, i.e. over an "
                             "infinite horizon, for every admissible Delta"}}
-
-
-def mask_intervals(w: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
-    """Contiguous runs of ``mask`` as frequency intervals.
-
-    Parameters
-    ----------
-    w : numpy.ndarray
-        Frequencies, rad/s.
-    mask : numpy.ndarray
-        Booleans on ``w``.
-
-    Returns
-    -------
-    list of (float, float)
-        ``(w_first, w_last)`` of every run of True, rad/s.
-    """
-    out, start = [], None
-    for i, flag in enumerate(mask):
-        if flag and start is None:
-            start = i
-        if start is not None and (not flag or i == mask.size - 1):
-            end = i if flag else i - 1
-            out.append((float(w[start]), float(w[end])))
-            start = None
-    return out
 
 
 def _exchange_points(worst: np.ndarray, bad: np.ndarray, n_max: int = 60) -> np.ndarray:

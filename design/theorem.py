@@ -62,7 +62,7 @@ from ilcdob.loop import LoopSystem, freqresp
 
 from .band import AMPLIFICATION_TOL, LearningBand
 from .delta import DeltaSet, delta_bound
-from .robust_set import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
+from .worst_case import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
 
 __all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", "learning_pairs",
            "exact_worst_ratio", "exact_ratio_for_delta", "bound_delta_sets", "EXACT_TOL", "REFINE"]

@@ -493,7 +493,7 @@ def test_submitted_figures_render_while_the_caller_goes_on(run):
         assert len(multiprocessing.active_children()) == 1  # started now, one core left to the caller
         with pytest.raises(ValueError, match=r"\['error_s4.png'\] submitted twice"):
             renderer.submit({"error_s4.png": scenario_figures(sr, ITERATIONS, pending=True)["error_s4.png"]})
-        files = res.files(pending=True)  # finish renders those not submitted, takes the others as rendered
+        files = res.files(reproduction_figures(res, pending=True))  # finish renders those not submitted, takes the others as rendered
         out = renderer.finish({name: files[name] for name in ("error_s4.png", "disturbance_s4.png",
                                                               "identified_models.png", "README.md")})
     assert list(out) == ["error_s4.png", "disturbance_s4.png", "identified_models.png", "README.md"]

@@ -117,7 +117,7 @@ def test_results_record_the_law_and_paper_stays_the_default(fleet, tmp_path):
     multi = reproduce(fleet, [1], 1, law="multi-source")
     assert multi.to_dict()["law"] == "multi-source" and multi.filters == {}  # no single pair's filters
     with OutputFolder(tmp_path, Provenance("reproduce"), overwrite=True) as folder:
-        folder.add_all(multi.files(figures=False))
+        folder.add_all(multi.files())
     assert "Learning law: **multi-source**" in (tmp_path / "README.md").read_text()
     html = build_report([tmp_path])
     assert "learning law <strong>multi-source</strong>" in html

@@ -1,9 +1,12 @@
-"""The layout: every import points one way, and the source tree runs without installing.
+"""The layout: every import points one way, no module imports itself round a circle, and the
+source tree runs without installing.
 
 Layers, lowest first: kernel (``ilcdob/*.py``) <- vehicles (``ilcdob.vehicles``) <-
 identification <- design <- validation <- application (``ilcdob.app``). A module may import
 its own layer and the layers below it, never one above (lazy imports inside functions
-included). The README's layout table states the same.
+included). Within a layer the imports form no circle either, counting every import statement
+(lazy ones and those for type checking too): a circle means a primitive sits in the wrong
+module. The README's layout table states the same.
 """
 
 from __future__ import annotations
@@ -79,6 +82,63 @@ def _upward() -> list[str]:
 def test_every_import_points_down_the_layers():
     assert _modules(), "no module found"
     assert _upward() == []
+
+
+def _graph() -> dict[str, set[str]]:
+    """Module -> the ilcdob modules it imports (an imported name resolved to its module)."""
+    modules = {module: path for path, module in _modules()}
+    graph = {}
+    for module, path in modules.items():
+        deps = set()
+        for _, name in _imports(path, module):
+            while name and name not in modules:  # `from .x import f` gives `...x.f`: its module is `...x`
+                name = name.rpartition(".")[0]
+            if name and name != module:
+                deps.add(name)
+        graph[module] = deps
+    return graph
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles: strongly connected sets of two or more modules (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    out = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                out.append(sorted(part))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circle():
+    circles = _circles(_graph())
+    assert circles == [], "import circles: " + "; ".join(" <-> ".join(c) for c in circles)
+
+
+def test_the_circle_finder_sees_a_circle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set(), "e": {"e"}}
+    assert _circles(graph) == [["a", "b", "c"]]
 
 
 def test_the_checker_sees_an_upward_import():

@@ -79,7 +79,7 @@ def test_short_run_reports_progress_per_scenario_and_writes_nothing(short_run, t
 
 
 def test_files_add_the_fleet_file_of_the_models(short_run):
-    files = short_run.files(figures=False)
+    files = short_run.files()
     assert list(files)[-2:] == ["identified_fleet.toml", "results.json"]  # results.json stays last
     assert files["identified_fleet.toml"] == short_run.identified_toml
     assert "README.md" in files and "ilcdob.design.band" in files["README.md"] and "ilcdob.design.flown" in files["README.md"]

@@ -12,6 +12,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from ilcdob.app.cli import main
+from ilcdob.validation.figures import reproduction_figures
 from ilcdob.validation.reproduce import reproduce, run_scenario
 from ilcdob.validation.scenarios import SCENARIOS, parse_scenarios, scenario
 from ilcdob.errors import SpecError
@@ -133,7 +134,8 @@ def test_files_regenerate_the_committed_report(run):
     res, _ = run
     readme = (COMMITTED / "README.md").read_text()
     elapsed = float(re.search(r"Run time ([0-9.]+) s for the simulations", readme).group(1))
-    files = dataclasses.replace(res, elapsed_s=elapsed).files()
+    timed = dataclasses.replace(res, elapsed_s=elapsed)
+    files = timed.files(reproduction_figures(timed))
     figures = ["rmse_bars.png"] + [f"{k}_s{i}.png" for i in range(1, 5) for k in ("error", "disturbance")] + [
         "bode_loops.png", "identified_models.png", "bode_learning.png", "bode_te.png"]
     assert list(files) == [*figures, "README.md", "results.json"]  # results.json last
@@ -145,7 +147,7 @@ def test_files_regenerate_the_committed_report(run):
 
 def test_files_without_figures_and_progress(run):
     res, calls = run
-    files = res.files(figures=False)
+    files = res.files()
     assert list(files) == ["README.md", "results.json"] and "![" not in files["README.md"]
     assert [c[:2] for c in calls] == [(1, 4), (2, 4), (3, 4), (4, 4)]
     assert calls[0][2].startswith("scenario 1 (Hover, sinusoidal wind, law paper)")
@@ -153,7 +155,7 @@ def test_files_without_figures_and_progress(run):
 
 def test_files_write_a_report_folder(fleet, tmp_path):
     res = reproduce(fleet, [1], 2)  # no progress: silent
-    _write(res.files(), tmp_path)
+    _write(res.files(reproduction_figures(res)), tmp_path)
     for name in ["rmse_bars.png", "error_s1.png", "disturbance_s1.png", "bode_loops.png",
                  "bode_learning.png", "bode_te.png", "README.md", "results.json"]:
         assert (tmp_path / name).stat().st_size > 1000, name
@@ -321,7 +323,7 @@ def test_the_folder_holds_the_figures_savefig_makes_rendered_in_worker_processes
     out = tmp_path / "run"
     res = reproduce_to_folder(out, scenarios=[1], iterations=1, figure_workers=2)
     assert not multiprocessing.active_children()
-    pending = {**res.files(pending=True), **report_files(res.fleet, [sr.order for sr in res.scenarios],
+    pending = {**res.files(reproduction_figures(res, pending=True)), **report_files(res.fleet, [sr.order for sr in res.scenarios],
                                                          pending=True)}
     assert sorted(p.name for p in out.glob("*.png")) == sorted(n for n in pending if n.endswith(".png"))
     # constrained layout, submitted as flown; tight layout, before the first flight; tight layout, at the end

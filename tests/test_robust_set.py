@@ -18,8 +18,8 @@ import ilcdob
 from ilcdob.design.closed_form import closed_form_filters
 from ilcdob.design.delta import delta_set
 from ilcdob.design.pair import design_pair, fleet_delta_sets
-from ilcdob.design.robust_set import (RobustSetInfeasibleError, RobustSetOptions, bound_on_grid,
-                                      design_robust_set, ratio_for_delta, uncertainty_cones, worst_case_ratio)
+from ilcdob.design.robust_set import RobustSetInfeasibleError, RobustSetOptions, bound_on_grid, design_robust_set
+from ilcdob.design.worst_case import ratio_for_delta, uncertainty_cones, worst_case_ratio
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import build_loop, freqresp
 from ilcdob.specs import PlantSpec

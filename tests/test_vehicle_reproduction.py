@@ -40,7 +40,7 @@ def test_the_report_holds_every_flight_and_its_acceptance(short):
 
     res, seen = short
     assert [s[:2] for s in seen] == [(1, 5), (2, 5), (3, 5), (4, 5), (5, 5)]
-    files = res.files(figures=False)
+    files = res.files()
     assert list(files)[-1] == "results.json"
     data = json.loads(json.dumps(files["results.json"]))
     assert data["plant"] == "rotorpy" and set(data["runs"]) == {"paper", "dryden"}

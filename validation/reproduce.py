@@ -40,7 +40,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import PurePath
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -233,33 +233,29 @@ class ReproductionResult:
             + ("" if self.law == "paper" else f" --law {self.law}")
             + " --out <dir>`; numbers are in `results.json`."]
 
-    def files(self, figures: bool = True, pending: bool = False) -> dict[str, object]:
+    def files(self, figures: Mapping[str, object] | None = None) -> dict[str, object]:
         """The report of the reproduction: file name -> content.
+
+        A result does not draw itself: the caller draws the figures
+        (:func:`ilcdob.validation.figures.reproduction_figures`, which reads this result) and
+        passes them here, so that the result's module needs no plotting.
 
         Parameters
         ----------
-        figures : bool
-            Include the figures (:func:`ilcdob.validation.figures.reproduction_figures`).
-        pending : bool
-            The figures unbuilt (:class:`~ilcdob.validation.figures.PendingFigure`), for
-            :func:`~ilcdob.validation.figures.render_figures` to build and render in parallel.
+        figures : mapping of str to object, optional
+            The figures by file name (``matplotlib.figure.Figure``, or ``PendingFigure`` for
+            :func:`~ilcdob.validation.figures.render_figures`); README.md shows them in this order.
 
         Returns
         -------
         dict of str to object
-            The figures (``matplotlib.figure.Figure``, PNG at
-            :data:`ilcdob.validation.figures.FIGURE_DPI`; ``PendingFigure`` with ``pending``) when
-            ``figures``, then ``README.md``
+            The figures, then ``README.md``
             (str, :func:`markdown_index`), ``identified_fleet.toml`` when the run identified its
             models (:attr:`identified_toml`), then ``results.json`` (a JSON document,
             :meth:`to_dict` with non-finite numbers as null). ``results.json`` comes last: written
             in this order, its presence means the files beside it are complete.
         """
-        out: dict[str, object] = {}
-        if figures:
-            from .figures import reproduction_figures  # matplotlib only when figures are made
-
-            out.update(reproduction_figures(self, pending=pending))
+        out: dict[str, object] = dict(figures or {})
         out["README.md"] = markdown_index(self, list(out))
         if self.identified_toml:
             out["identified_fleet.toml"] = self.identified_toml

@@ -241,7 +241,12 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
 def _report(res: Any, figures: bool, renderer: Any) -> dict[str, Any]:
     """The reproduction folder's content (:meth:`ReproductionResult.files` and :func:`report_files`), every
     figure built and rendered to PNG by ``renderer`` (:class:`ilcdob.validation.figures.FigureRenderer`)."""
-    files = res.files(figures=figures, pending=True)
+    if figures:
+        from ilcdob.validation.figures import reproduction_figures
+
+        files = res.files(reproduction_figures(res, pending=True))
+    else:
+        files = res.files()
     report = report_files(res.fleet, [sr.order for sr in res.scenarios], figures=figures, pending=True)
     clash = sorted(set(files) & set(report))
     if clash:
