@@ -11,7 +11,8 @@ from .limit import LearningLimitError, LearningLimitWarning
 from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
 from .laws import LAWS, ReferenceTerms, check_law, reference_terms
-from .pair import METHODS, LearningSignal, PairDesign, design_pair, with_law
+from .methods import METHODS, Method
+from .pair import LearningSignal, PairDesign, design_pair, with_law
 from .robust import RobustDesigner, RobustOptions, RobustPairDesigner
 from .theorem import PairCheck, format_theorem_table, theorem_check
 from .lifted_filters import LiftedLearningFilters, lifted_filters
@@ -21,7 +22,7 @@ __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter"
            "reconstruct_disturbance", "DeltaSet", "delta_set",
            "FIRDesign", "FIRDesignError", "FIRFilter", "FIROptions", "design_fir",
            "NormOptimalDesigner", "NormOptimalOptions", "norm_optimal_learning",
-           "METHODS", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
+           "METHODS", "Method", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
            "reference_terms", "PairCheck", "format_theorem_table", "theorem_check",
            "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner",
            "LearningBand", "choose_band", "LearningSignal", "LearningLimitError", "LearningLimitWarning"]

@@ -34,6 +34,7 @@ from ilcdob.specs import PlantSpec
 
 from .band import LearningBand
 from .closed_form import LearningFilters, closed_form_filters
+from .methods import ClosedForm
 
 __all__ = ["BodeCurve", "COINCIDE_RTOL", "TE_GAIN_ERROR", "frequency_grid", "magnitude_db", "wrapped_phase",
            "coinciding", "group_label", "draw_bode", "finish_bode_axes", "mark_band", "with_gain_error",
@@ -473,7 +474,7 @@ def _describe(source: str, target: str, method: str, te_basis: str | None, band:
              "  Te1 = Gd_j Gd_j-1^-1 - Gf_j L1,  Te2 = Te1 Gf_j-1",
              f"Te1, Te2 with {te_basis}" if te_basis else "Te1, Te2 not drawn (see their panels)",
              "Omega = (M + Q C) P / D: disturbance -> DOB estimate"]
-    if method != "closed-form":
+    if method != ClosedForm.name:
         lines.append(f"design method {method}: its own learning is in filters.json")
     if band is None or band.cutoff is None:
         lines.append("learning band: off (the filters act at every frequency)")

@@ -38,24 +38,23 @@ from ilcdob.specs import LimitSpec
 from .band import LearningBand, check_bandwidth, choose_band
 from .closed_form import LearningFilters, closed_form_filters, simulate_map
 from .delta import DeltaSet, delta_bound, delta_set
-from .export import robust_set_maps, zpk_to_coefficients
-from .fir import FIROptions, design_fir
+from .fir import FIROptions
 from .flown import airframe_path_filter, check_disturbance
 from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
 from .limit import LIMIT_POLICIES, LimitReport, enforce_limit
-from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_optimal_size, norm_optimal_learning
+from .methods import METHODS, DesignInputs, method_named
+from .norm_optimal import NormOptimalOptions
 from .robust import RobustOptions, RobustPairDesigner
-from .robust_set import RobustSetOptions, design_robust_set, structured_set
+from .robust_set import RobustSetOptions
 from .theorem import theorem_rhs
 
 __all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets", "METHODS",
            "DEFAULT_METHODS", "design_with_band"]
 
-METHODS = ("closed-form", "fir", "norm-optimal", "robust", "robust-set")
 #: The designs whose improvement is guaranteed over the Delta set by their own construction (the
 #: robust SOCP over its models, robust-set over the whole set): their learning band takes the
 #: noise edges only, the model edge is theirs (:func:`design_pair`).
-GUARANTEED = ("robust", "robust-set")
+GUARANTEED = tuple(name for name, m in METHODS.items() if m.guaranteed)
 #: The designs that comparisons and campaigns run unless told otherwise (robust-set takes a
 #: minute or more per source vehicle: on request).
 DEFAULT_METHODS = ("closed-form", "fir", "norm-optimal", "robust")
@@ -156,15 +155,7 @@ class PairDesign:
     @property
     def order(self) -> str:
         """Implementation size: filter orders (zpk/FIR), Riccati gains (and lifted matrix size), or SOCP models."""
-        f = self.filters
-        if self.method == "norm-optimal":
-            lifted = f", lifted {f['n']}x{f['n']}" if self.lifted is not None and "L1" in self.lifted else ""
-            return f"Riccati gains over {f['n']} samples{lifted}"
-        if self.method == "robust-set":
-            return f"closed form + {len(f['F']['num'])}-tap FIR"
-        if self.method == "robust":
-            return f"per-trial SOCP, {f['models']} models"
-        return ", ".join(f"{k}: {_filter_size(f[k])}" for k in ("L1", "L2"))
+        return METHODS[self.method].order(self.filters, self.lifted)
 
     def band_for(self, e_prev: object, df_prev: object | None = None) -> LearningBand:
         """The learning band for a trial of the source (its law-adjusted error ``e_prev``, m, and
@@ -286,15 +277,6 @@ class PairDesign:
             The learning signal the source flew (zeros if none).
         """
         return self.learning(e_prev, df_prev).d_f
-
-
-def _filter_size(coeffs: dict[str, Any]) -> str:
-    """``"23 taps + 6 SOS, advance 24"`` for look-ahead taps and sections (``"6 SOS, advance 0"``
-    without taps), ``"79/0"`` (numerator/denominator degree) otherwise."""
-    if coeffs.get("sos"):
-        taps = f"{len(coeffs['lookahead'])} taps + " if coeffs.get("lookahead") else ""
-        return f"{taps}{len(coeffs['sos'])} SOS, advance {coeffs['advance']}"
-    return f"{len(coeffs['num']) - 1}/{len(coeffs['den']) - 1}"
 
 
 def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | None = None,
@@ -467,8 +449,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     if reference is not None or acceleration is not None:
         raise SpecError("`reference`/`acceleration`: only the exact-reference law uses the reference trajectory; "
                         "got one with law 'paper' (pass law='exact-reference')")
-    if method not in METHODS:
-        raise SpecError(f"`method`: got {method!r}, valid methods are {list(METHODS)}")
+    chosen = method_named(method)
     check_disturbance(disturbance)
     if on_limit not in LIMIT_POLICIES:
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
@@ -477,11 +458,12 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     path = airframe_path_filter(src, tgt, disturbance == "wind") if disturbance != "command" else None
     closed_form = cache(partial(closed_form_filters, src, tgt))  # built once, when first needed
     head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
-    if method in ("fir", "robust", "robust-set"):
+    if chosen.needs_delta_sets:
         deltas = deltas or fleet_delta_sets(fleet, [source, target])
-    design = _method_design(method, fleet, src, tgt, head, closed_form, n, norm_optimal, fir, deltas, robust,
-                            relax, lifted, robust_set)
-    chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=method not in GUARANTEED)
+    made = chosen.design(DesignInputs(fleet, src, tgt, head, closed_form, deltas, n, norm_optimal, fir, robust,
+                                      robust_set, relax, lifted))
+    design = PairDesign(method, made.filters, made.raw, made.lifted, robust=made.robust)
+    chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=not chosen.guaranteed)
     limits = {s.name: s for s in fleet.systems}[target].limits
     filters = {**design.filters, "disturbance": {"at": disturbance,
                                                  **({"W": {"sos": path.tolist()}} if path is not None else {})}}
@@ -512,67 +494,6 @@ def design_with_band(design: PairDesign, band: LearningBand) -> PairDesign:
     """
     request = "auto" if design.choose is not None else band.cutoff
     return replace(design, band=band, filters={**design.filters, "band": {"request": request, **band.to_dict()}})
-
-
-def _method_design(method: str, fleet: Fleet, src: LoopSystem, tgt: LoopSystem, head: dict[str, Any],
-                   closed_form: Callable[[], LearningFilters], n: int | None, norm_optimal: NormOptimalOptions | None,
-                   fir: FIROptions | None, deltas: dict[str, DeltaSet] | None, robust: RobustOptions | None,
-                   relax: bool, lifted: bool, robust_set: RobustSetOptions | None) -> PairDesign:
-    """The method's filters and ``filters.json`` content (:func:`design_pair`), before the band."""
-    source, target = src.name, tgt.name
-    if method == "closed-form":
-        lf = closed_form()
-        filters = {**head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
-                   "units": {"L1": "(m/s^2)/m", "L2": "1"}}
-        return PairDesign(method, filters, lf.apply)
-    if method == "robust-set":
-        rs_opts = robust_set or RobustSetOptions(rho=robust.rho if robust is not None else 0.95)
-        s_spec = next(s for s in fleet.systems if s.name == source)
-        ds = deltas[source]
-        rs = design_robust_set(src, tgt, ds.w, ds.bound, rs_opts,
-                               structured_set(s_spec, ds.source, ds.bound, rs_opts.delta_set))
-        filters = {**head, "closed_form": {"L1": zpk_to_coefficients(rs.filters.L1),
-                                           "L2": zpk_to_coefficients(rs.filters.L2)},
-                   "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},
-                   "learning": "d_f,j = F{L1{e_{j-1}} + L2{d_f,{j-1}}}, computed on a trial as (1 - Q_j){F{d_hat}} "
-                               "with d_hat the disturbance reconstructed by the model (F: FIR, output(k) = "
-                               "sum_i num[i] input(k + advance - i)); the trial's ends as `trial_ends` says"
-                               + ("; the maps it runs under `law_maps` (C code: filters.c)" if rs.trial == "extended"
-                                  else "; no C code (the projected law solves a least-squares problem per trial)"),
-                   "delta_set": {source: deltas[source].source}, **rs.to_dict()}
-        if rs.trial == "extended":
-            filters["law_maps"] = robust_set_maps(rs.filters)
-        return PairDesign(method, filters, rs.apply)
-    if method == "robust":
-        opts = robust or RobustOptions()
-        designer = RobustPairDesigner([src, *deltas[source].loops], [tgt, *deltas[target].loops], opts, relax)
-        filters = {**head, "models": len(designer.sources),
-                   "delta_set": {source: deltas[source].source, target: deltas[target].source},
-                   "options": {"rho": opts.rho, "lam": opts.lam, "mu": opts.mu, "reduction_tol": opts.reduction_tol},
-                   "learning": "per trial (SOCP over the models): learning_signal.csv and lifted.npz"}
-        return PairDesign(method, filters, designer.learn, robust=designer)
-    if method == "fir":
-        fd = design_fir(src, tgt, deltas[source], deltas[target], fir)
-        info = fd.to_dict()
-        filters = {**head, "L1": info.pop("L1"), "L2": info.pop("L2"),
-                   "units": {"L1": "(m/s^2)/m", "L2": "1"},
-                   "robustness": {k: v for k, v in info.items() if k not in ("source", "target")}}
-        return PairDesign(method, filters, fd.apply)
-    opts = norm_optimal or NormOptimalOptions()
-    n = 500 if n is None else int(n)
-    if n < 2:
-        raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
-    order = max(tgt.nominal.G_f.nstates, src.nominal.G_d.nstates)
-    check_norm_optimal_size(n, order, lifted, "n", "lifted=True")
-    designer = NormOptimalDesigner(tgt, n, opts)
-    arrays = designer.law(src).to_arrays()
-    what = ("lifted.npz: the law d_f,j = L1 e_{j-1} + L2 d_f,{j-1} as Riccati gains "
-            "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(...).apply(e, d_f))")
-    if lifted:
-        arrays["L1"], arrays["L2"] = designer.lifted_matrices(src)
-        what += " and as the N x N matrices L1, L2"
-    filters = {**head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n, "lifted": what}
-    return PairDesign(method, filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts), arrays)
 
 
 def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: str,

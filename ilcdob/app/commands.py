@@ -515,18 +515,15 @@ def _csv_header(path: str | Path) -> list[str]:
     return []
 
 
-#: Options of ``ilcdob design`` that only some methods use -> those methods (another method refuses them).
-DESIGN_OPTION_METHODS: dict[str, tuple[str, ...]] = {
-    "--rho": ("robust", "robust-set"), "--samples": ("fir", "robust"), "--bound": ("fir", "robust", "robust-set"),
-    "--n": ("norm-optimal",), "--c-prefix": ("closed-form", "fir", "robust-set"),
-    "--c-float": ("closed-form", "fir"), "--fir-unattainable": ("fir",), "--lifted": ("norm-optimal",)}
-
-
 def _refuse_unused(method: str, given: dict[str, Any]) -> None:
-    """A :class:`SpecError` for the first option of ``given`` (None: not given) that ``method`` does not use."""
+    """A :class:`SpecError` for the first option of ``given`` (None: not given) that ``method`` does not use
+    (the options each method owns: :attr:`ilcdob.design.methods.Method.cli_options`)."""
+    from ilcdob.design.methods import METHODS, method_named
+
+    chosen = method_named(method, "--method")
     for option, value in given.items():
-        users = DESIGN_OPTION_METHODS[option]
-        if value is not None and method not in users:
+        users = [name for name, m in METHODS.items() if option in m.cli_options]
+        if value is not None and option not in chosen.cli_options:
             shown = "" if value is True else f" {value!r}"
             which = users[0] if len(users) == 1 else ", ".join(users[:-1]) + f" and {users[-1]}"
             why = {"--c-prefix": " (the methods with C code)",
@@ -607,7 +604,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     Raises
     ------
     SpecError
-        Besides bad values: an option the method does not use (:data:`DESIGN_OPTION_METHODS`), refused
+        Besides bad values: an option the method does not use (its ``cli_options``), refused
         rather than ignored.
     ilcdob.design.fir.FIRDesignError
         ``fir_unattainable="refuse"`` and the margin cannot be met (the message names the bands).
@@ -617,7 +614,8 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     from ilcdob.design.figure import pair_bode_figure
     from ilcdob.design.fir import UNATTAINABLE, FIROptions
     from ilcdob.design.laws import check_law
-    from ilcdob.design.pair import METHODS, design_pair, design_with_band, fleet_delta_sets
+    from ilcdob.design.methods import method_named
+    from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
     from ilcdob.design.robust import RobustOptions
     from ilcdob.identification.loaders import load_csv
     from ilcdob.design.norm_optimal import check_norm_optimal_size
@@ -625,13 +623,12 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
 
     if c_prefix is not None:
         check_c_prefix(c_prefix)
+    chosen = method_named(method, "--method")
     if n is not None:
-        check_norm_optimal_size(n, None, lifted and method == "norm-optimal", "--n", "--lifted")
-    if samples is not None and method in ("fir", "robust") and samples > MAX_DELTA_SAMPLES:
+        check_norm_optimal_size(n, None, lifted and "--lifted" in chosen.cli_options, "--n", "--lifted")
+    if samples is not None and "--samples" in chosen.cli_options and samples > MAX_DELTA_SAMPLES:
         raise SpecError(f"`--samples`: got {samples}, expected 1 to {MAX_DELTA_SAMPLES} Delta-set samples per system: "
                         f"every sample is a closed loop that --method {method} builds, flies and constrains on")
-    if method not in METHODS:
-        raise SpecError(f"`--method`: got {method!r}, valid methods are {list(METHODS)}")
     _refuse_unused(method, {"--rho": rho, "--samples": samples, "--bound": bound, "--n": n, "--c-prefix": c_prefix,
                             "--c-float": True if c_float else None, "--fir-unattainable": fir_unattainable,
                             "--lifted": True if lifted else None})
@@ -639,10 +636,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)} "
                         "(no-harm: keep only the no-harm promise where the margin cannot be met, and warn; "
                         "refuse: stop with the bands named)")
-    if method == "robust-set" and rho is not None and not (np.isfinite(rho) and 0 < rho <= 1):
-        raise SpecError(f"`--rho`: got {rho!r}, expected a guaranteed improvement factor in (0, 1] for --method "
-                        "robust-set (|e_j| <= rho |e'_j| on every plant of the Delta set; 1: never worse than "
-                        "without learning)")
+    chosen.check_options({"--rho": rho, "--trial": trial})
     rho = 0.95 if rho is None else rho
     samples = 8 if samples is None else samples
     law = check_law(law, "--law")
@@ -655,9 +649,6 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
         raise SpecError("`--law exact-reference`: the law needs the reference trajectory of the trial; give --trial "
                         "CSV with columns time (s), error (m), learning (m/s^2), reference (m) and, for controllers "
                         "with acceleration feed-forward, acceleration (m/s^2)")
-    if method == "robust" and trial is None:
-        raise SpecError("`--method robust`: the robust learning signal is an SOCP solved per trial; give the "
-                        "previous system's trial with --trial CSV (columns time, error, learning)")
     check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet, "--trial": trial})
     flt, digest = fleet_and_hash(fleet, axis)
     columns = {"e": "error", "d_f": "learning"}
@@ -679,17 +670,17 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                         f"computed for the whole trial, so its matrices must be {len(data)} long: omit --n or give "
                         f"--n {len(data)}")
     if data is not None and n is None:
-        check_norm_optimal_size(len(data), None, lifted and method == "norm-optimal", "--trial", "--lifted")
+        check_norm_optimal_size(len(data), None, lifted and "--lifted" in chosen.cli_options, "--trial", "--lifted")
     n = n or (len(data) if data is not None else None)
     deltas = None
-    if method in ("fir", "robust", "robust-set"):
+    if chosen.needs_delta_sets:
         deltas = fleet_delta_sets(flt, [source, target], k=samples, bound=bound)
     reference = {}
     if law == "exact-reference":
         reference = {"reference": data["r"], "acceleration": data["a"] if "a" in data.signals else None}
     design = design_pair(flt, source, target, method, n=n, deltas=deltas,
                          fir=FIROptions(unattainable=fir_unattainable) if fir_unattainable is not None else None,
-                         robust=RobustOptions(rho=rho) if method in ("robust", "robust-set") else None,
+                         robust=RobustOptions(rho=rho) if "--rho" in chosen.cli_options else None,
                          law=law, bandwidth=bandwidth, disturbance=disturbance, on_limit=on_limit,
                          lifted=lifted, **reference)
     if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
@@ -937,6 +928,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     from ilcdob.design.c_export import default_c_prefix, signal_header
     from ilcdob.design.export import apply_learning
     from ilcdob.design.limit import enforce_limit
+    from ilcdob.design.methods import DEFAULT_METHOD
     from ilcdob.signals import FlightData
     from ilcdob.specs import LimitSpec
 
@@ -945,7 +937,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     data, e, df_prev = columns.load(trial)
     digest = None
     if design is not None:
-        ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != "closed-form"),
+        ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != DEFAULT_METHOD),
                                             ("--bandwidth", bandwidth != "auto"),
                                             ("--fir-unattainable", fir_unattainable is not None)) if given]
         if ignored:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ilcdob.design.delta import DeltaSet, delta_set
 from ilcdob.design.laws import DEFAULT_LAW
+from ilcdob.design.methods import METHODS
 from ilcdob.design.pair import PairDesign, design_pair, with_law
 from ilcdob.design.robust import RobustOptions
 from ilcdob.design.robust_set import RobustSetOptions
@@ -104,15 +105,14 @@ class _WorkerState:
         if key not in self.designs:
             if self._deltas is None:
                 self._deltas = _design_deltas(self.fleet, self.options)
-            k = self.options.robust_models if method == "robust" else FIR_DESIGN_SAMPLES
+            k = self.options.robust_models if METHODS[method].per_trial else FIR_DESIGN_SAMPLES
             deltas = {name: replace(self._deltas[name], loops=self._deltas[name].loops[:k])
                       for name in (source, target)}
             try:
                 # robust-set guarantees over the family the true plants are drawn from (value sets, not samples)
                 self.designs[key] = design_pair(self.fleet, source, target, method, n=n, deltas=deltas,
                                                 robust=RobustOptions(rho=self.options.rho), lifted=False,
-                                                robust_set=self._robust_set_options() if method == "robust-set"
-                                                else None)
+                                                robust_set=self._robust_set_options())
             except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
                 self.designs[key] = f"design failed: {exc}"
         return self.designs[key]

@@ -1,0 +1,325 @@
+"""Design methods as registered objects: what each needs, owns and emits, and how it designs.
+
+A method turns a pair of loops (systems j-1 -> j) into the learning filter of the paper's law
+(docs/theory.md, sections 2 and 3): the closed form of the Theorem, a robust FIR, the
+norm-optimal law, the per-trial robust SOCP or the closed form with a robustness filter
+guaranteed over the Delta set. Each is one class here with the same faces:
+
+* ``name``, as ``--method`` and ``filters.json`` spell it;
+* ``guaranteed``: robust to the Delta set by its own construction, so the learning band leaves
+  the model edge to it (:func:`~.pair.design_pair`);
+* ``needs_delta_sets``: it designs over the fleet's Delta sets (:mod:`.delta`);
+* ``per_trial``: its learning signal is solved anew for every trial (its cost grows with the
+  Delta-set models it carries);
+* ``cli_options``: the ``ilcdob design`` options only some methods use, of which it uses these;
+* :meth:`Method.check_options`: the command-line options it takes, checked before anything is built;
+* :meth:`Method.design`: the filters and the ``filters.json`` content, before the band;
+* :meth:`Method.order`: the implementation size a report shows.
+
+:data:`METHODS` is built from the classes; nothing else asks which method a name is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+from ilcdob.fleet import Fleet
+from ilcdob.loop import LoopSystem
+
+from .closed_form import LearningFilters
+from .delta import DeltaSet
+from .export import robust_set_maps, zpk_to_coefficients
+from .fir import FIROptions, design_fir
+from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_optimal_size, norm_optimal_learning
+from .robust import RobustOptions, RobustPairDesigner
+from .robust_set import RobustSetOptions, design_robust_set, structured_set
+
+__all__ = ["DesignInputs", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust", "RobustSet",
+           "METHODS", "DEFAULT_METHOD", "method_named"]
+
+#: ``(e, d_f) -> d_f,j``: a method's learning filter on a trial (m -> m/s^2).
+Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class DesignInputs:
+    """What a method may use to design one pair (:func:`~.pair.design_pair` gathers it).
+
+    Attributes
+    ----------
+    fleet : Fleet
+    src, tgt : LoopSystem
+        Loops of systems j-1 and j.
+    head : dict
+        The ``filters.json`` entries every method writes first (method, law, from, to, sample_time).
+    closed_form : callable () -> LearningFilters
+        The Theorem's filters of the pair, built once when first asked for.
+    deltas : dict of str to DeltaSet, or None
+        The Delta sets by system name (methods with ``needs_delta_sets``).
+    n : int or None
+        Norm-optimal: trial length, samples (default 500).
+    norm_optimal, fir, robust, robust_set : options or None
+        Each method's options (None: its defaults).
+    relax : bool
+        Robust: relax the SOCP where the exact one is infeasible.
+    lifted : bool
+        Norm-optimal: also the N x N lifted matrices.
+    """
+
+    fleet: Fleet
+    src: LoopSystem
+    tgt: LoopSystem
+    head: dict[str, Any]
+    closed_form: Callable[[], LearningFilters]
+    deltas: dict[str, DeltaSet] | None = None
+    n: int | None = None
+    norm_optimal: NormOptimalOptions | None = None
+    fir: FIROptions | None = None
+    robust: RobustOptions | None = None
+    robust_set: RobustSetOptions | None = None
+    relax: bool = False
+    lifted: bool = False
+
+
+@dataclass(frozen=True)
+class MethodDesign:
+    """A method's result, before the band (:class:`~.pair.PairDesign` carries it on).
+
+    Attributes
+    ----------
+    filters : dict
+        The method's ``filters.json`` content.
+    raw : callable (e, d_f) -> d_f,j
+        Its learning filter on a trial (m -> m/s^2).
+    lifted : dict of str to numpy.ndarray, or None
+        Norm-optimal: the law's gains (and lifted matrices when asked for).
+    robust : RobustPairDesigner or None
+        Robust: the per-trial SOCP.
+    """
+
+    filters: dict[str, Any]
+    raw: Learn
+    lifted: dict[str, np.ndarray] | None = None
+    robust: RobustPairDesigner | None = field(default=None, repr=False)
+
+
+def _l1_l2_size(filters: dict[str, Any]) -> str:
+    """``"L1: 23 taps + 6 SOS, advance 24, L2: 79/0"`` of the ``L1``/``L2`` coefficient entries."""
+    def size(coeffs: dict[str, Any]) -> str:
+        if coeffs.get("sos"):
+            taps = f"{len(coeffs['lookahead'])} taps + " if coeffs.get("lookahead") else ""
+            return f"{taps}{len(coeffs['sos'])} SOS, advance {coeffs['advance']}"
+        return f"{len(coeffs['num']) - 1}/{len(coeffs['den']) - 1}"
+
+    return ", ".join(f"{k}: {size(filters[k])}" for k in ("L1", "L2"))
+
+
+class Method:
+    """The protocol of a design method (module docstring); subclasses set the attributes."""
+
+    name: str = ""
+    guaranteed: bool = False
+    needs_delta_sets: bool = False
+    per_trial: bool = False
+    cli_options: tuple[str, ...] = ()
+
+    def check_options(self, given: dict[str, Any]) -> None:
+        """Refuse command-line values this method cannot design with (the base: none).
+
+        Parameters
+        ----------
+        given : dict of str to object
+            Option (``"--rho"``, ``"--trial"``, ...) -> its value, None where not given.
+
+        Raises
+        ------
+        SpecError
+            A value the method refuses, naming the option.
+        """
+
+    def design(self, inputs: DesignInputs) -> MethodDesign:
+        """The method's filters and ``filters.json`` content for the pair of ``inputs`` (before the band).
+
+        Parameters
+        ----------
+        inputs : DesignInputs
+
+        Returns
+        -------
+        MethodDesign
+        """
+        raise NotImplementedError
+
+    def order(self, filters: dict[str, Any], lifted: dict[str, np.ndarray] | None) -> str:
+        """Implementation size: filter orders, FIR taps, Riccati gains or SOCP models.
+
+        Parameters
+        ----------
+        filters : dict
+            The design's ``filters.json`` content.
+        lifted : dict or None
+            Its lifted arrays (norm-optimal).
+        """
+        return _l1_l2_size(filters)
+
+    def __repr__(self) -> str:
+        return f"<method {self.name}>"
+
+
+class ClosedForm(Method):
+    """The Theorem's filters (paper Sec. III): ``L1 = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``L2 = L1 Gf_hat_{j-1}``."""
+
+    name = "closed-form"
+    cli_options = ("--c-prefix", "--c-float")
+
+    def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
+        lf = inputs.closed_form()
+        filters = {**inputs.head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
+                   "units": {"L1": "(m/s^2)/m", "L2": "1"}}
+        return MethodDesign(filters, lf.apply)
+
+
+class FIR(Method):
+    """FIR learning filters robust over the Delta sets (:mod:`.fir`)."""
+
+    name = "fir"
+    needs_delta_sets = True
+    cli_options = ("--samples", "--bound", "--c-prefix", "--c-float", "--fir-unattainable")
+
+    def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
+        fd = design_fir(inputs.src, inputs.tgt, inputs.deltas[inputs.src.name], inputs.deltas[inputs.tgt.name],
+                        inputs.fir)
+        info = fd.to_dict()
+        filters = {**inputs.head, "L1": info.pop("L1"), "L2": info.pop("L2"),
+                   "units": {"L1": "(m/s^2)/m", "L2": "1"},
+                   "robustness": {k: v for k, v in info.items() if k not in ("source", "target")}}
+        return MethodDesign(filters, fd.apply)
+
+
+class NormOptimal(Method):
+    """The lifted norm-optimal law over a trial of ``n`` samples (:mod:`.norm_optimal`)."""
+
+    name = "norm-optimal"
+    cli_options = ("--n", "--lifted")
+
+    def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
+        src, tgt = inputs.src, inputs.tgt
+        opts = inputs.norm_optimal or NormOptimalOptions()
+        n = 500 if inputs.n is None else int(inputs.n)
+        if n < 2:
+            raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
+        order = max(tgt.nominal.G_f.nstates, src.nominal.G_d.nstates)
+        check_norm_optimal_size(n, order, inputs.lifted, "n", "lifted=True")
+        designer = NormOptimalDesigner(tgt, n, opts)
+        arrays = designer.law(src).to_arrays()
+        what = ("lifted.npz: the law d_f,j = L1 e_{j-1} + L2 d_f,{j-1} as Riccati gains "
+                "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(...).apply(e, d_f))")
+        if inputs.lifted:
+            arrays["L1"], arrays["L2"] = designer.lifted_matrices(src)
+            what += " and as the N x N matrices L1, L2"
+        filters = {**inputs.head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
+                   "lifted": what}
+        return MethodDesign(filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts), arrays)
+
+    def order(self, filters: dict[str, Any], lifted: dict[str, np.ndarray] | None) -> str:  # noqa: D102
+        matrices = f", lifted {filters['n']}x{filters['n']}" if lifted is not None and "L1" in lifted else ""
+        return f"Riccati gains over {filters['n']} samples{matrices}"
+
+
+class Robust(Method):
+    """The per-trial SOCP over the models of both Delta sets (:mod:`.robust`)."""
+
+    name = "robust"
+    guaranteed = True
+    needs_delta_sets = True
+    per_trial = True
+    cli_options = ("--rho", "--samples", "--bound")
+
+    def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
+        source, target = inputs.src.name, inputs.tgt.name
+        opts = inputs.robust or RobustOptions()
+        designer = RobustPairDesigner([inputs.src, *inputs.deltas[source].loops],
+                                      [inputs.tgt, *inputs.deltas[target].loops], opts, inputs.relax)
+        filters = {**inputs.head, "models": len(designer.sources),
+                   "delta_set": {source: inputs.deltas[source].source, target: inputs.deltas[target].source},
+                   "options": {"rho": opts.rho, "lam": opts.lam, "mu": opts.mu, "reduction_tol": opts.reduction_tol},
+                   "learning": "per trial (SOCP over the models): learning_signal.csv and lifted.npz"}
+        return MethodDesign(filters, designer.learn, robust=designer)
+
+    def check_options(self, given: dict[str, Any]) -> None:  # noqa: D102 - Method.check_options
+        if given.get("--trial") is None:
+            raise SpecError("`--method robust`: the robust learning signal is an SOCP solved per trial; give the "
+                            "previous system's trial with --trial CSV (columns time, error, learning)")
+
+    def order(self, filters: dict[str, Any], lifted: dict[str, np.ndarray] | None) -> str:  # noqa: D102
+        return f"per-trial SOCP, {filters['models']} models"
+
+
+class RobustSet(Method):
+    """The closed form with a robustness FIR guaranteed over the source's whole Delta set (:mod:`.robust_set`)."""
+
+    name = "robust-set"
+    guaranteed = True
+    needs_delta_sets = True
+    cli_options = ("--rho", "--bound", "--c-prefix")
+
+    def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
+        source = inputs.src.name
+        opts = inputs.robust_set or RobustSetOptions(rho=inputs.robust.rho if inputs.robust is not None else 0.95)
+        spec = next(s for s in inputs.fleet.systems if s.name == source)
+        ds = inputs.deltas[source]
+        rs = design_robust_set(inputs.src, inputs.tgt, ds.w, ds.bound, opts,
+                               structured_set(spec, ds.source, ds.bound, opts.delta_set))
+        filters = {**inputs.head, "closed_form": {"L1": zpk_to_coefficients(rs.filters.L1),
+                                                  "L2": zpk_to_coefficients(rs.filters.L2)},
+                   "units": {"L1": "(m/s^2)/m", "L2": "1", "F": "1"},
+                   "learning": "d_f,j = F{L1{e_{j-1}} + L2{d_f,{j-1}}}, computed on a trial as (1 - Q_j){F{d_hat}} "
+                               "with d_hat the disturbance reconstructed by the model (F: FIR, output(k) = "
+                               "sum_i num[i] input(k + advance - i)); the trial's ends as `trial_ends` says"
+                               + ("; the maps it runs under `law_maps` (C code: filters.c)" if rs.trial == "extended"
+                                  else "; no C code (the projected law solves a least-squares problem per trial)"),
+                   "delta_set": {source: ds.source}, **rs.to_dict()}
+        if rs.trial == "extended":
+            filters["law_maps"] = robust_set_maps(rs.filters)
+        return MethodDesign(filters, rs.apply)
+
+    def check_options(self, given: dict[str, Any]) -> None:  # noqa: D102 - Method.check_options
+        rho = given.get("--rho")
+        if rho is not None and not (np.isfinite(rho) and 0 < rho <= 1):
+            raise SpecError(f"`--rho`: got {rho!r}, expected a guaranteed improvement factor in (0, 1] for --method "
+                            "robust-set (|e_j| <= rho |e'_j| on every plant of the Delta set; 1: never worse than "
+                            "without learning)")
+
+    def order(self, filters: dict[str, Any], lifted: dict[str, np.ndarray] | None) -> str:  # noqa: D102
+        return f"closed form + {len(filters['F']['num'])}-tap FIR"
+
+
+#: The design methods by name, in the order the tool lists them.
+METHODS: dict[str, Method] = {m.name: m for m in (ClosedForm(), FIR(), NormOptimal(), Robust(), RobustSet())}
+
+#: The method a command designs with when none is named: the Theorem's closed form.
+DEFAULT_METHOD = ClosedForm.name
+
+
+def method_named(name: object, option: str = "method") -> Method:
+    """The method called ``name``.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`METHODS`.
+    option : str
+        The option or argument it came from, for the message.
+
+    Raises
+    ------
+    SpecError
+        No method has that name.
+    """
+    if not isinstance(name, str) or name not in METHODS:
+        raise SpecError(f"`{option}`: got {name!r}, valid methods are {list(METHODS)}")
+    return METHODS[name]
