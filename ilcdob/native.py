@@ -356,20 +356,18 @@ class NativeFunction:
         generator.add(self.function)
         return generator.dump()
 
-    def library(self, command: list[str], folder: Path | None = None) -> Path | None:
+    def library(self, command: list[str]) -> Path | None:
         """Path of the library ``command`` builds.
 
         Parameters
         ----------
         command : list of str
             The compiler command (:func:`compiler_command`).
-        folder : Path, optional
-            The library folder (default :func:`cache_dir`).
 
         Returns
         -------
         Path or None
-            In ``folder``, named by the function and a hash of what the build depends on
+            In :func:`cache_dir` (where it is looked for first: :meth:`get`), named by the function and a hash of what the build depends on
             (module docstring); None when the compiler does not run.
         """
         import casadi as cs
@@ -383,7 +381,7 @@ class NativeFunction:
             self._digests[identity] = hashlib.sha256(key.encode()).hexdigest()[:20]
         digest = self._digests[identity]
         suffix = ".dll" if os.name == "nt" else ".so"
-        return (cache_dir() if folder is None else folder) / f"{self.function.name()}-{digest}{suffix}"
+        return cache_dir() / f"{self.function.name()}-{digest}{suffix}"
 
     def get(self, build: bool = True) -> Any:
         """The native function if there is (or, with ``build``, can be) one, else the virtual machine's.
