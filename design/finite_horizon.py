@@ -74,8 +74,8 @@ from .noncausal import ZPKFilter, lookahead
 from .trial_edges import trend_weights
 
 __all__ = ["LinearMap", "causal_map", "sos_map", "zero_phase_map", "horizon_map", "zpk_map", "fir_map",
-           "trend_map", "odd_start_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio", "finite_horizon_ratio",
-           "PairTrials"]
+           "trend_map", "odd_start_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio",
+           "finite_horizon_ratio", "PairTrials"]
 
 _CUBIC_FIT = 16  # samples extend_smoothly fits its cubic to (ilcdob.signals.extend_smoothly default)
 

@@ -237,7 +237,13 @@ class PairDesign:
         if self.law != "paper":
             raise SpecError(f"finite-horizon map: law {self.law!r}; only the paper's law is linear in the "
                             "error alone")
-        return getattr(self.raw, "__self__", None), self.band, self.path
+        return self._method_filter, self.band, self.path
+
+    @property
+    def _method_filter(self) -> Any:
+        """The object whose method :attr:`raw` is (``LearningFilters``, ``RobustSetDesign``, ...); None for a
+        plain function."""
+        return getattr(self.raw, "__self__", None)
 
     def finite_trial(self, n: int, source: LoopSystem | None = None, target: LoopSystem | None = None) -> Any:
         """The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` of this law over ``n`` samples.
@@ -259,7 +265,7 @@ class PairDesign:
         """
         from .finite_horizon import finite_horizon_ratio, law_map
 
-        method = getattr(self.raw, "__self__", None)
+        method = self._method_filter
         filters = method if isinstance(method, LearningFilters) else getattr(method, "filters", None)
         if not isinstance(filters, LearningFilters):
             raise SpecError(f"`finite_trial`: method {self.method!r} has no fixed linear law; closed-form and "
@@ -460,8 +466,9 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
     if chosen.needs_delta_sets:
         deltas = deltas or fleet_delta_sets(fleet, [source, target])
-    made = chosen.design(DesignInputs(fleet, src, tgt, head, closed_form, deltas, n, norm_optimal, fir, robust,
-                                      robust_set, relax, lifted))
+    made = chosen.design(DesignInputs(fleet, src, tgt, head, closed_form, deltas=deltas, n=n,
+                                      norm_optimal=norm_optimal, fir=fir, robust=robust, robust_set=robust_set,
+                                      relax=relax, lifted=lifted))
     design = PairDesign(method, made.filters, made.raw, made.lifted, robust=made.robust)
     chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=not chosen.guaranteed)
     limits = {s.name: s for s in fleet.systems}[target].limits

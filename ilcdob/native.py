@@ -367,8 +367,8 @@ class NativeFunction:
         Returns
         -------
         Path or None
-            In :func:`cache_dir` (where it is looked for first: :meth:`get`), named by the function and a hash of what the build depends on
-            (module docstring); None when the compiler does not run.
+            In :func:`cache_dir` (where :meth:`get` looks first), named by the function and a hash
+            of what the build depends on (module docstring); None when the compiler does not run.
         """
         import casadi as cs
 
@@ -426,7 +426,7 @@ class NativeFunction:
             _refuse(path, reason, "the library")
             path = private_dir() / path.name
         missing = not os.path.lexists(path)
-        if missing and mode == "auto" and (not build or tuple(command) in _FAILED):
+        if missing and not builds:
             return self.function
         try:
             if missing:

@@ -843,8 +843,10 @@ class TrialColumns(LogClock):
         e = np.asarray(data["e"] if self.error is not None else data["r"] - data["y"], float)
         df = np.asarray(data["d_f"], float) if self.learning is not None else np.zeros(len(data))
         error = f"column `{self.error}`" if self.error is not None else f"`{self.reference}` - `{self.position}`"
-        _check_trial_values(path, {f"error ({error})": (e, "m"),
-                                   f"learning signal (column `{self.learning}`)": (df, "m/s^2")})
+        signals = {f"error ({error})": (e, "m")}
+        if self.learning is not None:
+            signals[f"learning signal (column `{self.learning}`)"] = (df, "m/s^2")
+        _check_trial_values(path, signals)
         return data, e, df
 
 
