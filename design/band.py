@@ -71,7 +71,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 from scipy import signal as sps
@@ -347,64 +347,6 @@ class LearningBand:
         if self.cutoff is None:
             return x
         return sps.sosfiltfilt(self.sos, x, padtype=None)
-
-    def apply_trials(self, learn: Callable[..., np.ndarray], signals: Sequence[object],
-                     path: np.ndarray | None = None) -> np.ndarray:
-        """``fold(F{W{learn(F{H{x_1}}, ..., F{H{x_k}})}})`` on one trial (module docstring).
-
-        Parameters
-        ----------
-        learn : callable
-            The learning filter: takes the ``k`` extended, filtered signals and returns the
-            learning signal on the same (extended) horizon.
-        signals : sequence of array
-            The trial's signals (errors in m, learning signals in m/s^2), all ``N`` samples.
-        path : numpy.ndarray, optional
-            Second-order sections of the airframe correction W, run causally after ``learn``.
-
-        Returns
-        -------
-        numpy.ndarray
-            The learning signal, m/s^2, ``N`` samples.
-        """
-        xs = [as_signal(x, f"signal {i}") for i, x in enumerate(signals)]
-        n = xs[0].size
-        for i, x in enumerate(xs[1:], 1):
-            as_signal(x, f"signal {i}", n)
-        pad = self.pad
-        ext = [self.smooth(learning_horizon(x, self.ts, pad)) if np.any(x) else np.zeros(n + 2 * pad) for x in xs]
-        y = np.asarray(learn(*ext), dtype=float)
-        if path is not None:
-            y = sps.sosfilt(path, y)
-        return fold_start(self.smooth(y), pad, n)
-
-    def apply(self, learn: Callable[[np.ndarray, np.ndarray], np.ndarray], e_prev: object, df_prev: object,
-              path: np.ndarray | None = None, gain: float = 1.0) -> np.ndarray:
-        """The learning signal of vehicle j from vehicle j-1's trial through F (module docstring).
-
-        Parameters
-        ----------
-        learn : callable
-            ``learn(e, df) -> d_f`` of the method (m, m/s^2 -> m/s^2).
-        e_prev : array, m
-            Vehicle j-1's measured tracking error.
-        df_prev : array, m/s^2
-            The learning signal it flew (zeros if none).
-        path : numpy.ndarray, optional
-            Sections of the airframe correction W.
-        gain : float
-            Learning gain ``gamma`` in (0, 1] on the new error (1: the Theorem's law).
-
-        Returns
-        -------
-        numpy.ndarray
-            ``d_f,j``, m/s^2, same length as ``e_prev``.
-        """
-        e = as_signal(e_prev, "e_prev")
-        df = as_signal(df_prev, "df_prev", e.size)
-        if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not 0.0 < gain <= 1.0:
-            raise SpecError(f"`gain`: got {gain!r}, expected a learning gain in (0, 1]")
-        return self.apply_trials(learn, [gain * e if gain != 1.0 else e, df], path)
 
     def describe(self) -> str:
         """One line: the corner (or no filter) and why."""

@@ -29,7 +29,7 @@ Beside them the source has the whole learning law of the design, ::
     int PREFIX_learn(const double *e, const double *df_prev, double *df_next, size_t n,
                      double *work);
 
-computing :func:`~ilcdob.design.export.apply_learning` (``filters.json`` keys ``band`` and
+computing :func:`~ilcdob.design.law.apply_learning` (``filters.json`` keys ``band`` and
 ``disturbance``) ::
 
     d_f = fold(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
@@ -87,7 +87,13 @@ from ilcdob.fleet import AXES
 from ilcdob.names import c_comment, c_identifier
 from ilcdob.signals import as_signal
 
+from .c_text import DOUBLE, FLOAT, CType, array_c
+from .entries import MAX_ADVANCE, check_filter_entry, check_sections, direct_form
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
+from .law import LawContext, LearningLaw
+from .law.airframe import AirframePath
+from .law.band import band_spec
+from .law.robust_set import RobustSetMaps
 
 __all__ = ["CCode", "c_code", "check_filters", "check_filter_entry", "MAX_ADVANCE", "default_c_prefix",
            "check_c_prefix", "reference_trial", "emulate_c_filter", "float_error", "design_readme", "design_files", "signal_header",
@@ -96,13 +102,6 @@ __all__ = ["CCode", "c_code", "check_filters", "check_filter_entry", "MAX_ADVANC
 #: The filters of ``filters.json`` that get C functions, and their lower-case C names.
 FILTER_KEYS = ("L1", "L2")
 
-#: Most samples of look-ahead (``advance``) a filter of ``filters.json`` may state: 1000 s at
-#: 1 kHz, far beyond any learning filter, and small enough to allocate.
-MAX_ADVANCE = 1_000_000
-
-#: Most states of a state-space map of ``filters.json`` (``law_maps``): a loop map of a dozen
-#: blocks has a few dozen.
-_MAX_STATES = 512
 
 _FIT_MAX = 16   # samples the continuation is fitted to (extend_smoothly's n_fit)
 _FIT_DEG = 3    # its degree
@@ -232,18 +231,6 @@ def _tail_samples(x: np.ndarray, count: int, dt: type) -> np.ndarray:
     return out
 
 
-def _direct_form(coeffs: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """``num``, ``den`` normalised by ``den[0]`` and padded to one length (as ``lfilter`` does)."""
-    num, den = np.asarray(coeffs["num"], float), np.asarray(coeffs["den"], float)
-    if num.size == 0 or den.size == 0 or den[0] == 0:
-        raise SpecError(f"`num`/`den`: expected non-empty polynomials with den[0] != 0, got {num.size} "
-                        f"numerator and {den.size} denominator coefficients, den[0] = {den[:1].tolist()}")
-    size = max(num.size, den.size)
-    num = np.concatenate([num, np.zeros(size - num.size)]) / den[0]
-    den = np.concatenate([den, np.zeros(size - den.size)]) / den[0]
-    return num, den
-
-
 def emulate_c_filter(coeffs: dict[str, Any], x: object, dtype: type = np.float32) -> np.ndarray:
     """Run the arithmetic of the C function on ``x`` in ``dtype`` (float32: the float variant).
 
@@ -272,7 +259,7 @@ def emulate_c_filter(coeffs: dict[str, Any], x: object, dtype: type = np.float32
             padded = apply_lookahead(g.astype(dtype), padded)
         y = signal.sosfilt(np.asarray(coeffs["sos"], float).astype(dtype), padded)
     else:
-        num, den = _direct_form(coeffs)
+        num, den = direct_form(coeffs)
         if num.size == 1:
             y = padded * dtype(num[0])
         else:  # den has >= 2 entries here: lfilter's transposed direct form, as the C code
@@ -306,29 +293,7 @@ def float_error(coeffs: dict[str, Any], ts: float) -> float:
 # --------------------------------------------------------------------------- C text
 
 
-@dataclass(frozen=True)
-class _CType:
-    name: str        # C type
-    suffix: str      # function suffix
-    lit: str         # literal suffix
-    dtype: type      # numpy type of the coefficients
-
-    def num(self, v: float) -> str:
-        """A literal that the compiler rounds to exactly ``dtype(v)``."""
-        if self.dtype is np.float32:
-            text = f"{float(np.float32(v)):.9g}"
-        else:
-            text = f"{float(v):.17g}"
-        if not any(c in text for c in ".eEn"):
-            text += ".0"
-        return text + self.lit
-
-
-_DOUBLE = _CType("double", "", "", np.float64)
-_FLOAT = _CType("float", "_f", "f", np.float32)
-
-
-def _tail_c(prefix: str, ct: _CType) -> str:
+def _tail_c(prefix: str, ct: CType) -> str:
     """The continuation past the trial's end (shared by the filters of one type)."""
     T, s, L = ct.name, ct.suffix, ct.lit
     return f"""\
@@ -397,14 +362,6 @@ static {T} {prefix}tail_eval{s}(const struct {prefix}tail{s} *f, size_t q)
 """
 
 
-def _array_c(ct: _CType, name: str, values: np.ndarray) -> str:
-    if values.ndim == 1:
-        body = ",\n    ".join(", ".join(ct.num(v) for v in values[i:i + 4]) for i in range(0, values.size, 4))
-        return f"static const {ct.name} {name}[{values.size}] = {{\n    {body}\n}};\n"
-    rows = ",\n    ".join("{" + ", ".join(ct.num(v) for v in row) + "}" for row in values)
-    return f"static const {ct.name} {name}[{values.shape[0]}][{values.shape[1]}] = {{\n    {rows}\n}};\n"
-
-
 def signal_header(prefix: str, values: np.ndarray, ts: float) -> str:
     """A C header holding one learning signal: ``<prefix>df[<PREFIX>DF_SAMPLES]`` (m/s^2) and its sample time.
 
@@ -428,11 +385,11 @@ def signal_header(prefix: str, values: np.ndarray, ts: float) -> str:
         raise SpecError("`values`: no samples; a learning signal header needs at least one")
     return (f"/* Learning signal (m/s^2), one sample per {ts:g} s, written by ilcdob learn. */\n"
             f"#ifndef {macro}DF_H\n#define {macro}DF_H\n#define {macro}DF_SAMPLES {values.size}u\n"
-            f"#define {macro}DF_TS {_DOUBLE.num(ts)}\n"
-            + _array_c(_DOUBLE, f"{prefix}df", values) + "#endif\n")
+            f"#define {macro}DF_TS {DOUBLE.num(ts)}\n"
+            + array_c(DOUBLE, f"{prefix}df", values) + "#endif\n")
 
 
-def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
+def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: CType) -> str:
     """Coefficient table and apply function of one filter."""
     T, s = ct.name, ct.suffix
     name = f"{prefix}{key.lower()}"
@@ -449,13 +406,13 @@ def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
         lines.append(f"/* {key}: look-ahead pre-stage, {g.size} taps g_m: v(j) = sum_m g_m u(j + m), m = 0..{ahead} "
                      "(the series of the\n   anti-causal poles, |p| > 1); the sections below run on v and are read "
                      f"{adv - ahead} sample{'s' if adv - ahead != 1 else ''} ahead of it */\n")
-        lines.append(_array_c(ct, f"{name}_ahead{s}", g))
+        lines.append(array_c(ct, f"{name}_ahead{s}", g))
     if coeffs.get("sos"):
-        sos = _sections(coeffs["sos"], f"{key}.sos")
+        sos = check_sections(coeffs["sos"], f"{key}.sos")
         plural = "s" if sos.shape[0] > 1 else ""
         lines.append(f"/* {key}: {sos.shape[0]} second-order section{plural} in cascade, rows "
                      "b0 b1 b2 a0 a1 a2 (a0 = 1) */\n")
-        lines.append(_array_c(ct, f"{name}_sos{s}", sos))
+        lines.append(array_c(ct, f"{name}_sos{s}", sos))
         state = f"    {T} z[{sos.shape[0]}][2] = {{{{0.0{ct.lit}}}}};\n    size_t i;\n"
         step = (f"        for (i = 0; i < {sos.shape[0]}; ++i) {{\n"
                 f"            const {T} x_new = {name}_sos{s}[i][0] * x + z[i][0];\n"
@@ -464,14 +421,14 @@ def _filter_c(prefix: str, key: str, coeffs: dict[str, Any], ct: _CType) -> str:
                 f"            x = x_new;\n"
                 f"        }}\n")
     elif "num" in coeffs and "den" in coeffs:
-        num, den = _direct_form(coeffs)
+        num, den = direct_form(coeffs)
         size = num.size
         fir = bool(np.all(den[1:] == 0.0))
         kind = f"FIR, {size} taps" if fir else f"direct form, order {size - 1}"
         lines.append(f"/* {key}: {kind} (transposed direct form, as scipy.signal.lfilter) */\n")
-        lines.append(_array_c(ct, f"{name}_num{s}", num))
+        lines.append(array_c(ct, f"{name}_num{s}", num))
         if not fir:
-            lines.append(_array_c(ct, f"{name}_den{s}", den))
+            lines.append(array_c(ct, f"{name}_den{s}", den))
         if size == 1:
             state = ""
             step = f"        x = x * {name}_num{s}[0];\n"
@@ -560,180 +517,25 @@ class _Learning:
     fold: bool = False           # the learning signal before t = 0 folded onto the first samples
 
 
-def _sections(value: object, key: str) -> np.ndarray:
-    """``value`` as finite second-order sections ``[b0, b1, b2, 1, a1, a2]``, else :class:`SpecError`."""
-    try:
-        sos = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SpecError(f"`{key}`: got {value!r:.80}, expected rows [b0, b1, b2, 1, a1, a2] of numbers") from None
-    if sos.ndim != 2 or sos.shape[0] < 1 or sos.shape[1] != 6:
-        raise SpecError(f"`{key}`: got an array of shape {sos.shape}, expected at least one row "
-                        "[b0, b1, b2, 1, a1, a2] (shape (sections, 6))")
-    if not np.all(np.isfinite(sos)):
-        raise SpecError(f"`{key}`: non-finite coefficient(s); expected finite numbers")
-    if not np.all(sos[:, 3] == 1.0):
-        raise SpecError(f"`{key}`: got a0 = {sos[:, 3].tolist()}, expected rows [b0, b1, b2, 1, a1, a2] (a0 = 1)")
-    return sos
-
-
-def _count(value: object, key: str, least: int) -> int:
-    """``value`` as an integer number of samples ``>= least``, else :class:`SpecError`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-        raise SpecError(f"`{key}`: got {value!r}, expected an integer number of samples >= {least}")
-    return int(value)
-
-
 def _learning_parts(filters: dict[str, Any]) -> _Learning:
-    """The band and airframe correction of ``filters.json``, checked for the C code.
+    """The band and airframe correction of ``filters.json`` as the law's stages read them (:mod:`.law`).
 
     Raises
     ------
     SpecError
         A ``band`` or ``disturbance`` entry of the wrong type, shape or value, naming its key.
     """
-    band = filters.get("band")
-    if band is None:
-        band = {}
-    if not isinstance(band, dict):
-        raise SpecError(f"`band`: got {band!r:.80}, expected a mapping (LearningBand.to_dict)")
-    cutoff = band.get("cutoff_rad_s")
-    sos = zi = None
-    pad, end_fit, order, why = 0, 1, None, ""
-    if band.get("sos") is not None:
-        sos = _sections(band["sos"], "band.sos")
-        try:
-            zi = np.asarray(band.get("zi"), dtype=float)
-        except (TypeError, ValueError):
-            raise SpecError(f"`band.zi`: got {band.get('zi')!r:.80}, expected {sos.shape[0]} rows of 2 "
-                            "numbers (scipy.signal.sosfilt_zi of `band.sos`)") from None
-        if zi.shape != (sos.shape[0], 2):
-            raise SpecError(f"`band.zi`: got shape {zi.shape}, expected ({sos.shape[0]}, 2) for "
-                            f"{sos.shape[0]} section(s) in `band.sos` (scipy.signal.sosfilt_zi)")
-        if not np.all(np.isfinite(zi)):
-            raise SpecError("`band.zi`: non-finite value(s); expected finite numbers (scipy.signal.sosfilt_zi)")
-        pad = _count(band.get("pad"), "band.pad", 0)
-        end_fit = _count(band.get("end_fit"), "band.end_fit", 1)
-        if (isinstance(cutoff, bool) or not isinstance(cutoff, (int, float))
-                or not (math.isfinite(cutoff) and cutoff > 0)):
-            raise SpecError(f"`band.cutoff_rad_s`: got {cutoff!r}, expected the corner of `band.sos`, a "
-                            "frequency > 0 rad/s")
-        order = band.get("order") if isinstance(band.get("order"), int) else None
-        why = str(band.get("reason") or band.get("source") or "")
-        if band.get("start", "crop") not in ("crop", "fold"):
-            raise SpecError(f"`band.start`: got {band.get('start')!r:.80}, expected 'fold' (the part before t = 0 "
-                            "added, time-reversed, to the first samples) or 'crop'")
-    elif cutoff is not None:
-        raise SpecError(f"`band.sos`: missing, but `band.cutoff_rad_s` is {cutoff!r}; expected the sections of "
-                        "the band's filter F (or cutoff_rad_s None: no filter)")
-    dist = filters.get("disturbance")
-    if dist is None:
-        dist = {}
-    if not isinstance(dist, dict):
-        raise SpecError(f"`disturbance`: got {dist!r:.80}, expected a mapping such as {{'at': 'command'}}")
-    w_sos = None
-    if dist.get("W") is not None:
-        w = dist["W"]
-        if not isinstance(w, dict) or w.get("sos") is None:
-            raise SpecError(f"`disturbance.W`: got {w!r:.80}, expected {{'sos': [[b0, b1, b2, 1, a1, a2], ...]}}")
-        w_sos = _sections(w["sos"], "disturbance.W.sos")
-    elif dist.get("at", "command") in ("airframe", "wind"):
-        raise SpecError(f"`disturbance.W`: missing, but `disturbance.at` is {dist.get('at')!r}; expected the airframe "
-                        "correction {'sos': [[b0, b1, b2, 1, a1, a2], ...]}")
-    return _Learning(sos, zi, pad, end_fit, float(cutoff) if sos is not None else None, order, why, w_sos,
-                     sos is not None and band.get("start") == "fold")
+    spec = band_spec(filters)
+    w = AirframePath.from_dict(filters, LawContext())
+    w_sos = None if w is None else w.sos
+    if spec is None:
+        return _Learning(None, None, 0, 1, None, None, "", w_sos)
+    return _Learning(spec.sos, spec.zi, spec.pad, spec.end_fit, spec.cutoff, spec.order, spec.why, w_sos, spec.fold)
 
 
-def check_filter_entry(coeffs: object, key: str) -> None:
-    """One filter of ``filters.json`` checked: ``advance``, then ``sos`` (and ``lookahead``) or ``num``/``den``.
-
-    Parameters
-    ----------
-    coeffs : object
-        The entry (``filters["L1"]``, ...).
-    key : str
-        Its name, first in messages.
-
-    Raises
-    ------
-    SpecError
-        Not a mapping, ``advance`` not an integer in ``[0, MAX_ADVANCE]``, sections or
-        polynomials that are not finite numbers of the right shape, or bad look-ahead taps.
-    """
-    if not isinstance(coeffs, dict):
-        raise SpecError(f"`{key}`: got {coeffs!r:.80}, expected a mapping with `advance` and `sos` or `num`/`den`")
-    adv = _count(coeffs.get("advance"), f"{key}.advance", 0)
-    if adv > MAX_ADVANCE:
-        raise SpecError(f"`{key}.advance`: got {adv} samples, expected at most {MAX_ADVANCE} (a look-ahead of "
-                        "a few hundred samples is already long)")
-    if coeffs.get("sos"):
-        _sections(coeffs["sos"], f"{key}.sos")
-    else:
-        try:
-            num, den = (np.asarray(coeffs.get(part), dtype=float) for part in ("num", "den"))
-        except (TypeError, ValueError):
-            raise SpecError(f"`{key}.num`/`{key}.den`: expected lists of numbers (or `sos`)") from None
-        if num.ndim != 1 or den.ndim != 1 or not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
-            raise SpecError(f"`{key}.num`/`{key}.den`: expected lists of finite numbers (or `sos`)")
-        _direct_form(coeffs)
-    lookahead_taps(coeffs, f"{key}.lookahead")
-
-
-@dataclass(frozen=True)
-class _RobustSet:
-    """The parts of a robust-set ``filters.json`` its learning law runs (:func:`_robust_parts`)."""
-
-    h: np.ndarray                # F's taps
-    advance: int                 # F's look-ahead, samples
-    fade: int                    # samples at the end blended into the trend
-    ginv: dict[str, Any]         # Gd_hat_{j-1}^{-1}, coefficient form
-    gf: tuple[np.ndarray, ...]   # Gf_hat_{j-1}: A, B, C, D (state space)
-    omq: tuple[np.ndarray, ...]  # 1 - Q_j: A, B, C, D
-
-
-def _state_space(value: object, key: str) -> tuple[np.ndarray, ...]:
-    """A state-space entry ``{"A", "B", "C", "D"}`` as finite arrays of consistent shape, else :class:`SpecError`."""
-    if not isinstance(value, dict) or any(k not in value for k in "ABCD"):
-        raise SpecError(f"`{key}`: got {value!r:.80}, expected a mapping with A (n x n), B, C (n numbers) and D")
-    try:
-        a, b, c, d = (np.asarray(value[k], dtype=float) for k in "ABCD")
-    except (TypeError, ValueError):
-        raise SpecError(f"`{key}`: A, B, C and D must be numbers (nested lists)") from None
-    ns = b.size
-    if a.shape not in ((ns, ns), (0,), (1, 0)) or c.size != ns or d.size != 1 or ns > _MAX_STATES:
-        raise SpecError(f"`{key}`: got A of shape {a.shape}, {b.size} B, {c.size} C and {d.size} D values; expected "
-                        f"A of n x n, n B and n C values (n <= {_MAX_STATES}) and one D")
-    if not all(np.all(np.isfinite(x)) for x in (a, b, c, d)):
-        raise SpecError(f"`{key}`: non-finite value(s); expected finite numbers")
-    return a.reshape(ns, ns), b.reshape(-1), c.reshape(-1), d.reshape(-1)
-
-
-def _robust_parts(filters: dict[str, Any]) -> _RobustSet | None:
-    """The robust-set law's parts (``law_maps``, ``F``, ``trial_ends``), checked; None for other designs.
-
-    Raises
-    ------
-    SpecError
-        An entry of the wrong type, shape or value, naming its key.
-    """
-    maps = filters.get("law_maps")
-    if maps is None:
-        return None
-    if not isinstance(maps, dict):
-        raise SpecError(f"`law_maps`: got {maps!r:.80}, expected a mapping with source_gf, inverse_gd, one_minus_q")
-    fir, ends = filters.get("F"), filters.get("trial_ends")
-    if not isinstance(fir, dict):
-        raise SpecError(f"`F`: got {fir!r:.80}, expected the robustness FIR {{'num': [...], 'advance': samples}}")
-    check_filter_entry({**fir, "den": [1.0]}, "F")
-    h = np.asarray(fir["num"], dtype=float)
-    if h.ndim != 1 or not h.size:
-        raise SpecError(f"`F.num`: got {h.size} taps of shape {h.shape}, expected a list of at least one tap")
-    if not isinstance(ends, dict):
-        raise SpecError(f"`trial_ends`: got {ends!r:.80}, expected a mapping with `fade_samples`")
-    fade = _count(ends.get("fade_samples"), "trial_ends.fade_samples", 0)
-    check_filter_entry(maps.get("inverse_gd"), "law_maps.inverse_gd")
-    return _RobustSet(h, int(fir["advance"]), fade, maps["inverse_gd"],
-                      _state_space(maps.get("source_gf"), "law_maps.source_gf"),
-                      _state_space(maps.get("one_minus_q"), "law_maps.one_minus_q"))
+def _robust_parts(filters: dict[str, Any]) -> RobustSetMaps | None:
+    """The robust-set law's stage (``law_maps``, ``F``, ``trial_ends``), checked; None for other designs."""
+    return RobustSetMaps.from_dict(filters, LawContext())
 
 
 def _design_parts(filters: dict[str, Any]) -> None:
@@ -771,7 +573,7 @@ def _design_parts(filters: dict[str, Any]) -> None:
 def check_filters(filters: object, source: str) -> dict[str, Any]:
     """The content of a ``filters.json`` read from a file, checked before it is used.
 
-    Checks every entry the learning law (:func:`~ilcdob.design.export.apply_learning`) and
+    Checks every entry the learning law (:func:`~ilcdob.design.law.apply_learning`) and
     the C code (:func:`c_code`) read: ``from``/``to`` names, ``sample_time`` (s), ``L1`` and
     ``L2`` (``advance`` at most :data:`MAX_ADVANCE`, finite sections or polynomials,
     look-ahead taps), ``band`` and ``disturbance``, a robust-set design's ``law_maps``,
@@ -816,32 +618,11 @@ def check_filters(filters: object, source: str) -> dict[str, Any]:
     return filters
 
 
-def _learn_c(prefix: str, lp: _Learning, rp: _RobustSet | None = None) -> str:
-    """Coefficient tables, helpers and ``<prefix>learn`` (double only); ``rp``: the robust-set law
-    in place of ``L1{.} + L2{.}``."""
-    macro = prefix.upper()
-    out = ["\n/* ------------------------------------------------------------------ the learning law */\n"]
-    if rp is not None:
-        out.append(_robust_c(prefix, rp))
-    if lp.sos is not None:
-        ns = lp.sos.shape[0]
-        what = f"Butterworth order {lp.order}, " if lp.order else ""
-        out.append(f"\n/* F, the learning band: one pass, {ns} second-order section{'s' if ns > 1 else ''} "
-                   f"({what}corner {lp.cutoff:.6g} rad/s),\n   rows b0 b1 b2 a0 a1 a2 (a0 = 1); zi: its state "
-                   "per unit input at rest (scipy.signal.sosfilt_zi). */\n")
-        out.append(_array_c(_DOUBLE, f"{prefix}band_sos", lp.sos))
-        out.append(_array_c(_DOUBLE, f"{prefix}band_zi", lp.zi))
-    if lp.w_sos is not None:
-        nw = lp.w_sos.shape[0]
-        out.append(f"\n/* W, the airframe correction: {nw} second-order section{'s' if nw > 1 else ''} run "
-                   "forwards from rest,\n   rows b0 b1 b2 a0 a1 a2 (a0 = 1). */\n")
-        out.append(_array_c(_DOUBLE, f"{prefix}w_sos", lp.w_sos))
-    if lp.sos is not None or lp.w_sos is not None:
-        out.append(f"""
+_SECTIONS_C = """
 /* Second-order sections over x[0..n) in place from the state z, forwards or (backward != 0)
    backwards, in the operation order of scipy.signal.sosfilt. */
-static void {prefix}sections(const double (*sos)[6], size_t ns, double (*z)[2], double *x,
-{' ' * (13 + len(prefix))}size_t n, int backward)
+static void {p}sections(const double (*sos)[6], size_t ns, double (*z)[2], double *x,
+{indent}size_t n, int backward)
 {{
     size_t k, i;
 
@@ -857,261 +638,28 @@ static void {prefix}sections(const double (*sos)[6], size_t ns, double (*z)[2], 
         *at = v;
     }}
 }}
-""")
-    if lp.sos is not None:
-        ns = lp.sos.shape[0]
-        out.append(f"""
-/* One zero-phase pass of F over x[0..n) in place, n >= 1: forwards from the state zi x[0],
-   then backwards from zi y[n-1] (scipy.signal.sosfiltfilt with padtype=None). */
-static void {prefix}band_pass(double *x, size_t n)
-{{
-    double z[{ns}][2];
-    size_t i;
-
-    for (i = 0; i < {ns}; ++i) {{
-        z[i][0] = {prefix}band_zi[i][0] * x[0];
-        z[i][1] = {prefix}band_zi[i][1] * x[0];
-    }}
-    {prefix}sections({prefix}band_sos, {ns}, z, x, n, 0);
-    for (i = 0; i < {ns}; ++i) {{
-        z[i][0] = {prefix}band_zi[i][0] * x[n - 1];
-        z[i][1] = {prefix}band_zi[i][1] * x[n - 1];
-    }}
-    {prefix}sections({prefix}band_sos, {ns}, z, x, n, 1);
-}}
-""")
-        if lp.pad:
-            out.append(f"""
-/* H: x[0..n), n >= 1, extended by PAD = {macro}PAD samples at each end into
-   h[0..n + 2 PAD): zeros before; after the end the least-squares line through the last
-   m = min(END_FIT, n) samples, END_FIT = {macro}END_FIT (numpy.polyfit of degree 1 in
-   ilcdob.design.export; m = 1: the last sample), here on the centred abscissa
-   t_i = i - (m - 1)/2, i = 0..m-1: mean + slope t. */
-static void {prefix}horizon(const double *x, size_t n, double *h)
-{{
-    const size_t m = n < {macro}END_FIT ? n : {macro}END_FIT;
-    const double *u = x + (n - m);
-    const double half = 0.5 * (double)(m - 1);
-    double s_x = 0.0, s_tt = 0.0, s_tx = 0.0, mean, slope = 0.0;
-    size_t i;
-
-    for (i = 0; i < m; ++i) {{
-        const double t = (double)i - half;
-        s_x = s_x + u[i];
-        s_tt = s_tt + t * t;
-        s_tx = s_tx + t * u[i];
-    }}
-    mean = s_x / (double)m;
-    if (m > 1)
-        slope = s_tx / s_tt;
-    for (i = 0; i < {macro}PAD; ++i)
-        h[i] = 0.0;
-    for (i = 0; i < n; ++i)
-        h[{macro}PAD + i] = x[i];
-    for (i = 0; i < {macro}PAD; ++i)
-        h[{macro}PAD + n + i] = mean + slope * ((double)(m + i) - half);
-}}
-""")
-        else:
-            out.append(f"""
-/* H with {macro}PAD = 0: the trial as it is. */
-static void {prefix}horizon(const double *x, size_t n, double *h)
-{{
-    size_t i;
-
-    for (i = 0; i < n; ++i)
-        h[i] = x[i];
-}}
-""")
-    if lp.w_sos is not None:
-        nw = lp.w_sos.shape[0]
-        out.append(f"""
-/* W over x[0..n) in place, from rest. */
-static void {prefix}w_pass(double *x, size_t n)
-{{
-    double z[{nw}][2] = {{{{0.0}}}};
-
-    {prefix}sections({prefix}w_sos, {nw}, z, x, n, 0);
-}}
-""")
-    checks = (f"    if (n == 0)\n        return {macro}LEARN_EMPTY;\n"
-              f"    if (e == NULL || df_prev == NULL || df_next == NULL || work == NULL)\n"
-              f"        return {macro}LEARN_NULL;\n")
-    note = "   /* e and df_prev are read before df_next is written */"
-    w_step = f"    {prefix}w_pass(a, len);\n" if lp.w_sos is not None else ""
-    if rp is not None:
-        combine = f"    {prefix}rs_core(a, b, len, work + 2 * len);\n"
-    else:
-        combine = (f"    {prefix}l1_apply(a, a, len);\n    {prefix}l2_apply(b, b, len);\n"
-                   f"    for (k = 0; k < len; ++k)\n        a[k] = a[k] + b[k];\n")
-    if lp.sos is not None:
-        body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
-                f"    len = n + 2 * (size_t){macro}PAD;\n    a = work;\n    b = work + len;\n"
-                f"    {prefix}horizon(e, n, a);{note}\n    {prefix}horizon(df_prev, n, b);\n"
-                f"    {prefix}band_pass(a, len);\n    {prefix}band_pass(b, len);\n"
-                f"{combine}{w_step}"
-                f"    {prefix}band_pass(a, len);\n"
-                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n"
-                + (f"    /* fold: the part before t = 0, time-reversed, onto the first samples */\n"
-                   f"    for (k = 0; k < n && k < (size_t){macro}PAD; ++k)\n"
-                   f"        df_next[k] += a[{macro}PAD - 1 - k];\n" if lp.fold else "")
-                + "    return 0;\n")
-    elif rp is not None:  # no band: W{rs_core(e, df_prev)} on copies
-        body = (f"    double *a, *b;\n    size_t len, k;\n\n{checks}"
-                f"    len = n;\n    a = work;\n    b = work + n;\n"
-                f"    for (k = 0; k < n; ++k) {{\n        a[k] = e[k];{note}\n        b[k] = df_prev[k];\n    }}\n"
-                f"{combine}{w_step}"
-                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n    return 0;\n")
-    else:  # no band: W{L1{e} + L2{df_prev}} (W when present)
-        body = (f"    double *a, *b;\n    size_t {'len, ' if w_step else ''}k;\n\n{checks}"
-                + ("    len = n;\n" if w_step else "")
-                + f"    a = work;\n    b = work + n;\n"
-                f"    {prefix}l1_apply(e, a, n);{note}\n"
-                f"    {prefix}l2_apply(df_prev, b, n);\n"
-                f"    for (k = 0; k < n; ++k)\n        a[k] = a[k] + b[k];\n{w_step}"
-                f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n    return 0;\n")
-    out.append(f"\nint {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, "
-               f"double *work)\n{{\n{body}}}\n")
-    return "".join(out)
-
-
-def _state_space_c(prefix: str, name: str, what: str, ss: tuple[np.ndarray, ...]) -> str:
-    """Tables and an in-place runner ``<prefix><name>_run(x, n)`` of one state-space map, from rest."""
-    a, b, c, d = ss
-    ns = b.size
-    fn = f"{prefix}{name}_run"
-    if ns == 0:
-        return (f"\n/* {what}: a gain. */\nstatic void {fn}(double *x, size_t n)\n{{\n    size_t k;\n\n"
-                f"    for (k = 0; k < n; ++k)\n        x[k] = {_DOUBLE.num(d[0])} * x[k];\n}}\n")
-    tables = "".join(_array_c(_DOUBLE, f"{prefix}{name}_{k}", v) for k, v in (("a", a), ("b", b), ("c", c)))
-    return f"""
-/* {what}: state space of {ns} states, run from rest over x[0..n) in place:
-   y(k) = D u(k) + sum_i c_i s_i(k),  s_i(k + 1) = b_i u(k) + sum_j a_ij s_j(k)
-   (what scipy.signal.dlsim computes, to rounding). */
-{tables}
-static void {fn}(double *x, size_t n)
-{{
-    double s[{ns}] = {{0.0}}, t[{ns}];
-    size_t k, i, j;
-
-    for (k = 0; k < n; ++k) {{
-        const double u = x[k];
-        double y = {_DOUBLE.num(d[0])} * u;
-        for (i = 0; i < {ns}; ++i)
-            y = y + {prefix}{name}_c[i] * s[i];
-        for (i = 0; i < {ns}; ++i) {{
-            double v = {prefix}{name}_b[i] * u;
-            for (j = 0; j < {ns}; ++j)
-                v = v + {prefix}{name}_a[i][j] * s[j];
-            t[i] = v;
-        }}
-        for (i = 0; i < {ns}; ++i)
-            s[i] = t[i];
-        x[k] = y;
-    }}
-}}
 """
 
 
-def _robust_c(prefix: str, rp: _RobustSet) -> str:
-    """The robust-set law's maps and ``<prefix>rs_core`` (``(1 - Q_j){F{d_hat}}`` on a signal pair)."""
+def _learn_c(prefix: str, law: LearningLaw) -> str:
+    """``<prefix>learn`` (double only) and what it calls: each stage's tables, helpers and step in chain order."""
     macro = prefix.upper()
-    out = [_state_space_c(prefix, "gf", "Gf_hat of the source's model (learning signal -> error)", rp.gf),
-           _state_space_c(prefix, "omq", "1 - Q of the target (the part of a disturbance its DOB leaves)", rp.omq),
-           f"\n/* F, the robustness filter: FIR of {rp.h.size} taps, out(k) = sum_i h_i in(k + {macro}F_ADVANCE - i). */\n",
-           _array_c(_DOUBLE, f"{prefix}rs_h", rp.h)]
-    if rp.advance:
-        out.append(f"""
-/* d[0..n) continued {macro}F_ADVANCE samples past its end into d[n..n + F_ADVANCE) along its trend
-   (ilcdob.design.trial_edges.end_continuation): the least-squares line through the FIT =
-   min(2 F_ADVANCE, n - m) samples before the last m = min({macro}FADE, n), weighted by the Hann
-   window w_i = 0.5 - 0.5 cos(2 pi (i + 1)/(FIT + 1)) (numpy.hanning(FIT + 2)[1:-1]), on the
-   centred abscissa; the last m samples blended into it, d + f_k (line - d)... exactly
-   line + f_k (d - line), f_k = 0.5 (1 + cos(pi (k + 1)/(m + 1))). One sample: a constant; none: zero. */
-static void {prefix}rs_trend(double *d, size_t n)
-{{
-    const double pi = 3.14159265358979323846;
-    const size_t m = n < {macro}FADE ? n : {macro}FADE;
-    const size_t fit = 2 * (size_t){macro}F_ADVANCE < n - m ? 2 * (size_t){macro}F_ADVANCE : n - m;
-    double mean = 0.0, slope = 0.0, centre = 0.0;
-    size_t i;
-
-    if (fit >= 2) {{
-        const double *x = d + (n - m - fit);
-        const double half = 0.5 * (double)(fit - 1);
-        double s_w = 0.0, s_wt = 0.0, s_wx = 0.0, s_wtt = 0.0, s_wtx = 0.0, t_bar;
-        for (i = 0; i < fit; ++i) {{
-            const double w = 0.5 - 0.5 * cos(2.0 * pi * (double)(i + 1) / (double)(fit + 1));
-            const double t = (double)i - half;
-            s_w = s_w + w;
-            s_wt = s_wt + w * t;
-            s_wx = s_wx + w * x[i];
-        }}
-        t_bar = s_wt / s_w;
-        mean = s_wx / s_w;
-        for (i = 0; i < fit; ++i) {{
-            const double w = 0.5 - 0.5 * cos(2.0 * pi * (double)(i + 1) / (double)(fit + 1));
-            const double t = (double)i - half - t_bar;
-            s_wtt = s_wtt + w * t * t;
-            s_wtx = s_wtx + w * t * (x[i] - mean);
-        }}
-        slope = s_wtx / s_wtt;
-        centre = (double)(n - m - fit) + half + t_bar;
-    }} else if (fit == 1) {{
-        mean = d[n - m - 1];
-    }}
-    for (i = 0; i < m; ++i) {{
-        const size_t k = n - m + i;
-        const double line = mean + slope * ((double)k - centre);
-        const double f = 0.5 * (1.0 + cos(pi * (double)(i + 1) / (double)(m + 1)));
-        d[k] = line + f * (d[k] - line);
-    }}
-    for (i = 0; i < {macro}F_ADVANCE; ++i)
-        d[n + i] = mean + slope * ((double)(n + i) - centre);
-}}
-""")
-    out.append(f"""
-/* Sample i of F's output over d[0..len), zero outside: sum_j h_j d(i - j) (numpy.convolve). */
-static double {prefix}rs_conv(const double *d, size_t len, size_t i)
-{{
-    const size_t first = i + 1 > len ? i + 1 - len : 0;
-    const size_t last = i < {rp.h.size - 1} ? i : {rp.h.size - 1};
-    double sum = 0.0;
-    size_t j;
-
-    for (j = first; j <= last; ++j)
-        sum = sum + {prefix}rs_h[j] * d[i - j];
-    return sum;
-}}
-
-/* The robust-set law on a signal pair of len >= 1 samples (the trial, or the band's extended
-   horizon): a = e, b = d_f of the source in; a = (1 - Q_j){{F{{d_hat}}}} out, with
-   d_hat = -Ginv{{e + Gf{{d_f}}}} (ilcdob.design.robust_set.RobustSetDesign.apply). b is
-   overwritten; d holds len + {macro}F_ADVANCE doubles. */
-static void {prefix}rs_core(double *a, double *b, size_t len, double *d)
-{{
-    size_t k;
-
-    {prefix}gf_run(b, len);
-    for (k = 0; k < len; ++k)
-        a[k] = a[k] + b[k];
-    {prefix}ginv_apply(a, d, len);
-    for (k = 0; k < len; ++k)
-        d[k] = -d[k];
-""" + (f"""\
-    {prefix}rs_trend(d, len);
-    for (k = 0; k < len; ++k) {{
-        a[k] = {prefix}rs_conv(d, len + {macro}F_ADVANCE, {macro}F_ADVANCE + k);
-        if (k < {macro}F_ADVANCE)   /* F's output before t = 0, folded onto the first samples */
-            a[k] = a[k] + {prefix}rs_conv(d, len + {macro}F_ADVANCE, {macro}F_ADVANCE - 1 - k);
-    }}
-""" if rp.advance else f"""\
-    for (k = 0; k < len; ++k)
-        a[k] = {prefix}rs_conv(d, len, k);
-""") + f"""\
-    {prefix}omq_run(a, len);
-}}
-""")
+    parts = [s.c_parts(prefix) for s in law.stages]
+    out = ["\n/* ------------------------------------------------------------------ the learning law */\n",
+           *(p.tables for p in parts)]
+    if any(p.sections for p in parts):
+        out.append(_SECTIONS_C.format(p=prefix, indent=" " * (13 + len(prefix))))
+    out += [p.helpers for p in parts]
+    load = "" if any(p.loads for p in parts) else (
+        "    for (k = 0; k < n; ++k) {\n        a[k] = e[k];   /* e and df_prev are read before df_next is written */\n"
+        "        b[k] = df_prev[k];\n    }\n")
+    store = "" if any(p.stores for p in parts) else "    for (k = 0; k < n; ++k)\n        df_next[k] = a[k];\n"
+    body = (f"    double *a, *b;\n    size_t len, k;\n\n    if (n == 0)\n        return {macro}LEARN_EMPTY;\n"
+            f"    if (e == NULL || df_prev == NULL || df_next == NULL || work == NULL)\n        return {macro}LEARN_NULL;\n"
+            f"    len = n + 2 * (size_t){macro}PAD;\n    a = work;\n    b = work + len;\n"
+            + load + "".join(p.step for p in parts) + store + "    return 0;\n")
+    out.append(f"\nint {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, "
+               f"double *work)\n{{\n{body}}}\n")
     return "".join(out)
 
 
@@ -1150,7 +698,7 @@ class CCode:
         p, m = self.prefix, self.prefix.upper()
         out: dict[str, Any] = {"header": "filters.h", "source": "filters.c", "prefix": p,
                                "functions": [f"{p}learn", *(f"{p}{k}_apply" for k in self.filters)],
-                               "learn": {"function": f"{p}learn", "computes": "ilcdob.design.export.apply_learning",
+                               "learn": {"function": f"{p}learn", "computes": "ilcdob.design.law.apply_learning",
                                          "work": f"{m}LEARN_WORK(n) = {self.work or f'2 * (n + 2 * {self.pad})'} "
                                                  "doubles",
                                          "returns": f"0; {m}LEARN_EMPTY = 1 (n == 0) or {m}LEARN_NULL = 2 "
@@ -1183,7 +731,7 @@ def _law_comment(macro: str, lp: _Learning, robust: list[str] | None = None) -> 
         ends = "fold" if lp.fold else "crop"
         inner = core("F{H{e}}", "F{H{d_f}}")
         lines = [f"    d_next = {ends}(F{{W{{{inner}}}}})" if lp.w_sos is not None else f"    d_next = {ends}(F{{{inner}}})",
-                 "exactly as ilcdob.design.export.apply_learning does (to rounding), where",
+                 "exactly as ilcdob.design.law.apply_learning does (to rounding), where",
                  *(robust or []),
                  f"  F  is the learning band: a Butterworth {order}low-pass with corner {lp.cutoff:.6g} rad/s",
                  f"     ({macro}BAND_CUTOFF), run forwards from its steady state at the first sample, then",
@@ -1198,7 +746,7 @@ def _law_comment(macro: str, lp: _Learning, robust: list[str] | None = None) -> 
                   f" before t = 0 to the first {macro}PAD of them." if lp.fold else "  crop keeps the trial's n samples."]
     else:
         lines = [f"    d_next = W{{{core('e', 'd_f')}}}" if lp.w_sos is not None else f"    d_next = {core('e', 'd_f')}",
-                 "exactly as ilcdob.design.export.apply_learning does (to rounding)"
+                 "exactly as ilcdob.design.law.apply_learning does (to rounding)"
                  + (", where" if robust is not None else ":"), *(robust or []),
                  f"no learning band (no filter, {macro}BAND_CUTOFF 0.0): "
                  + ("R" if robust is not None else "L1 and L2") + " act on the trial as recorded"
@@ -1317,7 +865,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
     macro = prefix.upper()
     pair = c_comment(f"{filters['from']} -> {filters['to']}")
     ts = float(filters["sample_time"])
-    types = [_DOUBLE, _FLOAT] if float_variant else [_DOUBLE]
+    types = [DOUBLE, FLOAT] if float_variant else [DOUBLE]
     errors = {k: float_error(filters[k], ts) for k in FILTER_KEYS} if float_variant else {}
 
     decls = []
@@ -1379,11 +927,11 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
             parts.append("\n" + _tail_c(prefix, ct))
         for k in FILTER_KEYS:
             parts.append("\n" + _filter_c(prefix, k, filters[k], ct))
-    parts.append(_learn_c(prefix, lp))
+    parts.append(_learn_c(prefix, LearningLaw.from_dict(filters)))
     return CCode(prefix=prefix, header=header, source="".join(parts), float_errors=errors, pad=lp.pad)
 
 
-def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: _RobustSet) -> CCode:
+def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: RobustSetMaps) -> CCode:
     """``filters.h`` and ``filters.c`` of a robust-set design: ``learn`` and ``ginv_apply`` (:func:`c_code`)."""
     macro = prefix.upper()
     pair = c_comment(f"{filters['from']} -> {filters['to']}")
@@ -1429,9 +977,9 @@ void {prefix}ginv_apply(const double *u, double *y, size_t n);
     parts = [f"/* Robust-set learning law {pair}: see filters.h. Written by `ilcdob design`. */\n"
              '#include <math.h>\n#include "filters.h"\n']
     if ginv_adv:
-        parts.append("\n" + _tail_c(prefix, _DOUBLE))
-    parts.append("\n" + _filter_c(prefix, "Ginv", rp.ginv, _DOUBLE))
-    parts.append(_learn_c(prefix, lp, rp))
+        parts.append("\n" + _tail_c(prefix, DOUBLE))
+    parts.append("\n" + _filter_c(prefix, "Ginv", rp.ginv, DOUBLE))
+    parts.append(_learn_c(prefix, LearningLaw.from_dict(filters)))
     return CCode(prefix=prefix, header=header, source="".join(parts), pad=lp.pad, filters=("ginv",), work=work)
 
 
@@ -1601,7 +1149,7 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
                   "",
                   f"and feed `d_next` forward (m/s^2) on the next flight of {tgt}, sample k at time k Ts. "
                   f"`{p}learn` computes d_next = {law} over the whole trial at once, exactly as "
-                  "`ilcdob.design.export.apply_learning` does in Python (to rounding); no allocation, "
+                  "`ilcdob.design.law.apply_learning` does in Python (to rounding); no allocation, "
                   f"`work` holds `{m}LEARN_WORK(n)` = {code.work or f'2 * (n + 2 * {lp.pad})'} doubles.",
                   "", *_band_readme(filters, lp), ""]
         if robust:

@@ -53,7 +53,7 @@ direct form is exact and canonical. :func:`coefficients_freqresp` evaluates any 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import signal
@@ -62,17 +62,16 @@ from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 from ilcdob.statespace import simulate
 
-from .band import fold_start, learning_horizon
 from .closed_form import LearningFilters, inverse_gd_filter, one_minus
 from .noncausal import LOOKAHEAD_MAX, ZPKFilter, lookahead
-from .trial_edges import fir_on_trial
 
 if TYPE_CHECKING:
     import control as ct
 
 __all__ = ["zpk_to_coefficients", "inversion_note", "order_sections", "section_growth", "order_grid",
-           "apply_coefficients", "apply_lookahead", "lookahead_taps", "coefficients_freqresp", "apply_learning",
-           "state_space_to_dict", "apply_state_space", "robust_set_maps", "direct_form_grid", "direct_form_disagreement", "DIRECT_FORM_RTOL"]
+           "apply_coefficients", "apply_lookahead", "lookahead_taps", "coefficients_freqresp",
+           "state_space_to_dict", "apply_state_space", "robust_set_maps", "direct_form_grid", "direct_form_disagreement",
+           "DIRECT_FORM_RTOL"]
 
 #: Largest relative disagreement of ``num``/``den`` with ``sos`` for ``num``/``den`` to be written.
 DIRECT_FORM_RTOL = 1e-6
@@ -482,14 +481,6 @@ def apply_coefficients(coeffs: dict[str, Any], x: object) -> np.ndarray:
     return y[adv:adv + x.size]
 
 
-def _forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """One zero-phase pass: ``sos`` forwards from the state ``zi x[0]``, then backwards from
-    ``zi y[-1]`` (what ``scipy.signal.sosfiltfilt(..., padtype=None)`` computes)."""
-    y, _ = signal.sosfilt(sos, x, zi=zi * x[0])
-    y, _ = signal.sosfilt(sos, y[::-1], zi=zi * y[-1])
-    return y[::-1]
-
-
 def state_space_to_dict(sys: ct.StateSpace) -> dict[str, Any]:
     """A discrete SISO state-space system as ``filters.json`` records it: ``{"A", "B", "C", "D"}``.
 
@@ -556,81 +547,3 @@ def robust_set_maps(lf: LearningFilters) -> dict[str, Any]:
             "rule": "on a trial (e, d_f_prev): e' = e + source_gf{d_f_prev} (state space from rest), d_hat = "
                     "-inverse_gd{e'} (coefficient form, continued past the end by the cubic), F on d_hat as "
                     "`trial_ends` says, then one_minus_q (state space from rest)"}
-
-
-def _robust_set_core(filters: dict[str, Any], e: np.ndarray, df: np.ndarray) -> np.ndarray:
-    """``(1 - Q_j){F{d_hat}}`` of a robust-set ``filters.json`` (:meth:`~.robust_set.RobustSetDesign.apply`)."""
-    maps = filters["law_maps"]
-    e_virtual = e + apply_state_space(maps["source_gf"], df) if np.any(df) else e
-    d_hat = -apply_coefficients(maps["inverse_gd"], e_virtual)
-    fir = filters["F"]
-    y = fir_on_trial(d_hat, np.asarray(fir["num"], float), int(fir["advance"]),
-                     int(filters["trial_ends"]["fade_samples"]))
-    return apply_state_space(maps["one_minus_q"], y)
-
-
-def _learning_core(filters: dict[str, Any]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """The method's law on (extended) signals: ``L1{e} + L2{d_f}``, or the robust-set law."""
-    if all(k in filters for k in ("law_maps", "F", "trial_ends")):
-        return lambda e, df: _robust_set_core(filters, e, df)
-    missing = [k for k in ("L1", "L2") if k not in filters]
-    if missing:
-        raise SpecError(f"filters: missing key(s) {missing}; method {filters.get('method')!r} has no L1/L2 filters "
-                        "(and no robust-set `law_maps`)")
-    return lambda e, df: apply_coefficients(filters["L1"], e) + apply_coefficients(filters["L2"], df)
-
-
-def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> np.ndarray:
-    """The learning law of a ``filters.json`` computed from its coefficients alone.
-
-    What the C function ``<prefix>learn`` runs (:mod:`.c_export`), in numpy::
-
-        d_f = fold(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}})
-
-    ``H`` extends the trial by ``band.pad`` samples (zeros before, the least-squares line
-    through its last ``band.end_fit`` samples after), ``F`` is ``band.sos`` run forwards then
-    backwards from the steady state ``band.zi`` times the first sample of each pass, ``W``
-    is ``disturbance.W.sos`` run forwards from rest, ``L1``/``L2`` run as
-    :func:`apply_coefficients`; ``fold`` keeps the trial's samples and adds the part before
-    ``t = 0``, time-reversed, to the first ``band.pad`` of them (``band.start`` "fold",
-    :func:`~ilcdob.design.band.fold_start`; "crop" only keeps them). Without a band (no
-    ``band.sos``) it is ``W{L1{e} + L2{d_f_prev}}``.
-
-    A robust-set design (``law_maps``, ``F``, ``trial_ends``) has ``(1 - Q_j){F{d_hat}}`` in
-    place of ``L1{.} + L2{.}``, with ``d_hat = -Gd_hat_{j-1}^{-1}{e + Gf_hat_{j-1}{d_f_prev}}``
-    (:meth:`~ilcdob.design.robust_set.RobustSetDesign.apply`, trial ends "extended"; the maps
-    of :func:`robust_set_maps`).
-
-    Parameters
-    ----------
-    filters : dict
-        ``filters.json`` content with ``L1`` and ``L2`` (closed-form and FIR designs) or with
-        ``law_maps``, ``F`` and ``trial_ends`` (robust-set designs).
-    e_prev : array, m
-        The previous vehicle's tracking error (for ``exact-reference``: with its reference
-        error removed).
-    df_prev : array, m/s^2
-        The learning signal it flew (zeros if none).
-
-    Returns
-    -------
-    numpy.ndarray
-        The learning signal, m/s^2 (for ``exact-reference``: before the reference correction).
-    """
-    e = as_signal(e_prev, "e_prev")
-    df = as_signal(df_prev, "df_prev", e.size)
-    core = _learning_core(filters)
-    band = filters.get("band") or {}
-    w_sos = (filters.get("disturbance") or {}).get("W", {}).get("sos")
-    if band.get("sos") is None:
-        y = core(e, df)
-        return signal.sosfilt(np.asarray(w_sos, float), y) if w_sos is not None else y
-    sos, zi = np.asarray(band["sos"], float), np.asarray(band["zi"], float)
-    pad, n_fit, ts = int(band["pad"]), int(band["end_fit"]), float(filters["sample_time"])
-    x1 = _forward_backward(sos, zi, learning_horizon(e, ts, pad, n_fit))
-    x2 = _forward_backward(sos, zi, learning_horizon(df, ts, pad, n_fit))
-    y = core(x1, x2)
-    if w_sos is not None:
-        y = signal.sosfilt(np.asarray(w_sos, float), y)
-    z = _forward_backward(sos, zi, y)
-    return fold_start(z, pad, e.size) if band.get("start") == "fold" else z[pad:pad + e.size]

@@ -68,13 +68,13 @@ from ilcdob.lifted import markov_parameters
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 
-from .band import LearningBand, end_fit_samples, fade_out
+from .band import fade_out
 from .closed_form import LearningFilters, inverse_gd_filter
 from .noncausal import ZPKFilter, lookahead
 from .trial_edges import trend_weights
 
-__all__ = ["LinearMap", "causal_map", "sos_map", "zero_phase_map", "horizon_map", "zpk_map", "fir_map",
-           "trend_map", "odd_start_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio",
+__all__ = ["LinearMap", "causal_map", "sos_map", "zpk_map", "fir_map",
+           "trend_map", "odd_start_map", "extension_map", "crop_map", "fold_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio",
            "finite_horizon_ratio", "PairTrials"]
 
 _CUBIC_FIT = 16  # samples extend_smoothly fits its cubic to (ilcdob.signals.extend_smoothly default)
@@ -179,37 +179,6 @@ def sos_map(sos: np.ndarray, n: int, name: str = "sos") -> LinearMap:
     return LinearMap(n, n, lambda x: sps.sosfilt(sos, x), lambda y: _rev(sps.sosfilt(sos, _rev(y))), name)
 
 
-def zero_phase_map(band: LearningBand, n: int) -> LinearMap:
-    """One pass of the learning band ``F`` over ``n`` samples (:meth:`LearningBand.smooth`).
-
-    ``scipy.signal.sosfiltfilt(sos, x, padtype=None)``: forwards from the state ``zi x[0]``, then
-    backwards from ``zi y[-1]``. One direction is ``f(x) = S x + phi x[0]`` (``S`` the sections from
-    rest, ``phi`` the free response from ``zi``), so the pass is ``R f R f`` (``R`` reverses time) and
-    its adjoint ``f^T R f^T R`` with ``f^T y = S^T y + e_0 (phi . y)``.
-
-    Parameters
-    ----------
-    band : LearningBand
-        The band (no filter: the identity).
-    n : int
-        Samples (of the extended horizon).
-    """
-    if band.cutoff is None:
-        return LinearMap(n, n, lambda x: x, lambda y: y, "F=1")
-    sos = band.sos
-    phi = sps.sosfilt(sos, np.zeros(n), zi=sps.sosfilt_zi(sos))[0]
-
-    def f(x: np.ndarray) -> np.ndarray:
-        return sps.sosfilt(sos, x) + phi * x[0]
-
-    def ft(y: np.ndarray) -> np.ndarray:
-        out = _rev(sps.sosfilt(sos, _rev(y)))
-        out[0] += float(phi @ y)
-        return out
-
-    return LinearMap(n, n, lambda x: _rev(f(_rev(f(x)))), lambda y: ft(_rev(ft(_rev(y)))), "F")
-
-
 def _poly_tail(m: int, deg: int, n_pad: int, weights: np.ndarray | None = None) -> np.ndarray:
     """``n_pad x m`` matrix: the least-squares polynomial of degree ``deg`` through ``m`` samples
     (squared residuals weighted by ``weights``), evaluated at the ``n_pad`` samples after them (what
@@ -223,8 +192,20 @@ def _poly_tail(m: int, deg: int, n_pad: int, weights: np.ndarray | None = None) 
     return ve @ np.linalg.pinv(sw[:, None] * v) * sw[None, :]
 
 
-def _extension(n: int, n_before: int, n_after: int, n_fit: int, deg: int) -> LinearMap:
-    """``x -> [zeros(n_before), x, polynomial tail of n_after samples]`` and its adjoint."""
+def extension_map(n: int, n_before: int, n_after: int, n_fit: int, deg: int) -> LinearMap:
+    """``x -> [zeros(n_before), x, polynomial tail of n_after samples]`` and its adjoint.
+
+    Parameters
+    ----------
+    n : int
+        Samples of ``x``.
+    n_before, n_after : int
+        Samples added before and after.
+    n_fit : int
+        Last samples the tail's least-squares polynomial is fitted to.
+    deg : int
+        Its degree (lower when ``x`` is shorter).
+    """
     m = min(n_fit, n)
     deg = min(deg, m - 1)
     e = _poly_tail(m, deg, n_after) if n_after > 0 and deg >= 0 else np.zeros((n_after, m))
@@ -241,20 +222,18 @@ def _extension(n: int, n_before: int, n_after: int, n_fit: int, deg: int) -> Lin
     return LinearMap(n, n_out, fwd, adj, "H")
 
 
-def horizon_map(band: LearningBand, n: int) -> LinearMap:
-    """The trial's extension ``H`` by ``band.pad`` samples at each end (:func:`~.band.learning_horizon`).
+def crop_map(n_in: int, start: int, n: int) -> LinearMap:
+    """``x -> x[start:start + n]``.
 
     Parameters
     ----------
-    band : LearningBand
-        The band (its ``pad`` and sample time).
+    n_in : int
+        Samples of ``x``.
+    start : int
+        First sample kept.
     n : int
-        Samples of the trial.
+        Samples kept.
     """
-    return _extension(n, band.pad, band.pad, end_fit_samples(band.ts), 1)
-
-
-def _crop(n_in: int, start: int, n: int) -> LinearMap:
     def adj(y: np.ndarray) -> np.ndarray:
         out = np.zeros(n_in)
         out[start:start + n] = y
@@ -263,9 +242,19 @@ def _crop(n_in: int, start: int, n: int) -> LinearMap:
     return LinearMap(n_in, n, lambda x: x[start:start + n].copy(), adj, "crop")
 
 
-def _fold(pad: int, n: int) -> LinearMap:
-    """``n + 2 pad -> n``: :func:`~.band.fold_start`."""
-    m = min(pad, n)
+def fold_map(pad: int, n: int, fold: bool = True) -> LinearMap:
+    """``n + 2 pad -> n``: :func:`~.band.fold_start`.
+
+    Parameters
+    ----------
+    pad : int
+        Samples before and after the trial.
+    n : int
+        Samples of the trial.
+    fold : bool
+        Add the part before ``t = 0``, time-reversed, to the first samples (False: crop only).
+    """
+    m = min(pad, n) if fold else 0
 
     def fwd(z: np.ndarray) -> np.ndarray:
         out = z[pad:pad + n].copy()
@@ -305,7 +294,7 @@ def zpk_map(f: ZPKFilter, n: int) -> LinearMap:
     if len(pu):
         n_pre = max(lookahead(p) for p in pu)
         n_pad += n_pre
-    ext = _extension(n, n_pre, n_pad, _CUBIC_FIT, 3)
+    ext = extension_map(n, n_pre, n_pad, _CUBIC_FIT, 3)
     n_ext = ext.n_out
     maps = [ext]
     if len(pu):
@@ -315,7 +304,7 @@ def zpk_map(f: ZPKFilter, n: int) -> LinearMap:
                               lambda y: scale * sps.sosfilt(sos_u, y), "anti-causal"))
     pc = np.concatenate([g.causal_poles, np.zeros(k)])
     maps.append(sos_map(sps.zpk2sos(g.zeros, pc, g.gain), n_ext, "causal"))
-    maps.append(_crop(n_ext, n_pre + k, n))
+    maps.append(crop_map(n_ext, n_pre + k, n))
     out = maps[0]
     for mp in maps[1:]:
         out = mp @ out
@@ -444,48 +433,33 @@ def _method_map(method: Any, n: int) -> LinearMap:
                     "(LearningFilters) or robust-set (RobustSetDesign) design")
 
 
-def law_map(design: Any, n: int, band: LearningBand | None = None, path: np.ndarray | None = None) -> LinearMap:
-    """The learning law ``e'_{j-1} -> d_f,j`` over a trial of ``n`` samples as a linear map.
+def law_map(method: Any, n: int) -> LinearMap:
+    """A method's bare filter ``e'_{j-1} -> d_f,j`` over a trial of ``n`` samples as a linear map.
 
-    What :meth:`~ilcdob.design.pair.PairDesign.learning` computes for one trial of the source flown
-    without learning (``d_f,{j-1} = 0``), gain 1, the paper's law, its band fixed and no
-    acceleration limit: ``fold(F{W{learn(F{H{e}})}})`` (:mod:`.band`).
+    The closed form's ``L1`` or a robust-set design's law (its ``trial_map``), no band, no airframe
+    correction; a design's whole law is :meth:`PairDesign.learning_law(...).error_map(n)
+    <ilcdob.design.law.LearningLaw.error_map>`.
 
     Parameters
     ----------
-    design : PairDesign, LearningFilters or RobustSetDesign
-        A closed-form or robust-set design (a ``PairDesign`` brings its band and airframe path).
+    method : LearningFilters or RobustSetDesign
+        The method's filter.
     n : int
         Samples of the trial.
-    band : LearningBand, optional
-        The band (default: the design's fixed band; none for the bare filters).
-    path : numpy.ndarray, optional
-        Sections of the airframe correction ``W`` (default: the design's).
 
     Returns
     -------
     LinearMap
+
+    Raises
+    ------
+    SpecError
+        ``n < 2`` or another kind of filter.
     """
-    parts = getattr(design, "linear_law", None)  # a PairDesign: its method's filter, band and airframe path
-    if callable(parts):
-        method, own_band, own_path = parts()
-        band = own_band if band is None else band
-        path = own_path if path is None else path
-    else:
-        method = design
     n = int(n)
     if n < 2:
         raise SpecError(f"`n`: got {n}, expected a trial of at least 2 samples")
-    if band is None or band.cutoff is None:
-        learn = _method_map(method, n)
-        return learn if path is None else sos_map(path, n, "W") @ learn
-    pad = band.pad
-    ne = n + 2 * pad
-    inner = zero_phase_map(band, ne) @ horizon_map(band, n)
-    learn = _method_map(method, ne)
-    if path is not None:
-        learn = sos_map(path, ne, "W") @ learn
-    return _fold(pad, n) @ zero_phase_map(band, ne) @ learn @ inner
+    return _method_map(method, n)
 
 
 def error_maps(law: LinearMap, source: LoopSystem, target: LoopSystem) -> tuple[LinearMap, LinearMap]:

@@ -33,6 +33,11 @@ from ilcdob.loop import LoopSystem
 from .closed_form import LearningFilters
 from .delta import DeltaSet
 from .export import robust_set_maps, zpk_to_coefficients
+from .finite_horizon import LinearMap, causal_map, zpk_map
+from .law import Stage
+from .law.designed import Designed
+from .law.filters import FilterPair
+from .law.stage import hstack_maps
 from .fir import FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_optimal_size, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
@@ -40,10 +45,6 @@ from .robust_set import RobustSetOptions, design_robust_set, structured_set
 
 __all__ = ["DesignInputs", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust", "RobustSet",
            "METHODS", "DEFAULT_METHOD", "method_named"]
-
-#: ``(e, d_f) -> d_f,j``: a method's learning filter on a trial (m -> m/s^2).
-Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
 
 @dataclass(frozen=True)
 class DesignInputs:
@@ -93,8 +94,9 @@ class MethodDesign:
     ----------
     filters : dict
         The method's ``filters.json`` content.
-    raw : callable (e, d_f) -> d_f,j
-        Its learning filter on a trial (m -> m/s^2).
+    core : Stage
+        Its learning filter as the law's stage (:class:`~.law.designed.Designed`: on a trial, its
+        file entries and, where it has one, its linear map).
     lifted : dict of str to numpy.ndarray, or None
         Norm-optimal: the law's gains (and lifted matrices when asked for).
     robust : RobustPairDesigner or None
@@ -102,7 +104,7 @@ class MethodDesign:
     """
 
     filters: dict[str, Any]
-    raw: Learn
+    core: Stage
     lifted: dict[str, np.ndarray] | None = None
     robust: RobustPairDesigner | None = field(default=None, repr=False)
 
@@ -178,9 +180,10 @@ class ClosedForm(Method):
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
         lf = inputs.closed_form()
-        filters = {**inputs.head, "L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2),
-                   "units": {"L1": "(m/s^2)/m", "L2": "1"}}
-        return MethodDesign(filters, lf.apply)
+        entries = {"L1": zpk_to_coefficients(lf.L1), "L2": zpk_to_coefficients(lf.L2)}
+        filters = {**inputs.head, **entries, "units": {"L1": "(m/s^2)/m", "L2": "1"}}
+        return MethodDesign(filters, Designed(self.name, lf.apply, entries, lambda m: hstack_maps(
+            [zpk_map(lf.L1, m), zpk_map(lf.L2, m)], "L1/L2")))
 
 
 class FIR(Method):
@@ -194,10 +197,11 @@ class FIR(Method):
         fd = design_fir(inputs.src, inputs.tgt, inputs.deltas[inputs.src.name], inputs.deltas[inputs.tgt.name],
                         inputs.fir)
         info = fd.to_dict()
-        filters = {**inputs.head, "L1": info.pop("L1"), "L2": info.pop("L2"),
-                   "units": {"L1": "(m/s^2)/m", "L2": "1"},
+        entries = {"L1": info.pop("L1"), "L2": info.pop("L2")}
+        filters = {**inputs.head, **entries, "units": {"L1": "(m/s^2)/m", "L2": "1"},
                    "robustness": {k: v for k, v in info.items() if k not in ("source", "target")}}
-        return MethodDesign(filters, fd.apply)
+        pair = FilterPair(entries["L1"], entries["L2"])
+        return MethodDesign(filters, Designed(self.name, fd.apply, entries, lambda m: pair.linear_map(m, 2, m)))
 
 
 class NormOptimal(Method):
@@ -223,7 +227,13 @@ class NormOptimal(Method):
             what += " and as the N x N matrices L1, L2"
         filters = {**inputs.head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
                    "lifted": what}
-        return MethodDesign(filters, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts), arrays)
+        def lifted(m: int) -> LinearMap:  # the law over m samples: O(m^3), for checks on short trials
+            l1, l2 = NormOptimalDesigner(tgt, m, opts).lifted_matrices(src)
+            return hstack_maps([LinearMap(m, m, l1.__matmul__, l1.T.__matmul__, "L1"),
+                                LinearMap(m, m, l2.__matmul__, l2.T.__matmul__, "L2")], "lifted L1/L2")
+
+        return MethodDesign(filters, Designed(self.name, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts),
+                                              maps=lifted), arrays)
 
     def order(self, filters: dict[str, Any], lifted: dict[str, np.ndarray] | None) -> str:  # noqa: D102
         matrices = f", lifted {filters['n']}x{filters['n']}" if lifted is not None and "L1" in lifted else ""
@@ -248,7 +258,8 @@ class Robust(Method):
                    "delta_set": {source: inputs.deltas[source].source, target: inputs.deltas[target].source},
                    "options": {"rho": opts.rho, "lam": opts.lam, "mu": opts.mu, "reduction_tol": opts.reduction_tol},
                    "learning": "per trial (SOCP over the models): learning_signal.csv and lifted.npz"}
-        return MethodDesign(filters, designer.learn, robust=designer)
+        return MethodDesign(filters, Designed(self.name, designer.learn, why_not="the robust SOCP designs its filter "
+                                              "from each trial: not linear in the trial"), robust=designer)
 
     def check_options(self, given: dict[str, Any]) -> None:  # noqa: D102 - Method.check_options
         if given.get("--trial") is None:
@@ -285,7 +296,14 @@ class RobustSet(Method):
                    "delta_set": {source: ds.source}, **rs.to_dict()}
         if rs.trial == "extended":
             filters["law_maps"] = robust_set_maps(rs.filters)
-        return MethodDesign(filters, rs.apply)
+        gf = rs.filters.source.nominal.G_f
+
+        def maps(m: int) -> LinearMap:  # the law on (e, d_f): its map of e' = e + Gf_hat_{j-1}{d_f}
+            eye = LinearMap(m, m, lambda v: v, lambda v: v, "I")
+            return rs.trial_map(m) @ hstack_maps([eye, causal_map(gf, m, "Gf_hat_{j-1}")], "e + Gf d_f")
+
+        entries = {k: filters[k] for k in ("law_maps", "F", "trial_ends") if k in filters}
+        return MethodDesign(filters, Designed(self.name, rs.apply, entries if "law_maps" in entries else None, maps))
 
     def check_options(self, given: dict[str, Any]) -> None:  # noqa: D102 - Method.check_options
         rho = given.get("--rho")

@@ -6,17 +6,10 @@ second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.expo
 code of :mod:`.c_export` runs them), the norm-optimal law's gains (and, when asked, its
 lifted matrices), and the learning signal for a given trial of the previous system.
 
-Every design learns through the same law (:meth:`PairDesign.learning`)::
-
-    d_f,j = limit( reference_out( F{ W{ learn( F{H{reference_in(e_{j-1})}}, F{H{d_f,{j-1}}} ) } } ) )
-
-``learn`` is the method's filter (the Theorem's ``L1{.} + L2{.}`` for the closed form), ``F``
-and ``H`` the learning band and trial horizon (:mod:`.band`; off when the data and models
-allow the Theorem's filters as they are), ``W`` the airframe correction when the disturbance
-acts on the airframe (:mod:`.flown`), ``reference_in``/``reference_out`` the reference terms
-of the ``exact-reference`` law (:mod:`.laws`) and ``limit`` the learning vehicle's
-acceleration limit (:mod:`.limit`). The C code of a design runs the same chain from
-``filters.json``.
+Every design learns through the chain of stages of :mod:`.law` (docs/theory.md, section 4),
+built from its ``filters.json`` with the method's filter as designed in memory
+(:meth:`PairDesign.learning_law`); ``ilcdob learn`` and the C code run the same chain from the
+file alone, the whole-trial check its linear map.
 """
 
 from __future__ import annotations
@@ -37,6 +30,9 @@ from ilcdob.specs import LimitSpec
 
 from .band import LearningBand, check_bandwidth, choose_band
 from .closed_form import LearningFilters, closed_form_filters, simulate_map
+from .finite_horizon import finite_horizon_ratio
+from .law import LawContext, LearningLaw, Stage
+from .law.designed import Designed
 from .delta import DeltaSet, delta_bound, delta_set
 from .fir import FIROptions
 from .flown import airframe_path_filter, check_disturbance
@@ -99,8 +95,9 @@ class PairDesign:
         Design method (one of :data:`METHODS`).
     filters : dict
         ``filters.json`` content.
-    raw : callable (e, df) -> d_f
-        The method's learning filter on its own (no band, no reference terms, no limit).
+    core : Stage
+        The method's learning filter as designed (:class:`~.law.designed.Designed`), the stage
+        of the law that the file holds as coefficients.
     lifted : dict of str -> array, or None
         Norm-optimal: its learning law in compact form (the gains of
         :meth:`~ilcdob.design.norm_optimal.NormOptimalLaw.to_arrays`, O(N)), and the N x N
@@ -119,18 +116,20 @@ class PairDesign:
         With ``bandwidth="auto"``: ``choose(error=e)`` chooses the band of each trial from its
         error (:func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound).
     path : numpy.ndarray or None
-        Sections of the airframe correction W (disturbance on the airframe).
+        Sections of the airframe correction W (disturbance on the airframe; the band's choice).
     limits : LimitSpec or None
         The learning vehicle's acceleration limit.
     on_limit : str
         ``"clip"`` or ``"refuse"`` a learning signal beyond the limit.
     source_gf : control.StateSpace or None
         ``Gf_hat_{j-1}`` of the source's model (the band's choice, :meth:`band_for`).
+    loops : tuple of LoopSystem or None
+        The models' loops of source and target (the whole-trial check's default plants).
     """
 
     method: str
     filters: dict[str, Any]
-    raw: Learn
+    core: Stage
     lifted: dict[str, np.ndarray] | None = field(default=None)
     robust: RobustPairDesigner | None = field(default=None, repr=False)
     law: str = DEFAULT_LAW
@@ -141,6 +140,7 @@ class PairDesign:
     limits: LimitSpec | None = None
     on_limit: str = "clip"
     source_gf: Any = field(default=None, repr=False)
+    loops: tuple[LoopSystem, LoopSystem] | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         pair = f"{self.filters.get('from', '?')} -> {self.filters.get('to', '?')}"
@@ -187,9 +187,32 @@ class PairDesign:
             e = e + simulate_map(self.source_gf, as_signal(df_prev, "df_prev", e.size))
         return self.choose(error=e)
 
+    def learning_law(self, band: LearningBand | None = None, gain: float = 1.0, learn: Learn | None = None
+                     ) -> LearningLaw:
+        """The design's learning law: the stages of ``filters.json`` with the method's filter in memory.
+
+        Parameters
+        ----------
+        band : LearningBand, optional
+            The band to learn with (default: the band fixed at design time).
+        gain : float
+            Learning gain ``gamma`` in (0, 1] on the new error (1: the Theorem's law).
+        learn : callable, optional
+            ``learn(e, d_f)`` in place of the method's filter (e.g. one that records the robust
+            SOCP's result for the caller).
+
+        Returns
+        -------
+        LearningLaw
+        """
+        core = self.core if learn is None else Designed(self.method, learn)
+        return LearningLaw.from_dict(self.filters, LawContext(core=core, band=band if band is not None else self.band,
+                                                              reference=self.reference, gain=gain))
+
     def learning(self, e_prev: object, df_prev: object, gain: float = 1.0, learn: Learn | None = None
                  ) -> LearningSignal:
-        """The learning signal of the target from one trial of the source (module docstring).
+        """The learning signal of the target from one trial of the source (:meth:`learning_law` on the
+        trial's band, then the target's acceleration limit).
 
         Parameters
         ----------
@@ -200,8 +223,7 @@ class PairDesign:
         gain : float
             Learning gain ``gamma`` in (0, 1] on the new error (1: the Theorem's law).
         learn : callable, optional
-            Use this filter instead of :attr:`raw` (e.g. one that records the robust SOCP's
-            result for the caller).
+            ``learn(e, d_f)`` in place of the method's filter.
 
         Returns
         -------
@@ -214,43 +236,17 @@ class PairDesign:
         """
         e = as_signal(e_prev, "e_prev")
         df = as_signal(df_prev, "df_prev", e.size)
-        if self.reference is not None:
-            e = self.reference.error_in(e)
-        band = self.band_for(e, df)
-        d_f = band.apply(learn or self.raw, e, df, self.path, gain)
-        if self.reference is not None:
-            d_f = self.reference.signal_out(d_f)
+        band = self.band_for(e if self.reference is None else self.reference.error_in(e), df)
+        d_f = self.learning_law(band, gain, learn).apply(e, df)
         what = f"learning signal of {self.filters.get('to', '?')} from {self.filters.get('from', '?')}"
         d_f, report = enforce_limit(d_f, self.limits, self.on_limit, what, band.describe())
         return LearningSignal(d_f, band, report)
 
-    def linear_law(self) -> tuple[Any, LearningBand | None, np.ndarray | None]:
-        """The parts of the paper's law that :func:`~.finite_horizon.law_map` makes a linear map of:
-        the method's filter (closed-form ``LearningFilters``, a ``RobustSetDesign``, or None for a
-        method without one), the fixed band (:attr:`band`) and the airframe path (:attr:`path`).
-
-        Raises
-        ------
-        SpecError
-            The law is not the paper's (only it is linear in the error alone).
-        """
-        if self.law != "paper":
-            raise SpecError(f"finite-horizon map: law {self.law!r}; only the paper's law is linear in the "
-                            "error alone")
-        return self._method_filter, self.band, self.path
-
-    @property
-    def _method_filter(self) -> Any:
-        """The object whose method :attr:`raw` is (``LearningFilters``, ``RobustSetDesign``, ...); None for a
-        plain function."""
-        return getattr(self.raw, "__self__", None)
-
     def finite_trial(self, n: int, source: LoopSystem | None = None, target: LoopSystem | None = None) -> Any:
         """The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` of this law over ``n`` samples.
 
-        The lifted ``n``-sample error map (:mod:`.finite_horizon`): the law with its fixed band
-        (:attr:`band`), no limit, one trial of the source flown without learning. Closed-form and
-        robust-set designs with the paper's law.
+        The linear map of :meth:`learning_law` over ``n`` samples (:mod:`.finite_horizon`): the
+        fixed band (:attr:`band`), no limit, one trial of the source flown without learning.
 
         Parameters
         ----------
@@ -262,15 +258,18 @@ class PairDesign:
         Returns
         -------
         FiniteHorizonRatio
-        """
-        from .finite_horizon import finite_horizon_ratio, law_map
 
-        method = self._method_filter
-        filters = method if isinstance(method, LearningFilters) else getattr(method, "filters", None)
-        if not isinstance(filters, LearningFilters):
-            raise SpecError(f"`finite_trial`: method {self.method!r} has no fixed linear law; closed-form and "
-                            "robust-set designs have one")
-        return finite_horizon_ratio(law_map(self, n), source or filters.source, target or filters.target)
+        Raises
+        ------
+        SpecError
+            The law is not the paper's, or the method's filter has no linear map (the robust SOCP).
+        """
+        if self.law != DEFAULT_LAW:
+            raise SpecError(f"`finite_trial`: law {self.law!r}; only the paper's law is linear in the error alone")
+        src, tgt = self.loops if self.loops is not None else (None, None)
+        if (source or src) is None or (target or tgt) is None:
+            raise SpecError("`finite_trial`: give the source and target loops (a design made without them)")
+        return finite_horizon_ratio(self.learning_law().error_map(n), source or src, target or tgt)
 
     def learn(self, e_prev: object, df_prev: object) -> np.ndarray:
         """The learning signal only (``learning(e_prev, df_prev).d_f``), m/s^2.
@@ -469,7 +468,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     made = chosen.design(DesignInputs(fleet, src, tgt, head, closed_form, deltas=deltas, n=n,
                                       norm_optimal=norm_optimal, fir=fir, robust=robust, robust_set=robust_set,
                                       relax=relax, lifted=lifted))
-    design = PairDesign(method, made.filters, made.raw, made.lifted, robust=made.robust)
+    design = PairDesign(method, made.filters, made.core, made.lifted, robust=made.robust, loops=(src, tgt))
     chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=not chosen.guaranteed)
     limits = {s.name: s for s in fleet.systems}[target].limits
     filters = {**design.filters, "disturbance": {"at": disturbance,

@@ -10,6 +10,8 @@ from scipy import signal as sps
 
 from ilcdob.design.band import (AMPLIFICATION_TOL, END_FIT_S, NOISE_SHARE, OFF_FRACTION, LearningBand, check_bandwidth,
                                 choose_band, estimate_noise, learning_horizon)
+from ilcdob.design.law import LawContext, LearningLaw
+from ilcdob.design.law.designed import Designed
 from ilcdob.design.pair import design_pair, pair_band
 from ilcdob.errors import SpecError
 
@@ -33,9 +35,15 @@ def test_learning_horizon_fits_only_the_last_end_fit_seconds():
     np.testing.assert_allclose(learning_horizon(x, TS, 3)[-3:], 2.0 * np.arange(n_fit, n_fit + 3), atol=1e-9)
 
 
+def _through(band, learn, x):
+    """``x`` (no learning signal) through a law of ``band`` around ``learn`` (:mod:`ilcdob.design.law`)."""
+    law = LearningLaw.from_dict({}, LawContext(core=Designed("test", learn), band=band))
+    return law.apply(x, np.zeros_like(x))
+
+
 @pytest.mark.parametrize("cutoff", [2.0, 10.0, 40.0])
 def test_filter_gain_is_the_stated_response_with_zero_phase(cutoff):
-    """A sinusoid through ``apply`` with an identity learning filter comes out scaled by ``response(w)`` =
+    """A sinusoid through the band's stages with an identity learning filter comes out scaled by ``response(w)`` =
     |Butterworth|^4 (two forward-backward passes), built here from scipy.signal.butter, with zero phase
     (interior samples, 1e-6 of the amplitude: the ends are outside the comparison)."""
     band = LearningBand(TS, cutoff)
@@ -45,7 +53,7 @@ def test_filter_gain_is_the_stated_response_with_zero_phase(cutoff):
         if w >= math.pi / TS:
             continue
         x = np.sin(w * t + 0.3)
-        y = band.apply(lambda e, df: e + df, x, np.zeros_like(x))
+        y = _through(band, lambda e, df: e + df, x)
         gain = abs(sps.freqz(b, a, worN=[w * TS])[1][0]) ** 4
         assert band.response([w])[0] == pytest.approx(gain, rel=1e-9)
         interior = slice(2000, 4000)
@@ -55,7 +63,7 @@ def test_filter_gain_is_the_stated_response_with_zero_phase(cutoff):
 def test_no_band_is_the_learning_filter_itself():
     band = LearningBand(TS, None, source="off")
     x = np.random.default_rng(0).normal(size=300)
-    np.testing.assert_array_equal(band.apply(lambda e, df: 3.0 * e, x, np.zeros(300)), 3.0 * x)
+    np.testing.assert_array_equal(_through(band, lambda e, df: 3.0 * e, x), 3.0 * x)
     assert band.pad == 0 and band.sos is None
     np.testing.assert_array_equal(band.response([1.0, 100.0]), 1.0)
 

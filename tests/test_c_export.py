@@ -13,7 +13,8 @@ import pytest
 from ilcdob.app.cli import main
 from ilcdob.app.output import OutputFolder, Provenance
 from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
-from ilcdob.design.export import (DIRECT_FORM_RTOL, apply_coefficients, apply_learning, apply_lookahead,
+from ilcdob.design.law import apply_learning
+from ilcdob.design.export import (DIRECT_FORM_RTOL, apply_coefficients, apply_lookahead,
                                   coefficients_freqresp, direct_form_disagreement, section_growth,
                                   zpk_to_coefficients)
 from ilcdob.design.noncausal import ZPKFilter, lookahead

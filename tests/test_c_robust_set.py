@@ -10,7 +10,7 @@ import pytest
 
 from ilcdob.app.cli import main
 from ilcdob.design.c_export import c_code, check_filters
-from ilcdob.design.export import apply_learning
+from ilcdob.design.law import apply_learning
 from ilcdob.design.pair import design_pair
 from ilcdob.errors import SpecError
 from ilcdob.fleet import default_fleet

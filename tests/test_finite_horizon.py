@@ -88,11 +88,12 @@ def _learn(design):
 @pytest.mark.parametrize("method,bandwidth", [("closed-form", "off"), ("closed-form", 10.0),
                                               ("robust-set", "off"), ("robust-set", 5.0)])
 def test_law_map_is_the_learning_law(fleet, method, bandwidth):
-    """``law_map`` reproduces ``PairDesign.learning`` (band fixed, no limit) and its adjoint passes
+    """The law's linear map (``learning_law().error_map``) reproduces ``PairDesign.learning`` (band
+    fixed, no limit) and its adjoint passes
     the dot-product test. Measured: 1e-13 / 1e-10 relative; tolerances 1e-9 / 1e-7."""
     d = replace(_design(fleet, "UAV1", "UAV2", method, bandwidth=bandwidth), limits=None)
     n = 400
-    law = law_map(d, n)
+    law = d.learning_law().error_map(n)
     rng = np.random.default_rng(3)
     e = np.cumsum(rng.normal(size=n)) * 1e-3
     ref = d.learning(e, np.zeros(n)).d_f
@@ -109,7 +110,7 @@ def test_rho_n_matches_dense_and_excludes_invisible_disturbances(fleet):
     size and an unbounded ratio along them (measured 1e7 and more)."""
     n = 200
     d = replace(_design(fleet, "UAV1", "UAV2", "closed-form", bandwidth=10.0), limits=None)
-    law = law_map(d, n)
+    law = d.learning_law().error_map(n)
     src, tgt = fleet.loop("UAV1"), fleet.loop("UAV2")
     got = finite_horizon_ratio(law, src, tgt)
     a, b = error_maps(law, src, tgt)

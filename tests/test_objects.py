@@ -19,7 +19,8 @@ import pytest
 import scipy.io
 
 import ilcdob
-from ilcdob.design.export import apply_coefficients, apply_learning, coefficients_freqresp
+from ilcdob.design.export import apply_coefficients, coefficients_freqresp
+from ilcdob.design.law import apply_learning
 from ilcdob.design.objects import LearningFilterTF, design_to_mat, filter_tf, filters_tf, load_design
 from ilcdob.design.closed_form import closed_form_filters
 from ilcdob.design.pair import design_pair, fleet_delta_sets

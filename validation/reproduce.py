@@ -591,7 +591,8 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
                         for i, nm in enumerate(names)]
                 return multi_source_learning(fleet.loop(tgt), srcs, power_cache=powers)
 
-            df = band.apply_trials(learn, [x for nm in names for x in (latest[nm].measured_error, latest[nm].d_f)])
+            signals = [x for nm in names for x in (latest[nm].measured_error, latest[nm].d_f)]
+            df = design.learning_law(band, learn=learn).run(signals)
             df, _ = enforce_limit(df, design.limits, design.on_limit, f"learning signal of {tgt}", band.describe())
         else:
             df = design.learning(prev.measured_error, prev.d_f).d_f
