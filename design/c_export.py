@@ -91,8 +91,9 @@ from .c_text import DOUBLE, FLOAT, CType, array_c
 from .entries import MAX_ADVANCE, check_filter_entry, check_sections, direct_form
 from .export import apply_coefficients, apply_lookahead, lookahead_taps
 from .law import LawContext, LearningLaw
+from .law.stage import OUTPUT_PLACE
 from .law.airframe import AirframePath
-from .law.band import band_spec
+from .law.band import band_spec, check_cutoff
 from .law.robust_set import RobustSetMaps
 
 __all__ = ["CCode", "c_code", "check_filters", "check_filter_entry", "MAX_ADVANCE", "default_c_prefix",
@@ -530,7 +531,8 @@ def _learning_parts(filters: dict[str, Any]) -> _Learning:
     w_sos = None if w is None else w.sos
     if spec is None:
         return _Learning(None, None, 0, 1, None, None, "", w_sos)
-    return _Learning(spec.sos, spec.zi, spec.pad, spec.end_fit, spec.cutoff, spec.order, spec.why, w_sos, spec.fold)
+    return _Learning(spec.sos, spec.zi, spec.pad, spec.end_fit, check_cutoff(spec.cutoff), spec.order, spec.why, w_sos,
+                     spec.fold)
 
 
 def _robust_parts(filters: dict[str, Any]) -> RobustSetMaps | None:
@@ -642,9 +644,11 @@ static void {p}sections(const double (*sos)[6], size_t ns, double (*z)[2], doubl
 
 
 def _learn_c(prefix: str, law: LearningLaw) -> str:
-    """``<prefix>learn`` (double only) and what it calls: each stage's tables, helpers and step in chain order."""
+    """``<prefix>learn`` (double only) and what it calls: each stage's tables, helpers and step in chain order
+    (stages placed after :data:`~.law.stage.OUTPUT_PLACE` run on ``df_next``)."""
     macro = prefix.upper()
     parts = [s.c_parts(prefix) for s in law.stages]
+    after = [p.step for s, p in zip(law.stages, parts) if s.place > OUTPUT_PLACE]
     out = ["\n/* ------------------------------------------------------------------ the learning law */\n",
            *(p.tables for p in parts)]
     if any(p.sections for p in parts):
@@ -657,7 +661,8 @@ def _learn_c(prefix: str, law: LearningLaw) -> str:
     body = (f"    double *a, *b;\n    size_t len, k;\n\n    if (n == 0)\n        return {macro}LEARN_EMPTY;\n"
             f"    if (e == NULL || df_prev == NULL || df_next == NULL || work == NULL)\n        return {macro}LEARN_NULL;\n"
             f"    len = n + 2 * (size_t){macro}PAD;\n    a = work;\n    b = work + len;\n"
-            + load + "".join(p.step for p in parts) + store + "    return 0;\n")
+            + load + "".join(p.step for s, p in zip(law.stages, parts) if s.place <= OUTPUT_PLACE) + store
+            + "".join(after) + "    return 0;\n")
     out.append(f"\nint {prefix}learn(const double *e, const double *df_prev, double *df_next, size_t n, "
                f"double *work)\n{{\n{body}}}\n")
     return "".join(out)
@@ -711,15 +716,6 @@ class CCode:
         return out
 
 
-def _limit(filters: dict[str, Any]) -> float | None:
-    """The learning vehicle's acceleration limit of ``filters.json`` (m/s^2), None when none is stated."""
-    limit = filters.get("limit")
-    value = limit.get("acceleration_m_s2") if isinstance(limit, dict) else None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        return None
-    return float(value)
-
-
 def _law_comment(macro: str, lp: _Learning, robust: list[str] | None = None) -> str:
     """The lines of the header describing what ``learn`` computes; ``robust``: the lines defining
     the robust-set law ``R``, which then replaces ``L1{.} + L2{.}``."""
@@ -757,13 +753,8 @@ def _law_comment(macro: str, lp: _Learning, robust: list[str] | None = None) -> 
 
 
 def _law_macros(filters: dict[str, Any], macro: str, lp: _Learning) -> tuple[str, str]:
-    """The header's band and limit macros, and its note on the acceleration limit."""
-    limit = _limit(filters)
-    limit_note = ""
-    if limit is not None:
-        limit_note = (f" * learn does not apply the learning vehicle's acceleration limit ({macro}ACCELERATION_LIMIT,\n"
-                      " * filters.json `limit`): check d_next (with the exact-reference correction added, if any)\n"
-                      " * against it before flying it.\n")
+    """The header's band macros, then the stages' macros, and the stages' notes (:class:`~.law.stage.CParts`)."""
+    parts = [s.c_parts(macro.lower()) for s in LearningLaw.from_dict(filters).stages]
     if lp.sos is not None:
         macros = (f"#define {macro}BAND_CUTOFF {lp.cutoff!r} /* rad/s, corner of the learning band F */\n"
                   f"#define {macro}PAD {lp.pad} /* samples added at each end of the trial */\n"
@@ -771,10 +762,7 @@ def _law_macros(filters: dict[str, Any], macro: str, lp: _Learning) -> tuple[str
     else:
         macros = (f"#define {macro}BAND_CUTOFF 0.0 /* no learning band: the law acts on the trial as recorded */\n"
                   f"#define {macro}PAD 0 /* no band: nothing added to the trial */\n")
-    if limit is not None:
-        macros += (f"#define {macro}ACCELERATION_LIMIT {limit!r} /* m/s^2, of the learning vehicle: |d_next| must "
-                   "stay below it */\n")
-    return macros, limit_note
+    return macros + "".join(p.macros for p in parts), "".join(p.note for p in parts)
 
 
 def _header(title: str, macro: str, prefix: str, law: str, limit_note: str, apply_text: str, macros: str,
@@ -1031,10 +1019,7 @@ def _band_readme(filters: dict[str, Any], lp: _Learning) -> list[str]:
         out.append("No learning band (no filter): L1 and L2 act on the trial as recorded.")
     if lp.w_sos is not None:
         out.append("W is the airframe correction (the disturbance acts on the airframe), run after L1 + L2.")
-    limit = _limit(filters)
-    if limit is not None:
-        out.append(f"`learn` does not apply the acceleration limit of {filters['to']} ({limit:.4g} m/s^2, `limit` "
-                   "in `filters.json`): check `d_next` against it before flying it.")
+    out += [p.readme for p in (s.c_parts("") for s in LearningLaw.from_dict(filters).stages) if p.readme]
     return out
 
 

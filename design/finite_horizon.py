@@ -211,8 +211,11 @@ def extension_map(n: int, n_before: int, n_after: int, n_fit: int, deg: int) -> 
     e = _poly_tail(m, deg, n_after) if n_after > 0 and deg >= 0 else np.zeros((n_after, m))
     n_out = n_before + n + n_after
 
-    def fwd(x: np.ndarray) -> np.ndarray:
-        return np.concatenate([np.zeros(n_before), x, e @ x[n - m:]])
+    k, after = np.arange(m, dtype=float), np.arange(m, m + n_after, dtype=float)
+
+    def fwd(x: np.ndarray) -> np.ndarray:  # numpy.polyfit as the filters' own continuations run it, to the bit
+        tail = np.polyval(np.polyfit(k, x[n - m:], deg) if deg > 0 else x[n - 1:], after) if n_after else after
+        return np.concatenate([np.zeros(n_before), x, tail])
 
     def adj(y: np.ndarray) -> np.ndarray:
         out = y[n_before:n_before + n].copy()

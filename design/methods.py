@@ -30,7 +30,7 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
 
-from .closed_form import LearningFilters
+from .closed_form import LearningFilters, inverse_gd_filter
 from .delta import DeltaSet
 from .export import robust_set_maps, zpk_to_coefficients
 from .finite_horizon import LinearMap, causal_map, zpk_map
@@ -227,10 +227,14 @@ class NormOptimal(Method):
             what += " and as the N x N matrices L1, L2"
         filters = {**inputs.head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
                    "lifted": what}
-        def lifted(m: int) -> LinearMap:  # the law over m samples: O(m^3), for checks on short trials
-            l1, l2 = NormOptimalDesigner(tgt, m, opts).lifted_matrices(src)
-            return hstack_maps([LinearMap(m, m, l1.__matmul__, l1.T.__matmul__, "L1"),
-                                LinearMap(m, m, l2.__matmul__, l2.T.__matmul__, "L2")], "lifted L1/L2")
+        def lifted(m: int) -> LinearMap:
+            """What :func:`norm_optimal_learning` computes on m samples: the cost's solve (its dense matrix,
+            m solves) of ``e0 = Gd_hat_j Gd_hat_{j-1}^{-1}{e + Gf_hat_{j-1}{d_f}}``; for checks on short trials."""
+            sol = np.column_stack([NormOptimalDesigner(tgt, m, opts).solve(c) for c in np.eye(m)])
+            eye = LinearMap(m, m, lambda v: v, lambda v: v, "I")
+            e0 = (causal_map(tgt.nominal.G_d, m, "Gd_hat_j") @ zpk_map(inverse_gd_filter(src, True), m)
+                  @ hstack_maps([eye, causal_map(src.nominal.G_f, m, "Gf_hat_{j-1}")], "e + Gf d_f"))
+            return LinearMap(m, m, sol.__matmul__, sol.T.__matmul__, "solve") @ e0
 
         return MethodDesign(filters, Designed(self.name, lambda e, df: norm_optimal_learning(src, tgt, e, df, opts),
                                               maps=lifted), arrays)

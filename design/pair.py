@@ -6,7 +6,7 @@ second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.expo
 code of :mod:`.c_export` runs them), the norm-optimal law's gains (and, when asked, its
 lifted matrices), and the learning signal for a given trial of the previous system.
 
-Every design learns through the chain of stages of :mod:`.law` (docs/theory.md, section 4),
+Every design learns through the chain of stages of :mod:`.law` (docs/theory.md section 6),
 built from its ``filters.json`` with the method's filter as designed in memory
 (:meth:`PairDesign.learning_law`); ``ilcdob learn`` and the C code run the same chain from the
 file alone, the whole-trial check its linear map.
@@ -33,11 +33,12 @@ from .closed_form import LearningFilters, closed_form_filters, simulate_map
 from .finite_horizon import finite_horizon_ratio
 from .law import LawContext, LearningLaw, Stage
 from .law.designed import Designed
+from .law.limit import Limit
 from .delta import DeltaSet, delta_bound, delta_set
 from .fir import FIROptions
 from .flown import airframe_path_filter, check_disturbance
 from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
-from .limit import LIMIT_POLICIES, LimitReport, enforce_limit
+from .limit import LIMIT_POLICIES, LimitReport
 from .methods import METHODS, DesignInputs, method_named
 from .norm_optimal import NormOptimalOptions
 from .robust import RobustOptions, RobustPairDesigner
@@ -95,9 +96,10 @@ class PairDesign:
         Design method (one of :data:`METHODS`).
     filters : dict
         ``filters.json`` content.
-    core : Stage
+    core : Stage or callable
         The method's learning filter as designed (:class:`~.law.designed.Designed`), the stage
-        of the law that the file holds as coefficients.
+        of the law that the file holds as coefficients; a function ``learn(e, d_f)`` is wrapped
+        into one.
     lifted : dict of str -> array, or None
         Norm-optimal: its learning law in compact form (the gains of
         :meth:`~ilcdob.design.norm_optimal.NormOptimalLaw.to_arrays`, O(N)), and the N x N
@@ -141,6 +143,13 @@ class PairDesign:
     on_limit: str = "clip"
     source_gf: Any = field(default=None, repr=False)
     loops: tuple[LoopSystem, LoopSystem] | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.core, Stage):
+            if not callable(self.core):
+                raise SpecError(f"`core`: got {type(self.core).__name__}, expected a law stage or a learning "
+                                "function learn(e, d_f)")
+            object.__setattr__(self, "core", Designed(self.method, self.core))
 
     def __repr__(self) -> str:
         pair = f"{self.filters.get('from', '?')} -> {self.filters.get('to', '?')}"
@@ -206,13 +215,15 @@ class PairDesign:
         LearningLaw
         """
         core = self.core if learn is None else Designed(self.method, learn)
-        return LearningLaw.from_dict(self.filters, LawContext(core=core, band=band if band is not None else self.band,
-                                                              reference=self.reference, gain=gain))
+        what = f"learning signal of {self.filters.get('to', '?')} from {self.filters.get('from', '?')}"
+        return LearningLaw.from_dict(self.filters, LawContext(
+            core=core, band=band if band is not None else self.band, reference=self.reference, gain=gain,
+            limits=self.limits, on_limit=self.on_limit if self.limits is not None else "off", what=what))
 
     def learning(self, e_prev: object, df_prev: object, gain: float = 1.0, learn: Learn | None = None
                  ) -> LearningSignal:
         """The learning signal of the target from one trial of the source (:meth:`learning_law` on the
-        trial's band, then the target's acceleration limit).
+        trial's band).
 
         Parameters
         ----------
@@ -237,10 +248,9 @@ class PairDesign:
         e = as_signal(e_prev, "e_prev")
         df = as_signal(df_prev, "df_prev", e.size)
         band = self.band_for(e if self.reference is None else self.reference.error_in(e), df)
-        d_f = self.learning_law(band, gain, learn).apply(e, df)
-        what = f"learning signal of {self.filters.get('to', '?')} from {self.filters.get('from', '?')}"
-        d_f, report = enforce_limit(d_f, self.limits, self.on_limit, what, band.describe())
-        return LearningSignal(d_f, band, report)
+        notes: dict[str, Any] = {}
+        d_f = self.learning_law(band, gain, learn).run((e, df), notes)
+        return LearningSignal(d_f, band, notes.get("limit"))
 
     def finite_trial(self, n: int, source: LoopSystem | None = None, target: LoopSystem | None = None) -> Any:
         """The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` of this law over ``n`` samples.
@@ -474,8 +484,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     filters = {**design.filters, "disturbance": {"at": disturbance,
                                                  **({"W": {"sos": path.tolist()}} if path is not None else {})}}
     if limits is not None:
-        filters["limit"] = {"acceleration_m_s2": limits.max_acceleration, "from": limits.describe(),
-                            "on_limit": on_limit}
+        filters["limit"] = Limit.entry(limits, on_limit)
     design = replace(design, filters=filters, choose=chooser if request == "auto" else None, path=path,
                      limits=limits, on_limit=on_limit, source_gf=src.nominal.G_f)
     return design_with_band(design, chooser(error=None))

@@ -169,13 +169,14 @@ def _build_learn(cc: str, folder: Path, filters: dict, prefix: str = "p_") -> Pa
     return exe
 
 
-def _run_learn(exe: Path, e: np.ndarray, df: np.ndarray) -> np.ndarray:
-    """``learn(e, df)`` by the compiled driver; checks its return codes and that in place gives the same."""
+def _run_learn(exe: Path, e: np.ndarray, df: np.ndarray, code: str = "0") -> np.ndarray:
+    """``learn(e, df)`` by the compiled driver; checks its return codes (``code``: of each call on the
+    trial, 3 when it clipped to the acceleration limit) and that in place gives the same."""
     text = "\n".join([str(e.size), *(f"{v:.17g}" for v in np.concatenate([e, df]))])
     res = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
     lines = res.stdout.splitlines()
     assert lines[0].split() == ["1", "2", "2", "2", "2", "1"]   # n == 0, each NULL pointer; nothing written
-    assert lines[1].split() == ["0", "0", "0"]
+    assert lines[1].split() == [code] * 3
     out = np.loadtxt(lines[2:], ndmin=2)
     np.testing.assert_array_equal(out[:, 1], out[:, 0])   # df_next == e: the same numbers
     np.testing.assert_array_equal(out[:, 2], out[:, 0])   # df_next == df_prev
@@ -369,25 +370,26 @@ def _learn_trials(ts: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 def _check_learn(exe: Path, design) -> dict[str, tuple[float, float]]:
     """C learn against apply_learning (1e-12) and against the design's own Python law (1e-9).
 
-    The Python law clips to the learning vehicle's acceleration limit and C learn does not (the
-    header says so): a trial whose learning signal goes beyond the limit is scaled down for the
-    comparison (the law is linear), and on the trial as it is the clipped C output must be the
-    Python one. Returns the two measured errors per trial.
+    Both the Python law and C learn clip to the learning vehicle's acceleration limit (C returns
+    LEARN_CLIPPED, 3): a trial whose learning signal goes beyond it is checked clipped against both,
+    then scaled down (the law is linear) for the comparison of the unclipped law. Returns the two
+    measured errors per trial.
     """
     filters = design.filters
     lim = design.limits.max_acceleration if design.limits is not None else np.inf
     measured = {}
     for label, (e, df) in _learn_trials(filters["sample_time"]).items():
-        y = _run_learn(exe, e, df)
         ref = apply_learning(filters, e, df)
         peak = np.max(np.abs(ref))
         if peak > lim:
+            y = _run_learn(exe, e, df, code="3")
+            assert _rel(y, np.clip(ref, -lim, lim)) < 1e-12, label
             with pytest.warns(LearningLimitWarning):
-                assert _rel(np.clip(y, -lim, lim), design.learn(e, df)) < 1e-9, label
+                assert _rel(y, design.learn(e, df)) < 1e-9, label
             scale = 0.5 * lim / peak
             e, df = scale * e, scale * df
-            y = _run_learn(exe, e, df)
             ref = apply_learning(filters, e, df)
+        y = _run_learn(exe, e, df)
         measured[label] = (_rel(y, ref), _rel(y, design.learn(e, df)))
         assert measured[label][0] < 1e-12, (label, measured[label])
         assert measured[label][1] < 1e-9, (label, measured[label])
@@ -563,8 +565,8 @@ def test_header_and_readme_recommend_learn(learn_designs):
         assert ("W is the airframe correction" in readme) == case.endswith("airframe")
         assert bool(re.search(r"W +is the airframe correction", header)) == case.endswith("airframe")
         if design.limits is not None:
-            assert "does not apply the learning vehicle's acceleration limit" in header
-            assert "does not apply the acceleration limit" in readme
+            assert "Beyond the learning vehicle's acceleration limit" in header and "LEARN_CLIPPED 3" in header
+            assert "Beyond the acceleration limit" in readme
     # exact-reference: the reference terms go around learn
     design = learn_designs["band"]
     readme = design_files({**design.filters, "law": "exact-reference"})[0]["README.md"]

@@ -47,7 +47,6 @@ import numpy as np
 from ilcdob.design import LearningFilters, closed_form_filters
 from ilcdob.design.delta import DeltaSet, delta_set
 from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law
-from ilcdob.design.limit import enforce_limit
 from ilcdob.design.multi_source import SourceTrial, multi_source_learning
 from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
@@ -593,7 +592,6 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
 
             signals = [x for nm in names for x in (latest[nm].measured_error, latest[nm].d_f)]
             df = design.learning_law(band, learn=learn).run(signals)
-            df, _ = enforce_limit(df, design.limits, design.on_limit, f"learning signal of {tgt}", band.describe())
         else:
             df = design.learning(prev.measured_error, prev.d_f).d_f
         flight = fly(tgt, "dob", df)

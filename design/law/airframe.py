@@ -1,5 +1,5 @@
 """The airframe correction W as a stage: a disturbance acting on the airframe (or as wind through
-its drag) reaches the learning vehicle through W (docs/theory.md, section 4.3; :mod:`..flown`)."""
+its drag) reaches the learning vehicle through W (docs/theory.md section 6; :mod:`..flown`)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The learning band's two stages: the trial extended and filtered before the method's filter,
-filtered again and folded onto the trial after it (docs/theory.md, section 4.2; :mod:`..band`)."""
+filtered again and folded onto the trial after it (docs/theory.md section 6; :mod:`..band`)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from ..finite_horizon import LinearMap, extension_map, fold_map, sos_map
 from ..c_text import DOUBLE, array_c
 from .stage import CParts, LawContext, Signals, Stage, diag_maps, register
 
-__all__ = ["BandSpec", "BandIn", "BandOut", "band_spec"]
+__all__ = ["BandSpec", "BandIn", "BandOut", "band_spec", "check_cutoff", "forward_backward"]
 
 
 @dataclass(frozen=True)
@@ -33,8 +33,8 @@ class BandSpec:
         One pass of F and its steady state per unit input.
     pad, end_fit : int
         Samples added at each end; samples the end's line is fitted to.
-    cutoff : float
-        F's corner, rad/s.
+    cutoff : float or None
+        F's corner, rad/s (None: not stated; the law runs without it, the C text needs it).
     order : int or None
         F's Butterworth order, when stated.
     why : str
@@ -48,7 +48,7 @@ class BandSpec:
     zi: np.ndarray
     pad: int
     end_fit: int
-    cutoff: float
+    cutoff: float | None
     order: int | None
     why: str
     fold: bool
@@ -97,15 +97,33 @@ def band_spec(filters: dict[str, Any], ctx: LawContext | None = None) -> BandSpe
         raise SpecError("`band.zi`: non-finite value(s); expected finite numbers (scipy.signal.sosfilt_zi)")
     pad = check_count(band.get("pad"), "band.pad", 0)
     end_fit = check_count(band.get("end_fit"), "band.end_fit", 1)
-    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not (math.isfinite(cutoff) and cutoff > 0):
-        raise SpecError(f"`band.cutoff_rad_s`: got {cutoff!r}, expected the corner of `band.sos`, a "
-                        "frequency > 0 rad/s")
+    if cutoff is not None:
+        check_cutoff(cutoff)
     if band.get("start", "crop") not in ("crop", "fold"):
         raise SpecError(f"`band.start`: got {band.get('start')!r:.80}, expected 'fold' (the part before t = 0 "
                         "added, time-reversed, to the first samples) or 'crop'")
-    return BandSpec(band, sos, zi, pad, end_fit, float(cutoff),
+    return BandSpec(band, sos, zi, pad, end_fit, None if cutoff is None else float(cutoff),
                     band.get("order") if isinstance(band.get("order"), int) else None,
                     str(band.get("reason") or band.get("source") or ""), band.get("start") == "fold")
+
+
+def check_cutoff(cutoff: object) -> float:
+    """The band's corner ``band.cutoff_rad_s``, checked.
+
+    Parameters
+    ----------
+    cutoff : object
+        The entry.
+
+    Raises
+    ------
+    SpecError
+        Not a finite number > 0 (rad/s).
+    """
+    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not (math.isfinite(cutoff) and cutoff > 0):
+        raise SpecError(f"`band.cutoff_rad_s`: got {cutoff!r}, expected the corner of `band.sos`, a "
+                        "frequency > 0 rad/s")
+    return float(cutoff)
 
 
 def forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -188,10 +206,11 @@ class BandIn(_Band):
 
     def c_parts(self, prefix: str) -> CParts:  # noqa: D102 - Stage.c_parts
         s, macro = self.spec, prefix.upper()
+        cutoff = check_cutoff(s.cutoff)
         ns = s.sos.shape[0]
         what = f"Butterworth order {s.order}, " if s.order else ""
         tables = (f"\n/* F, the learning band: one pass, {ns} second-order section{'s' if ns > 1 else ''} "
-                  f"({what}corner {s.cutoff:.6g} rad/s),\n   rows b0 b1 b2 a0 a1 a2 (a0 = 1); zi: its state "
+                  f"({what}corner {cutoff:.6g} rad/s),\n   rows b0 b1 b2 a0 a1 a2 (a0 = 1); zi: its state "
                   "per unit input at rest (scipy.signal.sosfilt_zi). */\n"
                   + array_c(DOUBLE, f"{prefix}band_sos", s.sos) + array_c(DOUBLE, f"{prefix}band_zi", s.zi))
         helpers = _BAND_PASS_C.format(p=prefix, ns=ns) + (_HORIZON_C if s.pad else _NO_HORIZON_C).format(

@@ -1,4 +1,4 @@
-"""The two reference terms of the ``exact-reference`` law as stages (docs/theory.md, section 4.4;
+"""The two reference terms of the ``exact-reference`` law as stages (docs/theory.md section 6;
 :mod:`..laws`): the source's reference error removed before learning, the target's own reference
 correction added after. Their signals are not in ``filters.json`` (``reference_terms.csv``)."""
 

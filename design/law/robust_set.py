@@ -1,5 +1,5 @@
 """The robust-set law as a stage: ``(1 - Q_j){F{d_hat}}``, ``d_hat = -Gd_hat_{j-1}^{-1}{e + Gf_hat_{j-1}{d_f}}``,
-from the maps ``filters.json`` records (docs/theory.md, section 5; :mod:`..robust_set`)."""
+from the maps ``filters.json`` records (docs/theory.md sections 3 and 6; :mod:`..robust_set`)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The learning law as a chain of stages, and the protocol every stage follows.
 
-A design's learning law (docs/theory.md, section 4) is a composition: the reference term, the
+A design's learning law (docs/theory.md section 6, "One chain, four faces") is a composition: the reference term, the
 learning gain, the band's trial extension and filter, the method's filter (``L1{.} + L2{.}`` or
 the robust-set reconstruction), the airframe correction, the band's second pass and fold, the
 acceleration limit. Each piece is one :class:`Stage` with four faces that agree:
@@ -33,7 +33,7 @@ from ilcdob.signals import as_signal
 
 from ..finite_horizon import LinearMap
 
-__all__ = ["apply_learning", "Stage", "CParts", "LawContext", "LearningLaw", "STAGE_KINDS", "CORE_PLACE", "register", "hstack_maps",
+__all__ = ["apply_learning", "Stage", "CParts", "LawContext", "LearningLaw", "STAGE_KINDS", "CORE_PLACE", "OUTPUT_PLACE", "register", "hstack_maps",
            "diag_maps", "Signals"]
 
 #: The signals a stage sees: ``(e_1, d_f1, ..., e_k, d_fk)`` before the method's filter, ``(d_f,)`` after.
@@ -41,6 +41,8 @@ Signals = tuple[np.ndarray, ...]
 
 #: The place of the method's filter in the chain: stages placed before it see error/learning pairs.
 CORE_PLACE = 40
+#: In C, stages placed after this run on ``df_next`` (the learning signal written), those before on ``a``.
+OUTPUT_PLACE = 65
 
 #: The stage classes by kind, in registration order (:func:`register`).
 STAGE_KINDS: dict[str, type["Stage"]] = {}
@@ -64,6 +66,12 @@ class CParts:
     loads, stores : bool
         The step reads ``e``/``df_prev`` into ``a``/``b`` (the first stage), or writes ``df_next``
         from ``a`` (the last); without such a stage ``learn`` copies.
+    macros : str
+        ``#define`` lines of the header.
+    note : str
+        Comment lines of the header on what ``learn`` does (each starting `` * ``).
+    readme : str
+        A sentence for the design folder's README.
     """
 
     tables: str = ""
@@ -72,6 +80,9 @@ class CParts:
     sections: bool = False
     loads: bool = False
     stores: bool = False
+    macros: str = ""
+    note: str = ""
+    readme: str = ""
 
 
 @dataclass(frozen=True)
@@ -92,7 +103,8 @@ class LawContext:
     limits : object or None
         A :class:`~ilcdob.specs.LimitSpec` in place of the file's ``limit`` entry.
     on_limit : str or None
-        ``"clip"`` or ``"refuse"`` in place of the file's ``limit.on_limit``.
+        ``"clip"`` or ``"refuse"`` in place of the file's ``limit.on_limit``; ``"off"``: the law
+        without its limit stage.
     what : str
         What the learning signal is, for messages.
     """
@@ -480,4 +492,4 @@ def apply_learning(filters: dict[str, Any], e_prev: object, df_prev: object) -> 
     SpecError
         No learning law in ``filters`` or an entry of the wrong type, shape or value.
     """
-    return LearningLaw.from_dict(filters).apply(e_prev, df_prev)
+    return LearningLaw.from_dict(filters, LawContext(on_limit="off")).apply(e_prev, df_prev)

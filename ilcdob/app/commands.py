@@ -878,7 +878,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     """The next vehicle's learning signal from a recorded trial of the previous one (the paper's law).
 
     Computed from the filters' coefficients exactly as the emitted C function ``<prefix>learn``
-    runs them (:func:`ilcdob.design.export.apply_learning`), then checked against the learning
+    runs them (:func:`ilcdob.design.law.apply_learning`), then checked against the learning
     vehicle's acceleration limit. The filters are a design folder's ``filters.json``
     (``design``), or designed here from the fleet (``method``, the learning band fixed to the
     trial as ``ilcdob design --trial`` does).
@@ -928,7 +928,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         The learning signal (m/s^2) and the ``learning.json`` content.
     """
     from ilcdob.design.c_export import default_c_prefix, signal_header
-    from ilcdob.design.export import apply_learning
+    from ilcdob.design.law import apply_learning
     from ilcdob.design.limit import enforce_limit
     from ilcdob.design.methods import DEFAULT_METHOD
     from ilcdob.signals import FlightData
@@ -1000,7 +1000,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                          "error": (f"column {columns.error}" if columns.error is not None
                                    else f"{columns.reference} - {columns.position}"),
                          "learning_flown": columns.learning},
-               "computes": "ilcdob.design.export.apply_learning (what the C function <prefix>learn runs), then "
+               "computes": "ilcdob.design.law.apply_learning (what the C function <prefix>learn runs), then "
                            "the acceleration limit",
                "band": {k: (filters.get("band") or {}).get(k) for k in ("cutoff_rad_s", "source", "reason")},
                "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))) if n else 0.0,
