@@ -81,10 +81,12 @@ from threadpoolctl import ThreadpoolController
 from ilcdob.errors import IlcdobError, NumericalError, SpecError
 from ilcdob.interrupts import honour_interrupts
 from ilcdob.loop import LoopSystem, freqresp
+from ilcdob.response import fir_matrix, fir_response
 from ilcdob.signals import as_signal, extend_smoothly
 
 from .closed_form import LearningFilters, closed_form_filters
 from .delta import DeltaSet
+from .frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
 
 __all__ = ["FIROptions", "FIRFilter", "FIRFit", "FIRDesign", "FIRDesignError", "FIRSolverError",
            "FIRGuaranteeWarning", "SOLVERS", "UNATTAINABLE", "POINTS_PER_RIPPLE", "CHECK_REFINE", "attainable_te1",
@@ -120,7 +122,7 @@ class FIRGuaranteeWarning(UserWarning):
 
 
 @dataclass(frozen=True)
-class FIROptions:
+class FIROptions(FitWeighting):
     """Options of :func:`design_fir` (module docstring gives the optimisation problem).
 
     Attributes
@@ -168,29 +170,16 @@ class FIROptions:
     unattainable: str = "no-harm"
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.n_taps, (int, np.integer)) and self.n_taps >= 2):
-            raise SpecError(f"`n_taps`: got {self.n_taps!r}, expected an integer >= 2")
-        if not (isinstance(self.advance, (int, np.integer)) and 0 <= self.advance <= self.n_taps - 1):
-            raise SpecError(f"`advance`: got {self.advance!r}, expected an integer in [0, n_taps - 1 = "
-                            f"{self.n_taps - 1}]")
-        if not (np.isfinite(self.w_min) and self.w_min > 0):
-            raise SpecError(f"`w_min`: got {self.w_min!r}, expected a frequency > 0 rad/s (a FIR cannot "
-                            "match the integrator of L1 at DC)")
+        check_count("n_taps", self.n_taps, 2)
+        check_advance(self.advance, self.n_taps)
+        check_w_min(self.w_min, " (a FIR cannot match the integrator of L1 at DC)")
         if self.w_max is not None and not (np.isfinite(self.w_max) and self.w_max > self.w_min):
             raise SpecError(f"`w_max`: got {self.w_max!r}, expected > w_min = {self.w_min} rad/s or None")
-        if not (isinstance(self.n_grid, (int, np.integer)) and self.n_grid >= 10):
-            raise SpecError(f"`n_grid`: got {self.n_grid!r}, expected an integer >= 10")
+        check_count("n_grid", self.n_grid, 10)
         if not (np.isfinite(self.margin) and 0 <= self.margin < 1):
             raise SpecError(f"`margin`: got {self.margin!r}, expected 0 <= margin < 1")
-        lo_hi = tuple(self.weight_band)
-        if len(lo_hi) != 2 or not (0 <= lo_hi[0] < lo_hi[1]):
-            raise SpecError(f"`weight_band`: got {self.weight_band!r}, expected (lo, hi) with 0 <= lo < hi")
-        if not (np.isfinite(self.band_weight) and self.band_weight > 0):
-            raise SpecError(f"`band_weight`: got {self.band_weight!r}, expected > 0")
-        if not (np.isfinite(self.ridge) and self.ridge >= 0):
-            raise SpecError(f"`ridge`: got {self.ridge!r}, expected >= 0")
-        if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
-            raise SpecError(f"`max_iter`: got {self.max_iter!r}, expected an integer >= 1")
+        self._check_weighting()
+        check_count("max_iter", self.max_iter, 1)
         if self.solver not in SOLVERS:
             raise SpecError(f"`solver`: got {self.solver!r}, expected one of {list(SOLVERS)}")
         if self.unattainable not in UNATTAINABLE:
@@ -224,28 +213,10 @@ class FIROptions:
         if w_max > np.pi / ts or self.w_min >= w_max:
             raise SpecError(f"`w_min`/`w_max`: need w_min = {self.w_min} < w_max = {w_max} <= Nyquist "
                             f"{np.pi / ts:.4g} rad/s; lower w_min or raise w_max")
-        log = np.logspace(np.log10(self.w_min), np.log10(w_max), self.n_grid)
         step = 2 * np.pi / (self.n_taps * ts) / POINTS_PER_RIPPLE
-        linear = np.arange(self.w_min + step, w_max, step)
-        grid = np.unique(np.concatenate([log, linear]))
+        grid = log_linear_grid(self.w_min, w_max, self.n_grid, np.arange(self.w_min + step, w_max, step))
         keep = np.concatenate([[True], np.diff(np.log(grid)) > 1e-3 * np.log(w_max / self.w_min) / self.n_grid])
         return grid[keep]  # no near-duplicates (they would only repeat a row of the fit)
-
-    def weights(self, w: np.ndarray) -> np.ndarray:
-        """Band emphasis ``weight(w)``: ``band_weight`` inside ``weight_band``, 1 elsewhere.
-
-        Parameters
-        ----------
-        w : numpy.ndarray
-            Frequencies, rad/s.
-
-        Returns
-        -------
-        numpy.ndarray
-            The weights, the shape of ``w``.
-        """
-        lo, hi = self.weight_band
-        return np.where((w >= lo) & (w <= hi), self.band_weight, 1.0)
 
 
 @dataclass(frozen=True)
@@ -295,6 +266,8 @@ class FIRFilter:
     def freqresp(self, w: np.ndarray) -> np.ndarray:
         """Frequency response ``H(e^{jw Ts}) = e^{jw Ts a} sum_i h[i] e^{-jw Ts i}``.
 
+        Computed by :func:`ilcdob.response.fir_response`.
+
         Parameters
         ----------
         w : array_like
@@ -305,8 +278,7 @@ class FIRFilter:
         numpy.ndarray
             Complex response, the shape of ``w``.
         """
-        w = np.asarray(w, dtype=float)
-        return _fir_matrix(w.reshape(-1), self.n_taps, self.advance, self.ts).dot(self.h).reshape(w.shape)
+        return fir_response(self.h, w, self.ts, self.advance)
 
     def apply(self, x: object, name: str = "x") -> np.ndarray:
         """Apply non-causally over a whole trial.
@@ -509,11 +481,6 @@ class FIRDesign:
                 "solver": self.options.solver, "solver_status": self.solver_status}
 
 
-def _fir_matrix(w: np.ndarray, n: int, advance: int, ts: float) -> np.ndarray:
-    """Rows ``e^{-jw Ts (i - a)}``, i = 0..n-1, so that ``H(w) = E @ h``."""
-    return np.exp(-1j * np.outer(np.asarray(w, float) * ts, np.arange(n) - advance))
-
-
 def _realify(a: np.ndarray) -> np.ndarray:
     return np.concatenate([a.real, a.imag], axis=0)
 
@@ -547,7 +514,7 @@ class _Whitened:
 
 def _whiten(target: np.ndarray, w: np.ndarray, ts: float, options: FIROptions) -> _Whitened:
     n, m = int(options.n_taps), w.size
-    e_mat = _fir_matrix(w, n, int(options.advance), ts)
+    e_mat = fir_matrix(w, n, int(options.advance), ts)
     wt = np.sqrt(options.weights(w) * _quadrature(w)) / np.abs(target)
     scale = float(np.max(np.abs(target)))
     a_aug = np.vstack([_realify(e_mat * wt[:, None]), np.sqrt(max(options.ridge, 1e-14)) / scale * np.eye(n)])
@@ -679,7 +646,7 @@ def fit_fir(target: np.ndarray, w: np.ndarray, ts: float, options: FIROptions,
         ok, solver = status in (_CLARABEL_OK + _IPOPT_OK), options.solver
         te = np.abs(c - b_rows @ z).reshape(const.shape)
     h = fit.to_h @ z
-    resp = _fir_matrix(w, int(options.n_taps), int(options.advance), ts) @ h
+    resp = fir_matrix(w, int(options.n_taps), int(options.advance), ts) @ h
     rel = np.abs(resp - target) / np.abs(target)
     wts = options.weights(w) * _quadrature(w)
     filt = FIRFilter(h, int(options.advance), ts, float(np.sqrt(np.sum(wts * rel**2) / np.sum(wts))),
@@ -982,7 +949,7 @@ def _design_fir(prev_loop: LoopSystem, next_loop: LoopSystem, delta_prev: DeltaS
     if unattainable.any() and options.unattainable == "refuse":
         raise FIRDesignError(_refusal(name, options, w, unattainable, best, const, gain, h_best, None))
     fit = _whiten(target, w, ts, options)
-    data = _Checked(fit, _fir_matrix(check, int(options.n_taps), int(options.advance), ts) @ fit.to_h, const_c, gain_c)
+    data = _Checked(fit, fir_matrix(check, int(options.n_taps), int(options.advance), ts) @ fit.to_h, const_c, gain_c)
     none = np.zeros(const_c.shape, bool)
     no_harm = np.maximum(limit, np.abs(const_c))
     bound = np.full(const_c.shape, limit)
@@ -1008,8 +975,8 @@ def _design_fir(prev_loop: LoopSystem, next_loop: LoopSystem, delta_prev: DeltaS
         if not result.held:
             raise _not_held(name, options, check, result, bound)
     h = fit.to_h @ result.z
-    te = np.abs(const_c - gain_c * (_fir_matrix(check, int(options.n_taps), int(options.advance), ts) @ h)[None, :])
-    rel = np.abs(_fir_matrix(w, int(options.n_taps), int(options.advance), ts) @ h - target) / np.abs(target)
+    te = np.abs(const_c - gain_c * (fir_matrix(check, int(options.n_taps), int(options.advance), ts) @ h)[None, :])
+    rel = np.abs(fir_matrix(w, int(options.n_taps), int(options.advance), ts) @ h - target) / np.abs(target)
     wts = options.weights(w) * _quadrature(w)
     l1_fir = FIRFilter(h, int(options.advance), ts, float(np.sqrt(np.sum(wts * rel**2) / np.sum(wts))),
                        float(np.max(rel)))

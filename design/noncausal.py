@@ -51,11 +51,12 @@ thousands of m/s^2 in the last samples.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 from scipy import signal
 
+from ilcdob.response import response
 from ilcdob.signals import as_signal, extend_smoothly
 
 __all__ = ["ZPKFilter", "as_signal", "extend_smoothly", "lookahead", "LOOKAHEAD_MAX", "LOOKAHEAD_TOL"]
@@ -176,7 +177,7 @@ class ZPKFilter:
         numpy.ndarray
             Complex response, the shape of ``w``.
         """
-        return _zpk_response(self.zeros, self.poles, self.gain, np.exp(1j * np.asarray(w, dtype=float) * self.ts))
+        return response((partial(_zpk_response, self.zeros, self.poles, self.gain),), w, self.ts)
 
     def freqresp(self, w: np.ndarray) -> np.ndarray:
         """Frequency response ``F(e^{j w Ts})`` of the filter as applied (:attr:`realised`).
@@ -191,7 +192,7 @@ class ZPKFilter:
         numpy.ndarray
             Complex response, the shape of ``w``.
         """
-        return self(np.exp(1j * np.asarray(w, dtype=float) * self.ts))
+        return response((self,), w, self.ts)
 
     def approximation_error(self, w: np.ndarray) -> np.ndarray:
         """Relative error ``|realised / exact - 1|`` of the filter as applied (0 without substitution).

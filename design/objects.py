@@ -43,8 +43,8 @@ import numpy as np
 
 from ilcdob.errors import NumericalError, SpecError
 from ilcdob.inputs import read_json
-from ilcdob.loop import freqresp as _sys_freqresp
 from ilcdob.matfile import check_mat_path, write_mat
+from ilcdob.response import response
 
 from .c_export import FILTER_KEYS, check_filter_entry, check_filters
 from .export import DIRECT_FORM_RTOL, apply_coefficients, direct_form_grid, lookahead_taps
@@ -185,7 +185,7 @@ class LearningFilterTF:
             tf = tf * s
         w = direct_form_grid(self.ts)
         with np.errstate(all="ignore"):
-            rel = np.abs(_sys_freqresp(tf, w) * np.exp(1j * w * self.ts * self.advance) / self.freqresp(w) - 1)
+            rel = np.abs(response((tf,), w, self.ts, self.advance) / self.freqresp(w) - 1)
         rel = np.where(np.isfinite(rel), rel, np.inf)
         i = int(np.argmax(rel))
         if rel[i] > DIRECT_FORM_RTOL:
@@ -209,11 +209,7 @@ class LearningFilterTF:
         numpy.ndarray
             Complex response, the shape of ``w``.
         """
-        w = np.asarray(w, dtype=float)
-        h = np.exp(1j * w * self.ts * self.advance)
-        for s in self.sections:
-            h = h * _sys_freqresp(s, w)
-        return h
+        return response(self.sections, w, self.ts, self.advance)
 
     def apply(self, x: object) -> np.ndarray:
         """Run the filter over a whole trial (:func:`~ilcdob.design.export.apply_coefficients`).
@@ -400,7 +396,7 @@ def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: s
     * the airframe correction ``W``: ``W_sos`` (0 x 6: the disturbance acts at the command);
     * ``limit_acceleration_m_s2`` (NaN: no limit stated);
     * ``learning_law``: the law these variables compute
-      (:func:`~ilcdob.design.export.apply_learning`).
+      (:func:`~ilcdob.design.law.apply_learning`).
 
     Parameters
     ----------
@@ -470,5 +466,5 @@ def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: s
         law += ("; exact-reference: e is the error minus the source's reference error e_ref_source, and the "
                 "correction is added to d_f (reference_terms.csv of the design folder)")
     values["learning_law"] = law + ": e (m) the source's error, d_f_prev (m/s^2) the learning signal it flew"
-    notes["learning_law"] = "the learning law these variables compute (ilcdob.design.export.apply_learning)"
+    notes["learning_law"] = "the learning law these variables compute (ilcdob.design.law.apply_learning)"
     return write_mat(path, values, notes, "design")

@@ -126,6 +126,7 @@ from ilcdob.signals import as_signal, check_grid
 from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus, reconstruct_disturbance,
                           simulate_map)
 from .fir import FIRFilter
+from .frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
 from .noncausal import lookahead
 from .trial_edges import fir_on_trial
 from .trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
@@ -191,7 +192,7 @@ class RobustSetSolverError(IlcdobError, RuntimeError):
 
 
 @dataclass(frozen=True)
-class RobustSetOptions:
+class RobustSetOptions(FitWeighting):
     """Options of :func:`design_robust_set` (module docstring gives the problem).
 
     Attributes
@@ -274,29 +275,15 @@ class RobustSetOptions:
         if not (np.isfinite(self.rho) and 0 < self.rho <= 1):
             raise SpecError(f"`rho`: got {self.rho!r}, expected a guaranteed improvement factor in (0, 1] "
                             "(1: never worse than without learning)")
-        if not (isinstance(self.n_taps, (int, np.integer)) and self.n_taps >= 3):
-            raise SpecError(f"`n_taps`: got {self.n_taps!r}, expected an integer >= 3")
-        if self.advance is not None and not (isinstance(self.advance, (int, np.integer))
-                                             and 0 <= self.advance <= self.n_taps - 1):
-            raise SpecError(f"`advance`: got {self.advance!r}, expected None or an integer in [0, n_taps - 1 = "
-                            f"{self.n_taps - 1}]")
-        if not (isinstance(self.n_grid, (int, np.integer)) and self.n_grid >= 20):
-            raise SpecError(f"`n_grid`: got {self.n_grid!r}, expected an integer >= 20")
-        if not (np.isfinite(self.w_min) and self.w_min > 0):
-            raise SpecError(f"`w_min`: got {self.w_min!r}, expected a frequency > 0 rad/s")
-        if not (isinstance(self.n_verify, (int, np.integer)) and self.n_verify >= self.n_grid):
-            raise SpecError(f"`n_verify`: got {self.n_verify!r}, expected an integer >= n_grid = {self.n_grid}")
-        lo_hi = tuple(self.weight_band)
-        if len(lo_hi) != 2 or not (0 <= lo_hi[0] < lo_hi[1]):
-            raise SpecError(f"`weight_band`: got {self.weight_band!r}, expected (lo, hi) with 0 <= lo < hi rad/s")
-        if not (np.isfinite(self.band_weight) and self.band_weight > 0):
-            raise SpecError(f"`band_weight`: got {self.band_weight!r}, expected > 0")
-        if not (np.isfinite(self.ridge) and self.ridge >= 0):
-            raise SpecError(f"`ridge`: got {self.ridge!r}, expected >= 0")
+        check_count("n_taps", self.n_taps, 3)
+        check_advance(self.advance, self.n_taps, optional=True)
+        check_count("n_grid", self.n_grid, 20)
+        check_w_min(self.w_min)
+        check_count("n_verify", self.n_verify, self.n_grid, f"n_grid = {self.n_grid}")
+        self._check_weighting(" rad/s")
         if not (np.isfinite(self.slack) and 0 <= self.slack <= 0.1):
             raise SpecError(f"`slack`: got {self.slack!r}, expected a margin in [0, 0.1]")
-        if not (isinstance(self.max_exchange, (int, np.integer)) and self.max_exchange >= 0):
-            raise SpecError(f"`max_exchange`: got {self.max_exchange!r}, expected an integer >= 0")
+        check_count("max_exchange", self.max_exchange, 0)
         if not (np.isfinite(self.margin) and 0 <= self.margin < 1):
             raise SpecError(f"`margin`: got {self.margin!r}, expected a stability margin in [0, 1)")
         if not (np.isfinite(self.tol) and 0 <= self.tol <= 0.01):
@@ -338,8 +325,7 @@ class RobustSetOptions:
         nyq = np.pi / ts
         if self.w_min >= nyq:
             raise SpecError(f"`w_min`: got {self.w_min} rad/s, expected below Nyquist {nyq:.4g} rad/s")
-        lin = np.linspace(nyq / self.n_taps, nyq, self.n_taps)
-        return np.unique(np.concatenate([np.logspace(np.log10(self.w_min), np.log10(nyq), self.n_grid), lin]))
+        return log_linear_grid(self.w_min, nyq, self.n_grid, np.linspace(nyq / self.n_taps, nyq, self.n_taps))
 
     def verify_grid(self, ts: float) -> np.ndarray:
         """Dense verification grid: log from 1e-4 rad/s to ``w_min``, then linear to Nyquist.
@@ -354,25 +340,7 @@ class RobustSetOptions:
         numpy.ndarray
             Sorted frequencies, rad/s (200 log-spaced plus ``n_verify`` linearly spaced).
         """
-        nyq = np.pi / ts
-        low = np.logspace(-4, np.log10(self.w_min), 200)
-        return np.unique(np.concatenate([low, np.linspace(self.w_min, nyq, self.n_verify)]))
-
-    def weights(self, w: np.ndarray) -> np.ndarray:
-        """Nominal-criterion weight per frequency: ``band_weight`` inside ``weight_band``, else 1.
-
-        Parameters
-        ----------
-        w : numpy.ndarray
-            Frequencies, rad/s.
-
-        Returns
-        -------
-        numpy.ndarray
-            The weights, the shape of ``w``.
-        """
-        lo, hi = self.weight_band
-        return np.where((w >= lo) & (w <= hi), self.band_weight, 1.0)
+        return log_linear_grid(1e-4, self.w_min, 200, np.linspace(self.w_min, np.pi / ts, self.n_verify))
 
 
 def bound_on_grid(w_bound: np.ndarray, bound: np.ndarray, w: np.ndarray) -> np.ndarray:

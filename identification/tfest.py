@@ -1178,7 +1178,7 @@ def _experiments(data, input: str, output: str, structure: ModelStructure, opts:
     if not exps:
         raise SignalError(f"`data`: no piece of at least {need} samples between the gaps of the logs")
     if opts.delay == "auto" and opts.max_delay is None:
-        pass  # DEFAULT_DELAY_SHARE of the shortest experiment (:func:`_tfest`): within half of it
+        pass  # DEFAULT_DELAY_SHARE of the shortest experiment (:func:`_fit_problem`): within half of it
     elif opts.delay == "auto" or opts.delay > 0:
         shortest = min(e.n for e in exps) * ts
         limit = opts.max_delay if opts.delay == "auto" else float(opts.delay)
@@ -1259,21 +1259,137 @@ def _keep_freed_memory() -> None:
     del block
 
 
-def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
+def _tfest(data: FlightData | list[FlightData], input: str, output: str, structure: ModelStructure,
+           opts: FitOptions, validation: FlightData | list[FlightData] | None, say: Progress) -> TFEstimate:
+    """The fit of :func:`tfest` (its BLAS limited by the caller), step by step.
+
+    The steps are those of docs/identification.md, "The search": the criterion
+    (:func:`_fit_problem`), the starts (:func:`_initial_points`, :func:`_lm_starts`; step 1 and the
+    delay profile of step 2), Levenberg-Marquardt and the resonances retuned (:func:`_search`;
+    steps 3-4), the gross errors (:func:`_refit_without_gross_errors`; step 5), the limits
+    (:func:`_warn_if_stopped`; step 6) and the result with its covariance (:func:`_result`; step 7).
+
+    Parameters
+    ----------
+    data : FlightData or list of FlightData
+        Estimation experiments (one sample time), as given to :func:`tfest`.
+    input, output : str
+        Signal names of the plant input and output.
+    structure : ModelStructure
+        The model orders.
+    opts : FitOptions
+        Fit settings; a ``max_delay`` of None is replaced by its default (:func:`_fit_problem`).
+    validation : FlightData or list of FlightData or None
+        Held-out experiments (their fit percent is reported).
+    say : Progress
+        Where the fit reports as it advances.
+
+    Returns
+    -------
+    TFEstimate
+        The fitted model, its covariance, fits and the solver's report (``solver["seconds"]``:
+        wall time of this call, s).
+
+    Raises
+    ------
+    SignalError
+        Data unfit for the structure (:func:`_experiments`), or a converged fit of an output that
+        does not respond to the input (:func:`_result`).
+    SpecError
+        An unusable ``FitOptions.initial`` or delay bound.
+    IlcdobError
+        No start could be formed.
+
+    Warns
+    -----
+    RuntimeWarning
+        The search stopped at a limit (:func:`_warn_if_stopped`).
+    """
     t_start = time.perf_counter()
     deadline = t_start + (opts.time_limit if opts.time_limit is not None else math.inf)
+    model, delay0 = _fit_problem(data, input, output, structure, opts, say)
+    cands, ranking = _initial_points(model, delay0, say)
+    runs: list[dict] = []
+    best = _search(model, _lm_starts(model, cands, deadline, say), delay0, deadline, say, runs)
+    model, best, left_out = _refit_without_gross_errors(model, best, delay0, deadline, say, runs)
+    _warn_if_stopped(best)
+    return _result(model, best, input, output, validation, runs, ranking, left_out, t_start)
+
+
+def _fit_problem(data: FlightData | list[FlightData], input: str, output: str, structure: ModelStructure,
+                 opts: FitOptions, say: Progress) -> tuple[_Model, float]:
+    """The experiments and the criterion to minimise over them (docs/identification.md, "The model of one log").
+
+    Parameters
+    ----------
+    data : FlightData or list of FlightData
+        Estimation experiments (one sample time); split at their gaps (:func:`_experiments`).
+    input, output : str
+        Signal names of the plant input and output.
+    structure : ModelStructure
+        The model orders.
+    opts : FitOptions
+        Fit settings. With ``delay="auto"`` and ``max_delay=None``, the criterion's options get
+        ``max_delay`` = :data:`DEFAULT_DELAY_SHARE` of the shortest experiment, s.
+    say : Progress
+        Told of pieces between gaps too short to fit.
+
+    Returns
+    -------
+    model : _Model
+        The criterion; ``model.opts`` are the settings the fit runs with (``max_delay`` set).
+    delay0 : float
+        The delay held fixed in the criterion, s: ``opts.delay``, or 0 when the delay is estimated
+        (it is then the last nonlinear parameter).
+
+    Raises
+    ------
+    SignalError, SpecError
+        As :func:`_experiments`: too few samples, a constant signal, mixed sample times, a delay
+        bound of half the shortest experiment or more.
+    """
     exps, ts = _experiments(data, input, output, structure, opts, say)
     if opts.max_delay is None and opts.delay == "auto":
         opts = dataclasses.replace(opts, max_delay=DEFAULT_DELAY_SHARE * min(e.n for e in exps) * ts)
     estimate_delay = opts.delay == "auto"
-    model = _Model(structure, exps, ts, opts, estimate_delay)
-    delay0 = 0.0 if estimate_delay else float(opts.delay)
+    return _Model(structure, exps, ts, opts, estimate_delay), 0.0 if estimate_delay else float(opts.delay)
+
+
+def _initial_points(model: _Model, delay0: float, say: Progress) -> tuple[list[_Point], dict]:
+    """The candidate starts: ``FitOptions.initial`` alone, else those of :func:`_candidates`.
+
+    docs/identification.md, "The search", step 1.
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion (its ``opts`` and structure say which starts).
+    delay0 : float
+        The fixed delay, s (0 when estimated: the start's delay parameter is then 0 as well).
+    say : Progress
+        Told when SRIVC gives no estimate.
+
+    Returns
+    -------
+    cands : list of _Point
+        The starts with their linear parameters solved, best criterion first (at least one).
+    ranking : dict
+        How :func:`_candidates` ranked them (``decimation``, ``samples``); empty for ``initial``.
+
+    Raises
+    ------
+    SpecError
+        ``initial`` not of ``n_params`` values, or a model whose criterion is not finite.
+    IlcdobError
+        Every candidate model diverged.
+    """
+    opts, structure = model.opts, model.s
     if opts.initial is not None:
         if len(opts.initial) != structure.n_params:
             raise SpecError(f"`initial`: got {len(opts.initial)} values, the structure has {structure.n_params} "
                             f"parameters (free denominator, then numerator)")
         a0 = np.asarray(opts.initial[: structure.n_free_poles])
-        start = model.evaluate(np.concatenate([a0, [delay0] if estimate_delay else []]), delay0)
+        start = model.evaluate(np.concatenate([a0, [delay0] if model.estimate_delay else []]), delay0)
         if not math.isfinite(start.sse):
             raise SpecError(f"`initial`: the model {list(opts.initial)} cannot start the fit (unstable or "
                             "diverging on these data)")
@@ -1283,23 +1399,129 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     if not cands:
         raise IlcdobError("no initial estimate could be formed (every candidate model diverged); check that "
                           "the input excites the system and that the structure suits the data")
-    def competitive(points: list[_Point]) -> list[_Point]:
-        # a start whose criterion is several times the best start's lies in a region the first run never
-        # needed to search
-        return [p0 for p0 in points if p0.sse <= SECONDARY_START_RATIO * points[0].sse]
+    return cands, ranking
 
+
+def _competitive(points: list[_Point]) -> list[_Point]:
+    """The points within :data:`SECONDARY_START_RATIO` of the first one's criterion (``points`` best first).
+
+    A start whose criterion is several times the best start's lies in a region the first run never needed
+    to search.
+
+    Parameters
+    ----------
+    points : list of _Point
+        Starts, best first (not empty).
+
+    Returns
+    -------
+    list of _Point
+        Those with ``sse <= SECONDARY_START_RATIO * points[0].sse``, in their order.
+    """
+    return [p0 for p0 in points if p0.sse <= SECONDARY_START_RATIO * points[0].sse]
+
+
+def _lm_starts(model: _Model, cands: list[_Point], deadline: float, say: Progress) -> list[_Point]:
+    """The points Levenberg-Marquardt runs from (docs/identification.md, "The search", steps 1-2).
+
+    ``FitOptions.starts`` distinct candidates; with ``delay="auto"`` every competitive one profiles
+    the delay (:func:`_delay_sweep`: the best denominator at delay 0 need not be the best at the
+    true delay) and the distinct profile minima replace them. The starts are reported through
+    ``say`` (``0`` of the number of runs).
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion.
+    cands : list of _Point
+        Candidate starts, best first (:func:`_initial_points`).
+    deadline : float
+        ``time.perf_counter()`` value at which the delay sweep stops, s.
+    say : Progress
+        Told after each sweep point and of the starts chosen.
+
+    Returns
+    -------
+    list of _Point
+        The competitive starts (:func:`_competitive`), best first; with the delay as their last
+        parameter when it is estimated.
+    """
+    opts = model.opts
     starts = _distinct(cands, opts.starts)
-    if estimate_delay:  # every competitive start profiles the delay: the best denominator at delay 0 need not be
-        swept = [q for p0 in competitive(starts) for q in _delay_sweep(structure, exps, ts, opts, p0, deadline, say)]
+    if model.estimate_delay:
+        swept = [q for p0 in _competitive(starts)
+                 for q in _delay_sweep(model.s, model.exps, model.ts, opts, p0, deadline, say)]
         starts = _distinct(sorted(swept, key=lambda q: q.sse), opts.starts)
-    runs_from = competitive(starts)
+    runs_from = _competitive(starts)
     say(0, len(runs_from), "initial estimate(s): " + ", ".join(
-        f"SSE {p.sse:.6g}" + (f" at delay {p.delay:.4g} s" if estimate_delay else "") for p in starts))
+        f"SSE {p.sse:.6g}" + (f" at delay {p.delay:.4g} s" if model.estimate_delay else "") for p in starts))
+    return runs_from
+
+
+def _lm_run(model: _Model, start: _Point, delay0: float, deadline: float, say: Progress, runs: list[dict],
+            note: str | None = None) -> _LMResult:
+    """One Levenberg-Marquardt run (:func:`_levenberg_marquardt`), recorded in ``runs``.
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion.
+    start : _Point
+        Where the run starts.
+    delay0 : float
+        The fixed delay, s (0 when estimated).
+    deadline : float
+        ``time.perf_counter()`` value at which the run stops with status ``time_limit``, s.
+    say : Progress
+        Told after every iteration with ``FitOptions.verbose``.
+    runs : list of dict
+        Appended to: ``{"start_sse", "sse", "status", "iterations"}`` and, with ``note``, ``"start"``
+        (the record of ``solver["starts"]``).
+    note : str, optional
+        What the start was, when not a start of the search.
+
+    Returns
+    -------
+    _LMResult
+        The run's best point, status and iterations.
+    """
+    res = _levenberg_marquardt(model, start, delay0, model.opts, deadline, say)
+    runs.append({"start_sse": start.sse, "sse": res.point.sse, "status": res.status, "iterations": res.iterations,
+                 **({"start": note} if note is not None else {})})
+    return res
+
+
+def _search(model: _Model, runs_from: list[_Point], delay0: float, deadline: float, say: Progress,
+            runs: list[dict]) -> _LMResult:
+    """Levenberg-Marquardt from each start, then the resonances of a converged best retuned.
+
+    docs/identification.md, "The search", steps 3-4: the runs stop early at the time limit; after a
+    converged best, :func:`_retune_resonances` moves its lightly damped pole pairs and, from a lower
+    criterion, one more run replaces the best if it ends lower.
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion.
+    runs_from : list of _Point
+        The starts, best first (:func:`_lm_starts`; not empty).
+    delay0 : float
+        The fixed delay, s (0 when estimated).
+    deadline : float
+        ``time.perf_counter()`` value at which the search stops, s.
+    say : Progress
+        Told after each run (``done`` of ``len(runs_from)``).
+    runs : list of dict
+        Appended to, a record per run (:func:`_lm_run`).
+
+    Returns
+    -------
+    _LMResult
+        The run with the lowest criterion.
+    """
     best: _LMResult | None = None
-    runs = []
     for i, p0 in enumerate(runs_from):
-        res = _levenberg_marquardt(model, p0, delay0, opts, deadline, say)
-        runs.append({"start_sse": p0.sse, "sse": res.point.sse, "status": res.status, "iterations": res.iterations})
+        res = _lm_run(model, p0, delay0, deadline, say, runs)
         say(i + 1, len(runs_from),
             f"LM: {res.status} after {res.iterations} iterations, SSE {p0.sse:.6g} -> {res.point.sse:.6g}")
         if best is None or res.point.sse < best.point.sse:
@@ -1310,56 +1532,188 @@ def _tfest(data, input, output, structure, opts, validation, say) -> TFEstimate:
     if best.status == "converged":  # a lightly damped pair converged in a neighbouring basin: move it and refit
         moved = _retune_resonances(model, best.point, delay0)
         if moved.sse < best.point.sse:
-            res = _levenberg_marquardt(model, moved, delay0, opts, deadline, say)
-            runs.append({"start_sse": moved.sse, "sse": res.point.sse, "status": res.status,
-                         "iterations": res.iterations, "start": "resonances retuned"})
+            res = _lm_run(model, moved, delay0, deadline, say, runs, "resonances retuned")
             if res.point.sse < best.point.sse:
                 best = res
+    return best
+
+
+def _refit_without_gross_errors(model: _Model, best: _LMResult, delay0: float, deadline: float, say: Progress,
+                                runs: list[dict]) -> tuple[_Model, _LMResult, list[dict]]:
+    """Up to :data:`OUTLIER_ROUNDS` refits with the worst cluster of gross errors left out.
+
+    docs/identification.md, "The search", step 5. Only after a converged fit and with
+    ``FitOptions.outlier_sigmas`` set; a round that finds no gross error
+    (:func:`_without_gross_errors`), or whose cut record the current point cannot start, ends them.
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion the fit converged on.
+    best : _LMResult
+        That fit.
+    delay0 : float
+        The fixed delay, s (0 when estimated).
+    deadline : float
+        ``time.perf_counter()`` value at which a refit stops, s.
+    say : Progress
+        Told of each round (``done = total = 0``).
+    runs : list of dict
+        Appended to, a record per refit (:func:`_lm_run`).
+
+    Returns
+    -------
+    model : _Model
+        The criterion on the experiments as last cut (``model`` itself without a round).
+    best : _LMResult
+        The last refit (``best`` itself without a round).
+    left_out : list of dict
+        What every round left out (``source``, ``first``, ``last``, ``samples``).
+    """
+    opts = model.opts
     left_out: list[dict] = []
     for _ in range(OUTLIER_ROUNDS if opts.outlier_sigmas is not None and best.status == "converged" else 0):
         pieces, left = _without_gross_errors(model, best.point, opts.outlier_sigmas)
-        cut = _Model(structure, pieces, ts, opts, estimate_delay) if left else None
+        cut = _Model(model.s, pieces, model.ts, opts, model.estimate_delay) if left else None
         p0 = cut.evaluate(best.point.alpha, delay0) if cut is not None else None
         if p0 is None or not math.isfinite(p0.sse):
             break
-        res = _levenberg_marquardt(cut, p0, delay0, opts, deadline, say)
-        runs.append({"start_sse": p0.sse, "sse": res.point.sse, "status": res.status, "iterations": res.iterations,
-                     "start": f"{sum(d['samples'] for d in left)} gross-error samples left out"})
-        model, exps, best = cut, pieces, res
+        samples = sum(d["samples"] for d in left)
+        best = _lm_run(cut, p0, delay0, deadline, say, runs, f"{samples} gross-error samples left out")
+        model = cut
         left_out += left
-        say(0, 0, f"gross errors: {sum(d['samples'] for d in left)} samples left out, LM {res.status}, "
-                  f"SSE {res.point.sse:.6g}")
-    why = {"max_iter": "at its iteration limit", "time_limit": "at its time limit",
-           "numerical": "where the sensitivities overflowed (the model order may exceed what the data support)"}
-    if best.status != "converged":
-        advice = ("raise FitOptions.max_iter/time_limit (--max-iter/--time-limit) or check the model structure"
-                  if best.status != "numerical" else "check the model structure; an open-loop unstable plant needs "
-                  "FitOptions(stable=False) (--allow-unstable)")
-        warnings.warn(f"tfest stopped {why[best.status]} ({best.status}); the best iterate is returned (SSE "
-                      f"{best.point.sse:.6g}); {advice}", RuntimeWarning, stacklevel=3)
-    p = best.point
-    theta, delay = p.theta, p.delay
-    pull = {}
-    if estimate_delay and delay <= 1e-12:  # would a negative delay fit better? (the diagnostics' evidence)
-        with np.errstate(over="ignore", invalid="ignore"):
-            h_r, g_r = model.reduced_normal(p)
-        gain = g_r[-1] ** 2 / h_r[-1, -1] if g_r[-1] < 0 and h_r[-1, -1] > 0 else 0.0
-        pull = {"delay_lower_bound_gain": float(gain / max(p.sse / sum(e.n for e in exps), 1e-300))}
-    n_obs = sum(e.n for e in exps)
+        say(0, 0, f"gross errors: {samples} samples left out, LM {best.status}, SSE {best.point.sse:.6g}")
+    return model, best, left_out
+
+
+#: Why a search that did not converge stopped, by its status (:func:`_warn_if_stopped`).
+_STOPPED = {"max_iter": "at its iteration limit", "time_limit": "at its time limit",
+            "numerical": "where the sensitivities overflowed (the model order may exceed what the data support)"}
+
+
+def _warn_if_stopped(best: _LMResult) -> None:
+    """Warn that the search stopped before converging (docs/identification.md, "The search", step 6).
+
+    Parameters
+    ----------
+    best : _LMResult
+        The fit returned.
+
+    Warns
+    -----
+    RuntimeWarning
+        ``best.status`` is not ``converged``: why it stopped, its criterion and the advice. The
+        warning points at the caller of :func:`tfest`.
+    """
+    if best.status == "converged":
+        return
+    advice = ("raise FitOptions.max_iter/time_limit (--max-iter/--time-limit) or check the model structure"
+              if best.status != "numerical" else "check the model structure; an open-loop unstable plant needs "
+              "FitOptions(stable=False) (--allow-unstable)")
+    warnings.warn(f"tfest stopped {_STOPPED[best.status]} ({best.status}); the best iterate is returned (SSE "
+                  f"{best.point.sse:.6g}); {advice}", RuntimeWarning, stacklevel=4)
+
+
+def _delay_pull(model: _Model, p: _Point) -> dict:
+    """Evidence that a negative delay would fit better, for the diagnostics.
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion.
+    p : _Point
+        The fit.
+
+    Returns
+    -------
+    dict
+        With the delay estimated and on its lower bound (``<= 1e-12`` s),
+        ``{"delay_lower_bound_gain": g}``: the decrease of the criterion that a Gauss-Newton step
+        of the delay alone predicts (``g_r^2 / h_r`` from the delay's entries of the reduced normal
+        equations; 0 unless that step points below 0 s), divided by the residual variance
+        ``SSE / samples``. Else empty.
+    """
+    if not (model.estimate_delay and p.delay <= 1e-12):
+        return {}
+    with np.errstate(over="ignore", invalid="ignore"):
+        h_r, g_r = model.reduced_normal(p)
+    gain = g_r[-1] ** 2 / h_r[-1, -1] if g_r[-1] < 0 and h_r[-1, -1] > 0 else 0.0
+    return {"delay_lower_bound_gain": float(gain / max(p.sse / sum(e.n for e in model.exps), 1e-300))}
+
+
+def _covariance(model: _Model, p: _Point) -> tuple[float, np.ndarray]:
+    """Residual variance and covariance of the fit (docs/identification.md, "The search", step 7).
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion.
+    p : _Point
+        The fit.
+
+    Returns
+    -------
+    sigma2 : float
+        ``SSE / (samples - parameters)``, in the output's unit squared (all linear and nonlinear
+        parameters counted; at least 1 in the denominator).
+    cov : numpy.ndarray
+        Covariance of the structure's parameters (and of the delay, last, when estimated) from the
+        joint normal matrix of every parameter: inf, not a warning, for a diverging model.
+    """
+    n_obs = sum(e.n for e in model.exps)
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging model's covariance is inf, not a warning
         h = model.full_normal(p)
     sigma2 = p.sse / max(n_obs - h.shape[0], 1)
-    n_global = structure.n_params + (1 if estimate_delay else 0)
-    cov = sigma2 * _scaled_pinv(h)[:n_global, :n_global]
-    fitted = _fitted(model, p)
-    est = TFEstimate.from_fit(structure=structure, theta=theta, delay=delay, covariance=cov,
-                              delay_estimated=estimate_delay, sigma2=sigma2,
-                              experiments=[(e.u, e.y) for e in exps], ts=ts, validation=validation,
-                              input=input, output=output, trend=opts.trend, fitted=fitted,
+    n_global = model.s.n_params + (1 if model.estimate_delay else 0)
+    return sigma2, sigma2 * _scaled_pinv(h)[:n_global, :n_global]
+
+
+def _result(model: _Model, best: _LMResult, input: str, output: str, validation: FlightData | list[FlightData] | None,
+            runs: list[dict], ranking: dict, left_out: list[dict], t_start: float) -> TFEstimate:
+    """The fit as a :class:`TFEstimate`, refused when the output shows no response.
+
+    Parameters
+    ----------
+    model : _Model
+        The criterion of the fit (experiments as last cut).
+    best : _LMResult
+        The fit.
+    input, output : str
+        Signal names of the plant input and output.
+    validation : FlightData or list of FlightData or None
+        Held-out experiments.
+    runs : list of dict
+        The record of every LM run (:func:`_lm_run`): ``solver["starts"]``.
+    ranking : dict
+        How the starts were ranked (:func:`_initial_points`; may be empty).
+    left_out : list of dict
+        The gross errors left out (:func:`_refit_without_gross_errors`; may be empty).
+    t_start : float
+        ``time.perf_counter()`` value at the start of the fit, s.
+
+    Returns
+    -------
+    TFEstimate
+        With ``solver``: engine, status, iterations, starts, then ``ranking``, ``max_delay``
+        (delay estimated), ``delay_lower_bound_gain`` (:func:`_delay_pull`) and ``gross_errors``
+        where they apply, and ``seconds``, the wall time since ``t_start``.
+
+    Raises
+    ------
+    SignalError
+        A converged fit with a trend that explains less than :data:`MIN_RESPONSE_FIT` % of the output.
+    """
+    p, opts, exps = best.point, model.opts, model.exps
+    pull = _delay_pull(model, p)
+    sigma2, cov = _covariance(model, p)
+    est = TFEstimate.from_fit(structure=model.s, theta=p.theta, delay=p.delay, covariance=cov,
+                              delay_estimated=model.estimate_delay, sigma2=sigma2,
+                              experiments=[(e.u, e.y) for e in exps], ts=model.ts, validation=validation,
+                              input=input, output=output, trend=opts.trend, fitted=_fitted(model, p),
                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
-                                      "status": best.status, "iterations": best.iterations, "starts": runs,
-                                      **({"ranking": ranking} if ranking else {}),
-                                      **({"max_delay": opts.max_delay} if estimate_delay else {}), **pull,
+                                      "status": best.status, "iterations": best.iterations,
+                                      "starts": runs, **({"ranking": ranking} if ranking else {}),
+                                      **({"max_delay": opts.max_delay} if model.estimate_delay else {}), **pull,
                                       **({"gross_errors": left_out} if left_out else {}),
                                       "seconds": time.perf_counter() - t_start})
     if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:

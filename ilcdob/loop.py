@@ -42,6 +42,7 @@ import numpy as np
 
 from .discretize import DiscreteBlock, m_block, pid_block, plant_block, q_block
 from .errors import IlcdobError, SpecError, UnstableLoopError
+from .response import response
 from .specs import SystemSpec
 
 __all__ = ["LoopSystem", "build_loop", "freqresp", "delta_poles", "loop_eigenvalues", "STABILITY_MARGIN"]
@@ -56,6 +57,8 @@ _SIGNAL_UNITS = {"r": "m", "y": "m", "e": "m", "d": "m/s^2", "d_f": "m/s^2", "d_
 def freqresp(sys: ct.LTI, w: np.ndarray) -> np.ndarray:
     """Complex frequency response of a discrete SISO system, ``sys(e^{j w Ts})``.
 
+    Computed by :func:`ilcdob.response.response`.
+
     Parameters
     ----------
     sys : control.LTI
@@ -68,8 +71,7 @@ def freqresp(sys: ct.LTI, w: np.ndarray) -> np.ndarray:
     numpy.ndarray
         Complex response, the shape of ``w``.
     """
-    w = np.asarray(w, dtype=float)
-    return np.asarray(sys(np.exp(1j * w * sys.dt)), dtype=complex).reshape(w.shape)
+    return response((sys,), w, sys.dt)
 
 
 def _named(sys: ct.StateSpace, inp: str, out: str, name: str) -> ct.StateSpace:
