@@ -4,7 +4,8 @@
 * :mod:`.output` - the one results writer (folders written as a unit, ``manifest.json``);
 * :mod:`.html` - the self-contained HTML report, rendered from result files only;
 * :mod:`.console` - progress bars, notes, summaries and error lines;
-* :mod:`.cli` - argument parsing and exit codes.
+* :mod:`.options` - every command and option of the command line, as data;
+* :mod:`.cli` - argument parsing (built from :mod:`.options`) and exit codes.
 
 This layer may import every other; nothing imports it (``tests/test_layout.py``).
 """

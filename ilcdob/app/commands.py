@@ -27,7 +27,7 @@ from __future__ import annotations
 import hashlib
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -73,12 +73,83 @@ def _provenance(command: str, argv: Sequence[str] | None, fleet_hash: str | None
     return Provenance(command, list(argv or []), fleet_hash, law)
 
 
-def _write_folder(out: str | Path, provenance: Provenance, *maps: dict[str, Any], overwrite: bool = False,
-                  keep: Sequence[str] = ()) -> None:
-    """Write content maps into ``out`` as one unit (:class:`OutputFolder`)."""
-    with OutputFolder(out, provenance, overwrite=overwrite, keep=keep) as folder:
-        for files in maps:
-            folder.add_all(files)
+@dataclass(frozen=True)
+class _Output:
+    """The output folder of one command run: checked before any work, written as a unit after it.
+
+    Attributes
+    ----------
+    command : str
+        The command, recorded in ``manifest.json``.
+    out : str or Path or None
+        The folder (None: the run writes nothing, e.g. ``compare`` without ``--out``).
+    overwrite : bool
+        Replace a non-empty folder that ilcdob did not write.
+    argv : sequence of str, optional
+        Command line, recorded in ``manifest.json``.
+    """
+
+    command: str
+    out: str | Path | None
+    overwrite: bool = False
+    argv: Sequence[str] | None = None
+
+    def check(self, inputs: dict[str, Any] | None = None, resumable: Sequence[str] = ()) -> Path | None:
+        """Check the folder before any work (:func:`check_output_path`); returns the path to write (None: none).
+
+        Parameters
+        ----------
+        inputs : dict, optional
+            The run's inputs by option name, which the folder must neither be, hold nor lie in.
+        resumable : sequence of str
+            File names of an unfinished run that the folder may hold (a campaign's sample store).
+
+        Raises
+        ------
+        OutputError
+            The folder cannot be written (see :func:`check_output_path`).
+        """
+        if self.out is None:
+            return None
+        return check_output_path(self.out, folder=True, overwrite=self.overwrite, resumable=resumable, inputs=inputs)
+
+    def check_and_load(self, fleet: str | Path | None, axis: str = "x",
+                       inputs: dict[str, Any] | None = None) -> tuple[Fleet, str]:
+        """:meth:`check` (``fleet`` among the inputs, first), then the fleet and its hash (:func:`fleet_and_hash`).
+
+        Parameters
+        ----------
+        fleet : str or Path or None
+            Fleet TOML (None: the built-in fleet).
+        axis : {"x", "y", "z"}
+            The axis loaded.
+        inputs : dict, optional
+            The run's other inputs by option name.
+        """
+        self.check({"--fleet": fleet, **(inputs or {})})
+        return fleet_and_hash(fleet, axis)
+
+    def write(self, *maps: dict[str, Any], digest: str | None = None, law: str | None = None,
+              keep: Sequence[str] = ()) -> None:
+        """Write the content maps into the folder as one unit (:class:`OutputFolder`); nothing without a folder.
+
+        Parameters
+        ----------
+        *maps : dict of str to content
+            File name -> content (:mod:`ilcdob.app.output`).
+        digest : str, optional
+            SHA-256 of the fleet file, recorded in ``manifest.json``.
+        law : str, optional
+            The learning law, recorded in ``manifest.json``.
+        keep : sequence of str
+            Files of the existing folder carried into the new one.
+        """
+        if self.out is None:
+            return
+        provenance = _provenance(self.command, self.argv, digest, law)
+        with OutputFolder(self.out, provenance, overwrite=self.overwrite, keep=keep) as folder:
+            for files in maps:
+                folder.add_all(files)
 
 
 #: Most learning iterations of ``reproduce`` (the paper flies 3).
@@ -175,67 +246,139 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     -------
     ReproductionResult
     """
-    from ilcdob.design.laws import check_law
-    from ilcdob.validation.figures import FigureRenderer, fleet_figures, render_workers, scenario_figures
-    from ilcdob.validation.scenarios import check_order
+    run = _Reproduction(list(scenarios), iterations, plant, seed, law, figures, order, sensor_noise, bandwidth,
+                        workers, figure_workers, progress).checked()
+    output = _Output("reproduce", out, overwrite, argv)
+    return run.fly_vehicles(output, fleet) if plant == "rotorpy" else run.fly_fleet(output, fleet)
 
-    law = check_law(law, "--law")
-    render_workers(figure_workers, name="figure_workers")  # a bad count fails before the run
-    if plant not in ("linear", "nonlinear", "rotorpy"):
-        raise SpecError(f"`plant`: got {plant!r}, expected 'linear', 'nonlinear' or 'rotorpy'")
-    if workers is not None and plant != "rotorpy":
-        raise SpecError(f"`--workers`: got {workers}, but only `--plant rotorpy` flies in parallel (plant {plant!r})")
-    _check_reproduce_counts(iterations, len(list(scenarios)), plant, seed, workers)
-    if plant == "rotorpy":
-        given = [opt for opt, v in (("--fleet", fleet), ("--order", order),
-                                    ("--law", None if law == "paper" else law),
-                                    ("--bandwidth", None if bandwidth == "auto" else bandwidth)) if v is not None]
+
+@dataclass(frozen=True)
+class _Reproduction:
+    """The settings of one ``reproduce`` run: :func:`reproduce_to_folder`'s parameters but its folder's and fleet."""
+
+    scenarios: list[int]
+    iterations: int
+    plant: str
+    seed: int
+    law: str
+    figures: bool
+    order: Sequence[str] | None
+    sensor_noise: float | None
+    bandwidth: object
+    workers: int | None
+    figure_workers: int | None
+    progress: Progress | None
+
+    def checked(self) -> _Reproduction:
+        """The settings with the law's name checked (:func:`ilcdob.design.laws.check_law`).
+
+        Raises
+        ------
+        SpecError
+            A bad law, plant, count, seed or number of workers, before any work.
+        """
+        from ilcdob.design.laws import check_law
+        from ilcdob.validation.figures import render_workers
+
+        law = check_law(self.law, "--law")
+        render_workers(self.figure_workers, name="figure_workers")  # a bad count fails before the run
+        if self.plant not in ("linear", "nonlinear", "rotorpy"):
+            raise SpecError(f"`plant`: got {self.plant!r}, expected 'linear', 'nonlinear' or 'rotorpy'")
+        if self.workers is not None and self.plant != "rotorpy":
+            raise SpecError(f"`--workers`: got {self.workers}, but only `--plant rotorpy` flies in parallel (plant "
+                            f"{self.plant!r})")
+        _check_reproduce_counts(self.iterations, len(self.scenarios), self.plant, self.seed, self.workers)
+        return replace(self, law=law)
+
+    def _noise(self) -> dict[str, float]:
+        return {} if self.sensor_noise is None else {"sensor_noise_std": self.sensor_noise}
+
+    def fly_vehicles(self, output: _Output, fleet: str | Path | None) -> Any:
+        """``--plant rotorpy``: identify and fly rotorpy's multirotors, write the folder; returns the result.
+
+        Parameters
+        ----------
+        output : _Output
+            The reproduction folder.
+        fleet : str or Path or None
+            Must be None: the vehicles are rotorpy's.
+
+        Raises
+        ------
+        SpecError
+            A fleet, order, law or band given: the run flies its own vehicles with every law.
+        """
+        given = [opt for opt, v in (("--fleet", fleet), ("--order", self.order),
+                                    ("--law", None if self.law == "paper" else self.law),
+                                    ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth))
+                 if v is not None]
         if given:
             raise SpecError(f"`--plant rotorpy` takes no {', '.join(given)}: it flies its own vehicles with every law "
                             "and the band chosen from each trial")
-        check_output_path(out, folder=True, overwrite=overwrite)
+        output.check()
+        from ilcdob.validation.figures import FigureRenderer
         from ilcdob.validation.vehicle_reproduction import VehicleSettings, reproduce_vehicles
 
-        noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
-        settings = VehicleSettings(dryden_seed=seed, workers=workers or 1, **noise)
-        res = reproduce_vehicles(list(scenarios), iterations, settings, progress=progress)
-        with FigureRenderer(figure_workers) as renderer:
-            content = _report(res, figures, renderer)
-        _write_folder(out, _provenance("reproduce", argv, None, res.law), content, overwrite=overwrite)
+        settings = VehicleSettings(dryden_seed=self.seed, workers=self.workers or 1, **self._noise())
+        res = reproduce_vehicles(self.scenarios, self.iterations, settings, progress=self.progress)
+        with FigureRenderer(self.figure_workers) as renderer:
+            content = _report(res, self.figures, renderer)
+        output.write(content, law=res.law)
         return res
-    if plant == "nonlinear" and law == "multi-source":
-        raise SpecError("`--law multi-source` with `--plant nonlinear`: the nonlinear vehicles learn one pair at a time "
-                        "(the airframe correction is per pair); use --law paper or exact-reference, or --plant linear")
-    from ilcdob.design.band import check_bandwidth
 
-    bandwidth = check_bandwidth(bandwidth, None)
-    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
-    flt, digest = fleet_and_hash(fleet)
-    check_bandwidth(bandwidth, flt.sample_time)  # a corner, against the fleet's Nyquist frequency
-    order = None if order is None else check_order(flt.names, order, "--order")
-    with FigureRenderer(figure_workers) as renderer:
-        if plant == "nonlinear":
-            from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
+    def fly_fleet(self, output: _Output, fleet: str | Path | None) -> Any:
+        """The linear or nonlinear plant: fly the fleet's scenarios, write the folder; returns the result.
 
-            noise = {} if sensor_noise is None else {"sensor_noise_std": sensor_noise}
-            settings = NonlinearSettings(seed=seed, bandwidth=bandwidth, **noise)
-            res = reproduce_nonlinear(flt if fleet else None, list(scenarios), iterations, settings,
-                                      progress=progress, order=order, law=law)
-        else:
-            from ilcdob.validation.reproduce import reproduce
+        Parameters
+        ----------
+        output : _Output
+            The reproduction folder.
+        fleet : str or Path or None
+            Fleet TOML (None: the built-in fleet).
 
-            def flown(sr: Any) -> None:  # its figures are rendered while the next scenario flies
-                renderer.submit(scenario_figures(sr, iterations, pending=True))
+        Raises
+        ------
+        SpecError
+            The multi-source law on the nonlinear plant, a bad band or order.
+        """
+        from ilcdob.design.band import check_bandwidth
+        from ilcdob.validation.figures import FigureRenderer
+        from ilcdob.validation.scenarios import check_order
 
-            if figures:  # the fleet's figures while the first scenario flies
-                renderer.submit(fleet_figures(flt, pending=True))
+        if self.plant == "nonlinear" and self.law == "multi-source":
+            raise SpecError("`--law multi-source` with `--plant nonlinear`: the nonlinear vehicles learn one pair at a "
+                            "time (the airframe correction is per pair); use --law paper or exact-reference, or "
+                            "--plant linear")
+        bandwidth = check_bandwidth(self.bandwidth, None)
+        flt, digest = output.check_and_load(fleet)
+        check_bandwidth(bandwidth, flt.sample_time)  # a corner, against the fleet's Nyquist frequency
+        order = None if self.order is None else check_order(flt.names, self.order, "--order")
+        with FigureRenderer(self.figure_workers) as renderer:
+            if self.plant == "nonlinear":
+                from ilcdob.validation.nonlinear import NonlinearSettings, reproduce_nonlinear
 
-            res = reproduce(flt, list(scenarios), iterations, law=law, progress=progress, order=order,
-                            sensor_noise_std=0.0 if sensor_noise is None else sensor_noise, seed=seed,
-                            bandwidth=bandwidth, on_scenario=flown if figures else None)
-        content = _report(res, figures, renderer)
-    _write_folder(out, _provenance("reproduce", argv, digest, res.law), content, overwrite=overwrite)
-    return res
+                settings = NonlinearSettings(seed=self.seed, bandwidth=bandwidth, **self._noise())
+                res = reproduce_nonlinear(flt if fleet else None, self.scenarios, self.iterations, settings,
+                                          progress=self.progress, order=order, law=self.law)
+            else:
+                res = self._fly_linear(flt, bandwidth, order, renderer)
+            content = _report(res, self.figures, renderer)
+        output.write(content, digest=digest, law=res.law)
+        return res
+
+    def _fly_linear(self, flt: Fleet, bandwidth: object, order: list[str] | None, renderer: Any) -> Any:
+        """The linear plant, each scenario's figures rendered while the next one flies."""
+        from ilcdob.validation.figures import fleet_figures, scenario_figures
+        from ilcdob.validation.reproduce import reproduce
+
+        def flown(sr: Any) -> None:  # its figures are rendered while the next scenario flies
+            renderer.submit(scenario_figures(sr, self.iterations, pending=True))
+
+        if self.figures:  # the fleet's figures while the first scenario flies
+            renderer.submit(fleet_figures(flt, pending=True))
+        return reproduce(flt, self.scenarios, self.iterations, law=self.law, progress=self.progress, order=order,
+                         sensor_noise_std=0.0 if self.sensor_noise is None else self.sensor_noise, seed=self.seed,
+                         bandwidth=bandwidth, on_scenario=flown if self.figures else None)
 
 
 def _report(res: Any, figures: bool, renderer: Any) -> dict[str, Any]:
@@ -492,10 +635,10 @@ def identify_fleet_to_folder(out: str | Path, *, fleet: str | Path | None = None
     """
     from ilcdob.identification.fleet_id import identify_fleet
 
-    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
-    flt, digest = fleet_and_hash(fleet)
+    output = _Output("identify-fleet", out, overwrite, argv)
+    flt, digest = output.check_and_load(fleet)
     result = identify_fleet(flt, seed=seed, progress=progress)
-    _write_folder(out, _provenance("identify-fleet", argv, digest), result.files(), overwrite=overwrite)
+    output.write(result.files(), digest=digest)
     return result
 
 
@@ -533,26 +676,14 @@ def _refuse_unused(method: str, given: dict[str, Any]) -> None:
                             f"{'that method' if len(users) == 1 else 'one of those methods'}")
 
 
-def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | Path | None = None,
-                     method: str = "closed-form", rho: float | None = None, samples: int | None = None,
-                     bound: float | None = None,
-                     n: int | None = None, law: str = "paper", trial: str | Path | None = None,
-                     c_prefix: str | None = None, c_float: bool = False, bandwidth: object = "auto",
-                     disturbance: str = "command", on_limit: str = "clip", overwrite: bool = False,
-                     argv: Sequence[str] | None = None, axis: str = "x",
-                     fir_unattainable: str | None = None, lifted: bool = False) -> tuple[Any, dict[str, Any]]:
-    """Design the learning filters of ``target`` from ``source`` and write the design folder.
+@dataclass(frozen=True, kw_only=True)
+class DesignOptions:
+    """How :func:`design_to_folder` designs a pair: the ``ilcdob design`` options but the pair, fleet and folder.
 
-    Parameters
+    Attributes
     ----------
-    out : str or Path
-        Output folder, written as a unit.
-    source, target : str
-        Systems j-1 (learned from) and j (learning).
-    fleet : str or Path or None
-        Fleet TOML (None: the built-in fleet).
     method : str
-        closed-form, fir, norm-optimal, robust or robust-set (:data:`ilcdob.design.pair.METHODS`).
+        closed-form, fir, norm-optimal, robust or robust-set (:data:`ilcdob.design.methods.METHODS`).
     rho : float, optional
         robust and robust-set only: the guaranteed improvement factor (default 0.95; robust-set:
         in (0, 1], on every plant of the Delta set).
@@ -580,10 +711,6 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     on_limit : {"clip", "refuse"}
         A learning signal beyond the target's acceleration limit: clip it (with a
         :class:`~ilcdob.design.limit.LearningLimitWarning`) or refuse it.
-    overwrite : bool
-        Replace a non-empty folder that ilcdob did not write.
-    argv : sequence of str, optional
-        Command line, recorded in ``manifest.json``.
     axis : {"x", "y", "z"}
         The axis designed (the fleet file's section; filters.json records it, and so the default C
         prefix of y and z designs ends in the axis, :func:`ilcdob.design.c_export.default_c_prefix`).
@@ -595,6 +722,53 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     lifted : bool
         norm-optimal only: also write the N x N lifted matrices L1, L2 to lifted.npz (about 8 N^2
         numbers of memory while they are built; the compact law, Riccati gains, is always written).
+    """
+
+    method: str = "closed-form"
+    rho: float | None = None
+    samples: int | None = None
+    bound: float | None = None
+    n: int | None = None
+    law: str = "paper"
+    trial: str | Path | None = None
+    c_prefix: str | None = None
+    c_float: bool = False
+    bandwidth: object = "auto"
+    disturbance: str = "command"
+    on_limit: str = "clip"
+    axis: str = "x"
+    fir_unattainable: str | None = None
+    lifted: bool = False
+
+
+def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | Path | None = None,
+                     method: str = "closed-form", rho: float | None = None, samples: int | None = None,
+                     bound: float | None = None, n: int | None = None, law: str = "paper",
+                     trial: str | Path | None = None, c_prefix: str | None = None, c_float: bool = False,
+                     bandwidth: object = "auto", disturbance: str = "command", on_limit: str = "clip",
+                     overwrite: bool = False, argv: Sequence[str] | None = None, axis: str = "x",
+                     fir_unattainable: str | None = None, lifted: bool = False) -> tuple[Any, dict[str, Any]]:
+    """Design the learning filters of ``target`` from ``source`` and write the design folder.
+
+    Written, as a unit: ``filters.json``, the C code (``filters.h``/``.c``, :func:`ilcdob.design.c_export.design_files`),
+    ``README.md``, ``bode.png`` and, as the design has them, ``lifted.npz``, ``learning_signal.csv`` (with
+    ``trial``) and ``reference_terms.csv`` (the exact-reference law).
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder, written as a unit.
+    source, target : str
+        Systems j-1 (learned from) and j (learning).
+    fleet : str or Path or None
+        Fleet TOML (None: the built-in fleet).
+    method, rho, samples, bound, n, law, trial, c_prefix, c_float, bandwidth, disturbance, on_limit, axis, \
+fir_unattainable, lifted
+        The design's options, each as :class:`DesignOptions` describes it (units, defaults, which methods use it).
+    overwrite : bool
+        Replace a non-empty folder that ilcdob did not write.
+    argv : sequence of str, optional
+        Command line, recorded in ``manifest.json``.
 
     Returns
     -------
@@ -605,126 +779,203 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
     ------
     SpecError
         Besides bad values: an option the method does not use (its ``cli_options``), refused
-        rather than ignored.
+        rather than ignored; all checked before the fleet or the trial is read.
+    SignalError
+        The trial misses samples, holds values beyond :data:`MAX_TRIAL_VALUE`, is sampled unlike the fleet,
+        or is too short for ``bandwidth="auto"``.
     ilcdob.design.fir.FIRDesignError
         ``fir_unattainable="refuse"`` and the margin cannot be met (the message names the bands).
     """
-    from ilcdob.design.c_export import check_c_prefix, design_files
+    from ilcdob.design.c_export import design_files
+
+    options = DesignOptions(method=method, rho=rho, samples=samples, bound=bound, n=n, law=law, trial=trial,
+                            c_prefix=c_prefix, c_float=c_float, bandwidth=bandwidth, disturbance=disturbance,
+                            on_limit=on_limit, axis=axis, fir_unattainable=fir_unattainable, lifted=lifted)
+    chosen, options = _checked_design_options(options)
+    output = _Output("design", out, overwrite, argv)
+    flt, digest = output.check_and_load(fleet, options.axis, {"--trial": options.trial})
+    data = _design_trial(options, chosen, flt)
+    design = _pair_design(flt, source, target, chosen, options, data)
+    filters = {**design.filters, "axis": options.axis}
+    others = _design_outputs(design, data, filters, flt, source, target, options)
+    files, written = design_files(filters, list(others), prefix=options.c_prefix, float_variant=options.c_float)
+    output.write(others, files, digest=digest, law=options.law)
+    return design, written
+
+
+def _checked_design_options(o: DesignOptions) -> tuple[Any, DesignOptions]:
+    """The method of ``o`` and ``o`` with its defaults filled in (rho 0.95, 8 samples, the law's name checked).
+
+    Raises
+    ------
+    SpecError
+        A bad value, an option the method does not use, or a law ``ilcdob design`` cannot make
+        (multi-source; exact-reference without a trial).
+    """
+    from ilcdob.design.c_export import check_c_prefix
     from ilcdob.design.delta import MAX_DELTA_SAMPLES
-    from ilcdob.design.figure import pair_bode_figure
-    from ilcdob.design.fir import UNATTAINABLE, FIROptions
+    from ilcdob.design.fir import UNATTAINABLE
     from ilcdob.design.laws import check_law
     from ilcdob.design.methods import method_named
-    from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
-    from ilcdob.design.robust import RobustOptions
-    from ilcdob.identification.loaders import load_csv
     from ilcdob.design.norm_optimal import check_norm_optimal_size
-    from ilcdob.signals import FlightData
 
-    if c_prefix is not None:
-        check_c_prefix(c_prefix)
-    chosen = method_named(method, "--method")
-    if n is not None:
-        check_norm_optimal_size(n, None, lifted and "--lifted" in chosen.cli_options, "--n", "--lifted")
-    if samples is not None and "--samples" in chosen.cli_options and samples > MAX_DELTA_SAMPLES:
-        raise SpecError(f"`--samples`: got {samples}, expected 1 to {MAX_DELTA_SAMPLES} Delta-set samples per system: "
-                        f"every sample is a closed loop that --method {method} builds, flies and constrains on")
-    _refuse_unused(method, {"--rho": rho, "--samples": samples, "--bound": bound, "--n": n, "--c-prefix": c_prefix,
-                            "--c-float": True if c_float else None, "--fir-unattainable": fir_unattainable,
-                            "--lifted": True if lifted else None})
-    if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
-        raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)} "
+    if o.c_prefix is not None:
+        check_c_prefix(o.c_prefix)
+    chosen = method_named(o.method, "--method")
+    if o.n is not None:
+        check_norm_optimal_size(o.n, None, o.lifted and "--lifted" in chosen.cli_options, "--n", "--lifted")
+    if o.samples is not None and "--samples" in chosen.cli_options and o.samples > MAX_DELTA_SAMPLES:
+        raise SpecError(f"`--samples`: got {o.samples}, expected 1 to {MAX_DELTA_SAMPLES} Delta-set samples per "
+                        f"system: every sample is a closed loop that --method {o.method} builds, flies and "
+                        "constrains on")
+    _refuse_unused(o.method, {"--rho": o.rho, "--samples": o.samples, "--bound": o.bound, "--n": o.n,
+                              "--c-prefix": o.c_prefix, "--c-float": True if o.c_float else None,
+                              "--fir-unattainable": o.fir_unattainable, "--lifted": True if o.lifted else None})
+    if o.fir_unattainable is not None and o.fir_unattainable not in UNATTAINABLE:
+        raise SpecError(f"`--fir-unattainable`: got {o.fir_unattainable!r}, expected one of {list(UNATTAINABLE)} "
                         "(no-harm: keep only the no-harm promise where the margin cannot be met, and warn; "
                         "refuse: stop with the bands named)")
-    chosen.check_options({"--rho": rho, "--trial": trial})
-    rho = 0.95 if rho is None else rho
-    samples = 8 if samples is None else samples
-    law = check_law(law, "--law")
+    chosen.check_options({"--rho": o.rho, "--trial": o.trial})
+    law = check_law(o.law, "--law")
     if law == "multi-source":
         raise SpecError("`--law multi-source`: it learns from the trials of every earlier system at once, and "
                         "`ilcdob design` makes one pair's filters from one trial of --from; use `ilcdob reproduce "
                         "--law multi-source` for a learning chain, or ilcdob.design.multi_source.multi_source_learning "
                         "with every trial")
-    if law == "exact-reference" and not trial:
+    if law == "exact-reference" and not o.trial:
         raise SpecError("`--law exact-reference`: the law needs the reference trajectory of the trial; give --trial "
                         "CSV with columns time (s), error (m), learning (m/s^2), reference (m) and, for controllers "
                         "with acceleration feed-forward, acceleration (m/s^2)")
-    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet, "--trial": trial})
-    flt, digest = fleet_and_hash(fleet, axis)
+    return chosen, replace(o, rho=0.95 if o.rho is None else o.rho, samples=8 if o.samples is None else o.samples,
+                           law=law)
+
+
+def _design_trial(o: DesignOptions, chosen: Any, flt: Fleet) -> Any:
+    """The source's trial of ``o`` (None: none given), loaded and checked against the fleet and ``o.n``.
+
+    Returns
+    -------
+    FlightData or None
+        Signals ``e`` (m), ``d_f`` (m/s^2) and, for the exact-reference law, ``r`` (m) and ``a``
+        (m/s^2, when the file has an acceleration column).
+
+    Raises
+    ------
+    SignalError
+        Missing samples, values beyond :data:`MAX_TRIAL_VALUE`, a sample time other than the fleet's.
+    SpecError
+        ``o.n`` other than the trial's length, or a trial too long for the norm-optimal law.
+    """
+    from ilcdob.design.norm_optimal import check_norm_optimal_size
+    from ilcdob.identification.loaders import load_csv
+
+    if not o.trial:
+        return None
     columns = {"e": "error", "d_f": "learning"}
-    if law == "exact-reference":
+    if o.law == "exact-reference":
         columns["r"] = "reference"
-        if "acceleration" in _csv_header(trial):
+        if "acceleration" in _csv_header(o.trial):
             columns["a"] = "acceleration"
-    data = load_csv(trial, columns) if trial else None
-    if data is not None:
-        _check_learning_trial(data, trial, options=False)
-        what = {"e": ("error", "m"), "d_f": ("learning signal", "m/s^2"), "r": ("reference", "m"),
-                "a": ("acceleration", "m/s^2")}
-        _check_trial_values(trial, {f"{what[key][0]} (column `{column}`)": (data[key], what[key][1])
-                                    for key, column in columns.items()})
-    if data is not None and abs(data.ts - flt.sample_time) > 1e-9:
-        raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
-    if data is not None and n is not None and n != len(data):
-        raise SpecError(f"`--n`: got {n}, but the trial {trial} has {len(data)} samples; the learning signal is "
+    data = load_csv(o.trial, columns)
+    _check_learning_trial(data, o.trial, options=False)
+    what = {"e": ("error", "m"), "d_f": ("learning signal", "m/s^2"), "r": ("reference", "m"),
+            "a": ("acceleration", "m/s^2")}
+    _check_trial_values(o.trial, {f"{what[key][0]} (column `{column}`)": (data[key], what[key][1])
+                                  for key, column in columns.items()})
+    if abs(data.ts - flt.sample_time) > 1e-9:
+        raise SignalError(f"{o.trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
+    if o.n is not None and o.n != len(data):
+        raise SpecError(f"`--n`: got {o.n}, but the trial {o.trial} has {len(data)} samples; the learning signal is "
                         f"computed for the whole trial, so its matrices must be {len(data)} long: omit --n or give "
                         f"--n {len(data)}")
-    if data is not None and n is None:
-        check_norm_optimal_size(len(data), None, lifted and "--lifted" in chosen.cli_options, "--trial", "--lifted")
-    n = n or (len(data) if data is not None else None)
+    if o.n is None:
+        check_norm_optimal_size(len(data), None, o.lifted and "--lifted" in chosen.cli_options, "--trial", "--lifted")
+    return data
+
+
+def _pair_design(flt: Fleet, source: str, target: str, chosen: Any, o: DesignOptions, data: Any) -> Any:
+    """The pair's design (:func:`ilcdob.design.pair.design_pair`), its learning band fixed to the trial's when
+    ``data`` is a trial and the band is chosen from one (``bandwidth="auto"``)."""
+    from ilcdob.design.fir import FIROptions
+    from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
+    from ilcdob.design.robust import RobustOptions
+
+    n = o.n or (len(data) if data is not None else None)
     deltas = None
     if chosen.needs_delta_sets:
-        deltas = fleet_delta_sets(flt, [source, target], k=samples, bound=bound)
+        deltas = fleet_delta_sets(flt, [source, target], k=o.samples, bound=o.bound)
     reference = {}
-    if law == "exact-reference":
+    if o.law == "exact-reference":
         reference = {"reference": data["r"], "acceleration": data["a"] if "a" in data.signals else None}
-    design = design_pair(flt, source, target, method, n=n, deltas=deltas,
-                         fir=FIROptions(unattainable=fir_unattainable) if fir_unattainable is not None else None,
-                         robust=RobustOptions(rho=rho) if "--rho" in chosen.cli_options else None,
-                         law=law, bandwidth=bandwidth, disturbance=disturbance, on_limit=on_limit,
-                         lifted=lifted, **reference)
+    design = design_pair(flt, source, target, o.method, n=n, deltas=deltas,
+                         fir=FIROptions(unattainable=o.fir_unattainable) if o.fir_unattainable is not None else None,
+                         robust=RobustOptions(rho=o.rho) if "--rho" in chosen.cli_options else None,
+                         law=o.law, bandwidth=o.bandwidth, disturbance=o.disturbance, on_limit=o.on_limit,
+                         lifted=o.lifted, **reference)
     if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
-        _check_noise_samples(trial, len(data))
+        _check_noise_samples(o.trial, len(data))
         e_in = design.reference.error_in(data["e"]) if design.reference is not None else data["e"]
         design = design_with_band(design, design.band_for(e_in, data["d_f"]))
-    filters = {**design.filters, "axis": axis}
+    return design
+
+
+def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet, source: str, target: str,
+                    o: DesignOptions) -> dict[str, Any]:
+    """The design folder's files besides filters.json, C code and README.md: lifted.npz, learning_signal.csv,
+    reference_terms.csv and bode.png, as the design has them. With a trial (``data``), also sets
+    ``filters["trial"]``, the learning signal's summary (:func:`_learn_from_trial`)."""
+    from ilcdob.design.figure import pair_bode_figure
+    from ilcdob.signals import FlightData
+
     others: dict[str, Any] = {}
     arrays = design.lifted
     if data is not None:
-        socp: list[Any] = []  # the robust SOCP's result on the (band-filtered) trial
-
-        def robust_learn(e: np.ndarray, df: np.ndarray) -> np.ndarray:
-            socp.append(design.robust.design(e, df))
-            return socp[-1].d_f
-
-        signal = design.learning(data["e"], data["d_f"], learn=robust_learn if design.robust is not None else None)
-        d_f = signal.d_f
-        filters["trial"] = {"file": str(trial), "samples": len(data),
-                            "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))),
-                                                "rms_m_s2": float(np.sqrt(np.mean(d_f ** 2)))}}
-        if signal.limit is not None:
-            filters["trial"]["limit"] = signal.limit.to_dict()
-        if socp:
-            res = socp[-1]
-            filters["trial"].update({"worst_ratio": res.worst_ratio, "ratios": res.ratios.tolist(), "rho": res.rho,
-                                     "status": res.status, "solve_time_s": res.solve_time,
-                                     "horizon_samples": int(res.d_f.size)})
-            arrays = {"d_f": d_f, "ratios": res.ratios, "predicted_errors": res.errors}
+        filters["trial"], d_f, socp_arrays = _learn_from_trial(design, data, o.trial)
+        arrays = socp_arrays if socp_arrays is not None else arrays
     if arrays is not None:
         others["lifted.npz"] = lambda path, a=arrays: np.savez(path, **a)
     if data is not None:
         others["learning_signal.csv"] = FlightData(
             data.t, {"learning": d_f}, {"learning": "m/s^2"},
-            source=f"learning signal of {target} from {trial}").to_csv
+            source=f"learning signal of {target} from {o.trial}").to_csv
     if design.reference is not None:
         others["reference_terms.csv"] = FlightData(
             data.t, {"e_ref_source": design.reference.source_error, "correction": design.reference.correction},
             {"e_ref_source": "m", "correction": "m/s^2"},
-            source=f"reference terms of {source} -> {target} for {trial}").to_csv
-    others["bode.png"] = pair_bode_figure(flt, source, target, design.band, method)
-    files, written = design_files(filters, list(others), prefix=c_prefix, float_variant=c_float)
-    _write_folder(out, _provenance("design", argv, digest, law), others, files, overwrite=overwrite)
-    return design, written
+            source=f"reference terms of {source} -> {target} for {o.trial}").to_csv
+    others["bode.png"] = pair_bode_figure(flt, source, target, design.band, o.method)
+    return others
+
+
+def _learn_from_trial(design: Any, data: Any, trial: str | Path) -> tuple[dict[str, Any], np.ndarray, Any]:
+    """The learning signal of ``design`` on the source's trial.
+
+    Returns
+    -------
+    tuple of (dict, numpy.ndarray, dict or None)
+        The ``trial`` entry of filters.json (file, samples, the signal's peak and RMS in m/s^2, its
+        limit report, the robust SOCP's result), the signal (m/s^2) and, for the robust method, the
+        arrays of lifted.npz (``d_f``, ``ratios``, ``predicted_errors``; None otherwise).
+    """
+    socp: list[Any] = []  # the robust SOCP's result on the (band-filtered) trial
+
+    def robust_learn(e: np.ndarray, df: np.ndarray) -> np.ndarray:
+        socp.append(design.robust.design(e, df))
+        return socp[-1].d_f
+
+    signal = design.learning(data["e"], data["d_f"], learn=robust_learn if design.robust is not None else None)
+    d_f = signal.d_f
+    info: dict[str, Any] = {"file": str(trial), "samples": len(data),
+                            "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))),
+                                                "rms_m_s2": float(np.sqrt(np.mean(d_f ** 2)))}}
+    if signal.limit is not None:
+        info["limit"] = signal.limit.to_dict()
+    if not socp:
+        return info, d_f, None
+    res = socp[-1]
+    info.update({"worst_ratio": res.worst_ratio, "ratios": res.ratios.tolist(), "rho": res.rho, "status": res.status,
+                 "solve_time_s": res.solve_time, "horizon_samples": int(res.d_f.size)})
+    return info, d_f, {"d_f": d_f, "ratios": res.ratios, "predicted_errors": res.errors}
 
 
 #: Largest magnitude of a trial's error (m) or learning signal (m/s^2) accepted: a million km
@@ -927,58 +1178,132 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     (numpy.ndarray, dict)
         The learning signal (m/s^2) and the ``learning.json`` content.
     """
-    from ilcdob.design.c_export import default_c_prefix, signal_header
-    from ilcdob.design.law import apply_learning
-    from ilcdob.design.limit import enforce_limit
-    from ilcdob.design.methods import DEFAULT_METHOD
-    from ilcdob.signals import FlightData
-    from ilcdob.specs import LimitSpec
-
-    check_output_path(out, folder=True, overwrite=overwrite, inputs={"trial": trial, "--fleet": fleet,
-                                                                     "--design": design})
+    output = _Output("learn", out, overwrite, argv)
+    output.check({"trial": trial, "--fleet": fleet, "--design": design})
     data, e, df_prev = columns.load(trial)
     digest = None
     if design is not None:
-        ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != DEFAULT_METHOD),
-                                            ("--bandwidth", bandwidth != "auto"),
-                                            ("--fir-unattainable", fir_unattainable is not None)) if given]
-        if ignored:
-            raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
-                            "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
-        from ilcdob.design.c_export import check_filters
-
-        path = Path(design) / "filters.json"
-        manifest = verify_manifest(design)  # an edited or added file is refused, naming it
-        filters = check_filters(read_json(path, "filters.json of --design", error=SpecError,
-                                          hint="give a folder written by `ilcdob design`"), str(path))
-        for name, given, key in (("--from", source, "from"), ("--to", target, "to")):
-            if given is not None and given != filters.get(key):
-                raise SpecError(f"`{name}`: got {given!r}, but {path} was designed {filters.get('from')!r} -> "
-                                f"{filters.get('to')!r}")
-        if axis is not None and axis != filters.get("axis", "x"):
-            raise SpecError(f"`--axis`: got {axis!r}, but {path} was designed for axis {filters.get('axis', 'x')!r}")
-        source, target = filters.get("from"), filters.get("to")
-        origin = f"filters.json of {Path(design).name}" + ("" if manifest else " (no manifest: provenance unknown)")
+        _refuse_with_design(fleet=fleet, method=method, bandwidth=bandwidth, fir_unattainable=fir_unattainable)
+        filters, source, target, origin = _filters_of_folder(design, source, target, axis)
     else:
-        if source is None or target is None:
-            raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
-                            "(or give --design FOLDER)")
-        from ilcdob.design.fir import UNATTAINABLE, FIROptions
-        from ilcdob.design.pair import design_pair, design_with_band
+        filters, origin, digest = _filters_designed_here(
+            trial, data, e, df_prev, source=source, target=target, fleet=fleet, axis=axis, method=method,
+            bandwidth=bandwidth, on_limit=on_limit, fir_unattainable=fir_unattainable)
+    d_f, report = _learning_signal(filters, origin, trial, data, e, df_prev, on_limit,
+                                   f"learning signal of {target} from {source}")
+    files, summary = _learning_files(filters, origin, source, target, trial, columns, data, d_f, report)
+    output.write(files, digest=digest, law="paper")
+    return d_f, summary
 
-        _refuse_unused(method, {"--fir-unattainable": fir_unattainable})
-        if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
-            raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)}")
-        flt, digest = fleet_and_hash(fleet, axis or "x")
-        if abs(data.ts - flt.sample_time) > 1e-9:
-            raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
-        made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit,
-                           fir=None if fir_unattainable is None else FIROptions(unattainable=fir_unattainable))
-        if made.choose is not None:
-            _check_noise_samples(trial, e.size)
-            made = design_with_band(made, made.band_for(e, df_prev))
-        filters = {**made.filters, "axis": axis or "x"}
-        origin = f"designed here ({method})"
+
+def _refuse_with_design(*, fleet: str | Path | None, method: str, bandwidth: object,
+                        fir_unattainable: str | None) -> None:
+    """Refuse ``learn --design`` with the options that design here (its filters.json fixes filters and band)."""
+    from ilcdob.design.methods import DEFAULT_METHOD
+
+    ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != DEFAULT_METHOD),
+                                        ("--bandwidth", bandwidth != "auto"),
+                                        ("--fir-unattainable", fir_unattainable is not None)) if given]
+    if ignored:
+        raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
+                        "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
+
+
+def _filters_of_folder(design: str | Path, source: str | None, target: str | None,
+                       axis: str | None) -> tuple[dict[str, Any], Any, Any, str]:
+    """The filters of a design folder, checked against its manifest and the pair and axis asked for.
+
+    Returns
+    -------
+    tuple of (dict, str, str, str)
+        Its ``filters.json``, the systems j-1 and j it was designed for, and where the filters come from
+        (for learning.json: the folder's name, "provenance unknown" without a manifest).
+
+    Raises
+    ------
+    SpecError
+        ``filters.json`` is missing or malformed, or designed for another pair or axis.
+    ManifestError
+        A file of the folder was edited, added or is missing.
+    """
+    from ilcdob.design.c_export import check_filters
+
+    path = Path(design) / "filters.json"
+    manifest = verify_manifest(design)  # an edited or added file is refused, naming it
+    filters = check_filters(read_json(path, "filters.json of --design", error=SpecError,
+                                      hint="give a folder written by `ilcdob design`"), str(path))
+    for name, given, key in (("--from", source, "from"), ("--to", target, "to")):
+        if given is not None and given != filters.get(key):
+            raise SpecError(f"`{name}`: got {given!r}, but {path} was designed {filters.get('from')!r} -> "
+                            f"{filters.get('to')!r}")
+    if axis is not None and axis != filters.get("axis", "x"):
+        raise SpecError(f"`--axis`: got {axis!r}, but {path} was designed for axis {filters.get('axis', 'x')!r}")
+    origin = f"filters.json of {Path(design).name}" + ("" if manifest else " (no manifest: provenance unknown)")
+    return filters, filters.get("from"), filters.get("to"), origin
+
+
+def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev: np.ndarray, *, source: str | None,
+                           target: str | None, fleet: str | Path | None, axis: str | None, method: str,
+                           bandwidth: object, on_limit: str,
+                           fir_unattainable: str | None) -> tuple[dict[str, Any], str, str]:
+    """The pair's filters designed from the fleet, the learning band fixed to the trial (``e``, m; ``df_prev``, m/s^2).
+
+    Returns
+    -------
+    tuple of (dict, str, str)
+        The filters (``filters.json`` content), where they come from (for learning.json) and the
+        fleet file's SHA-256.
+
+    Raises
+    ------
+    SpecError
+        No pair named, a method other than closed-form or fir options, a bad ``fir_unattainable``.
+    SignalError
+        The trial is sampled unlike the fleet, or too short for ``bandwidth="auto"``.
+    """
+    if source is None or target is None:
+        raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
+                        "(or give --design FOLDER)")
+    from ilcdob.design.fir import UNATTAINABLE, FIROptions
+    from ilcdob.design.pair import design_pair, design_with_band
+
+    _refuse_unused(method, {"--fir-unattainable": fir_unattainable})
+    if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
+        raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)}")
+    flt, digest = fleet_and_hash(fleet, axis or "x")
+    if abs(data.ts - flt.sample_time) > 1e-9:
+        raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
+    made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit,
+                       fir=None if fir_unattainable is None else FIROptions(unattainable=fir_unattainable))
+    if made.choose is not None:
+        _check_noise_samples(trial, e.size)
+        made = design_with_band(made, made.band_for(e, df_prev))
+    return {**made.filters, "axis": axis or "x"}, f"designed here ({method})", digest
+
+
+def _learning_signal(filters: dict[str, Any], origin: str, trial: str | Path, data: Any, e: np.ndarray,
+                     df_prev: np.ndarray, on_limit: str, what: str) -> tuple[np.ndarray, Any]:
+    """The paper's law run from ``filters`` on the trial, as the C function ``<prefix>learn`` runs it, then
+    the target's acceleration limit (``what``: the signal, for the limit's message).
+
+    Returns
+    -------
+    tuple of (numpy.ndarray, LimitReport or None)
+        The learning signal (m/s^2) and what the limit did to it.
+
+    Raises
+    ------
+    SpecError
+        Filters of another law, or without L1/L2 filters or robust-set law maps.
+    SignalError
+        The trial is sampled unlike the filters.
+    LearningLimitError
+        ``on_limit="refuse"`` and the signal exceeds the limit.
+    """
+    from ilcdob.design.law import apply_learning
+    from ilcdob.design.limit import enforce_limit
+    from ilcdob.specs import LimitSpec
+
     if filters.get("law", "paper") != "paper" or not ("L1" in filters and "L2" in filters or "law_maps" in filters):
         raise SpecError(f"the filters ({origin}): method {filters.get('method')!r}, law {filters.get('law')!r}; "
                         "`ilcdob learn` computes the paper's law from L1/L2 filters (closed-form or fir designs) "
@@ -988,12 +1313,20 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         raise SignalError(f"{trial}: sample time {data.ts} s differs from the filters' {ts} s")
     d_f = apply_learning(filters, e, df_prev)
     limit = (filters.get("limit") or {}).get("acceleration_m_s2")
-    d_f, report = enforce_limit(d_f, None if limit is None else LimitSpec(acceleration=float(limit)), on_limit,
-                                f"learning signal of {target} from {source}")
+    return enforce_limit(d_f, None if limit is None else LimitSpec(acceleration=float(limit)), on_limit, what)
+
+
+def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: Any, trial: str | Path,
+                    columns: TrialColumns, data: Any, d_f: np.ndarray,
+                    report: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The learn folder's content (learning_signal.csv/.bin/.h, learning.json) and the learning.json content."""
+    from ilcdob.design.c_export import default_c_prefix, signal_header
+    from ilcdob.signals import FlightData
+
     n = d_f.size
+    ts = float(filters["sample_time"])
     axis = filters.get("axis", "x")
     prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target), axis)
-    header = signal_header(prefix, d_f, ts)
     summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"),
                "law": "paper",
                "trial": {"file": Path(trial).name, "samples": n, "sample_time_s": ts,
@@ -1012,10 +1345,9 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                "units": {"learning": "m/s^2", "time": "s"}}
     files = {"learning_signal.csv": FlightData(data.t, {"learning": d_f}, {"learning": "m/s^2"},
                                                source=f"learning signal of {target} from {Path(trial).name}").to_csv,
-             "learning_signal.bin": d_f.astype("<f8").tobytes(), "learning_signal.h": header,
+             "learning_signal.bin": d_f.astype("<f8").tobytes(), "learning_signal.h": signal_header(prefix, d_f, ts),
              "learning.json": summary}
-    _write_folder(out, _provenance("learn", argv, digest, "paper"), files, overwrite=overwrite)
-    return d_f, summary
+    return files, summary
 
 
 def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, order: Sequence[str] | None = None,
@@ -1110,13 +1442,11 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
     from ilcdob.design.pair import DEFAULT_METHODS
     from ilcdob.validation.compare import compare_designs
 
-    if out is not None:
-        check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
-    flt, digest = fleet_and_hash(fleet)
+    output = _Output("compare", out, overwrite, argv)
+    flt, digest = output.check_and_load(fleet)  # no folder (out None): the fleet alone
     cmp = compare_designs(flt, scenario, list(methods or DEFAULT_METHODS), options, progress=progress)
     if out is not None:
-        _write_folder(out, _provenance("compare", argv, digest, options.law),
-                      cmp.files(rho=options.robust.rho if options.robust else None), overwrite=overwrite)
+        output.write(cmp.files(rho=options.robust.rho if options.robust else None), digest=digest, law=options.law)
     return cmp
 
 
@@ -1143,10 +1473,10 @@ def extensions_to_folder(out: str | Path, *, fleet: str | Path | None = None, sc
     """
     from ilcdob.validation.extensions import extensions_study
 
-    check_output_path(out, folder=True, overwrite=overwrite, inputs={"--fleet": fleet})
-    flt, digest = fleet_and_hash(fleet)
+    output = _Output("extensions", out, overwrite, argv)
+    flt, digest = output.check_and_load(fleet)
     result = extensions_study(flt, list(scenarios))
-    _write_folder(out, _provenance("extensions", argv, digest), result.files(out=str(out)), overwrite=overwrite)
+    output.write(result.files(out=str(out)), digest=digest)
     return result
 
 
@@ -1221,7 +1551,8 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     """
     from ilcdob.validation.campaign import SAMPLES_FILE, STORE_FILES, run_campaign
 
-    out = check_output_path(out, folder=True, overwrite=overwrite, resumable=STORE_FILES, inputs={"--fleet": fleet})
+    output = _Output("campaign", out, overwrite, argv)
+    out = output.check({"--fleet": fleet}, resumable=STORE_FILES)  # a link resolved: the store is appended there
     flt, digest = fleet_and_hash(fleet)
     before = _StoreState.of(out, STORE_FILES)
     try:
@@ -1231,8 +1562,7 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     except BaseException:
         before.restore(SAMPLES_FILE)
         raise
-    _write_folder(out, _provenance("campaign", argv, digest, options.law), result.files(), overwrite=overwrite,
-                  keep=STORE_FILES)
+    replace(output, out=out).write(result.files(), digest=digest, law=options.law, keep=STORE_FILES)
     return result
 
 

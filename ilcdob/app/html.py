@@ -1205,22 +1205,30 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     if not isinstance(options, ReportOptions):
         raise ReportError(f"`options`: got {type(options).__name__}, expected a ReportOptions")
     inputs = discover_inputs(list(dirs))
-    provenance = list(inputs.provenance)
     # every input is read and checked before anything is rendered
     fleet_tables = [_read_checked(r.folder / "fleet.json", _check_fleet_table)
                     if (r.folder / "fleet.json").is_file() else None for r in inputs.results]
     theorems = [_read_theorem(r.folder) for r in inputs.results]
-
-    def plant_name(res: JsonInput) -> str:
-        return _PLANT_TITLE[res.data["plant"]].split(" (")[0].lower()
-
-    sections: list[_Section] = []
     reproduce_cmd = f"results.json from `{KNOWN_FILES['results.json']}`"
+    sections = [_fleet_section(inputs.results, fleet_tables, reproduce_cmd),
+                _bode_section(inputs.results, reproduce_cmd),
+                *(_plant_section_of(inputs.results, plant) for plant in PLANTS),
+                _theorem_section(inputs.results, theorems, reproduce_cmd),
+                _compare_section(inputs.compare), _campaign_section(inputs.campaign)]
+    return _document(sections, list(inputs.provenance), options.title)
 
-    # fleet and identified models
+
+def _results_heading(res: JsonInput) -> str:
+    """``<h3>`` of one results.json's part of a section: its plant and folder."""
+    plant = _PLANT_TITLE[res.data["plant"]].split(" (")[0].lower()
+    return f"<h3>{html_text(plant.capitalize())}: {html_text(str(res.folder))}</h3>"
+
+
+def _fleet_section(results: list[JsonInput], tables: list[Any], expected: str) -> _Section:
+    """Fleet and identified models: each results folder's fleet.json table and identified-model figure."""
     body, srcs = [], []
-    for res, table in zip(inputs.results, fleet_tables):
-        body.append(f"<h3>{html_text(plant_name(res).capitalize())}: {html_text(str(res.folder))}</h3>")
+    for res, table in zip(results, tables):
+        body.append(_results_heading(res))
         if table is not None:
             body.append(_fleet_html(table))
             srcs.append(str(res.folder / "fleet.json"))
@@ -1230,51 +1238,64 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
             body.append(_file_figure(res.folder, "identified_models.png",
                                      "Identified plant models: magnitude (dB) against frequency (rad/s) with "
                                      "their 3-sigma multiplicative uncertainty band, and that bound |Delta(jw)|"))
-    sections.append(_Section("fleet", "Fleet and identified models", "\n".join(body), srcs, reproduce_cmd))
+    return _Section("fleet", "Fleet and identified models", "\n".join(body), srcs, expected)
 
-    # Bode figures
+
+def _bode_section(results: list[JsonInput], expected: str) -> _Section:
+    """The paper's Bode figures of each results folder."""
     body, srcs = [], []
-    for res in inputs.results:
-        body.append(f"<h3>{html_text(plant_name(res).capitalize())}: {html_text(str(res.folder))}</h3>")
+    for res in results:
+        body.append(_results_heading(res))
         for name, caption in _BODE_FIGURES.items():
             body.append(_file_figure(res.folder, name, caption))
         if any((res.folder / name).is_file() for name in _BODE_FIGURES):
             srcs.append(str(res.path))
-    sections.append(_Section("bode", "Bode figures of the paper", "\n".join(body), srcs, reproduce_cmd))
+    return _Section("bode", "Bode figures of the paper", "\n".join(body), srcs, expected)
 
-    # one section per plant
-    for plant in PLANTS:
-        mine = [r for r in inputs.results if r.data["plant"] == plant]
-        sections.append(_Section(plant, _PLANT_TITLE[plant], "\n".join(_plant_section(r) for r in mine),
-                                 [str(r.path) for r in mine],
-                                 f"results.json with \"plant\": \"{plant}\" from `ilcdob reproduce"
-                                 + ("" if plant == "linear" else f" --plant {plant}") + " --out DIR`"))
 
-    # Theorem check
+def _plant_section_of(results: list[JsonInput], plant: str) -> _Section:
+    """The section of one plant: every results.json flown on it."""
+    mine = [r for r in results if r.data["plant"] == plant]
+    return _Section(plant, _PLANT_TITLE[plant], "\n".join(_plant_section(r) for r in mine), [str(r.path) for r in mine],
+                    f"results.json with \"plant\": \"{plant}\" from `ilcdob reproduce"
+                    + ("" if plant == "linear" else f" --plant {plant}") + " --out DIR`")
+
+
+def _theorem_section(results: list[JsonInput], theorems: list[Any], expected: str) -> _Section:
+    """The Theorem check of each results folder (theorem.json)."""
     body, srcs = [], []
-    for res, theorem in zip(inputs.results, theorems):
-        body.append(f"<h3>{html_text(plant_name(res).capitalize())}: {html_text(str(res.folder))}</h3>")
+    for res, theorem in zip(results, theorems):
+        body.append(_results_heading(res))
         body.append(_theorem_html(res.folder, theorem))
         if theorem is not None and "missing" not in theorem:
             srcs.append(str(res.folder / "theorem.json"))
-    sections.append(_Section("theorem", "Theorem check", "\n".join(body), srcs,
-                             f"{reproduce_cmd}, naming a fleet with identified models"))
+    return _Section("theorem", "Theorem check", "\n".join(body), srcs,
+                    f"{expected}, naming a fleet with identified models")
 
-    sections.append(_Section(
+
+def _compare_section(compare: list[JsonInput]) -> _Section:
+    """The design comparison: every compare.json."""
+    return _Section(
         "compare", "Design comparison",
         "<p>Each design of <code>ilcdob compare</code> flown for one pair, nominal and over the Delta set; "
         "ratio = ||e_j|| / ||e'_j|| (&lt; 1: learning helped). A design that could not be made is listed with "
-        "its reason.</p>\n" + "\n".join(_compare_html(j) for j in inputs.compare) if inputs.compare else "",
-        [str(j.path) for j in inputs.compare], f"compare.json from `{KNOWN_FILES['compare.json']}`"))
-    sections.append(_Section(
+        "its reason.</p>\n" + "\n".join(_compare_html(j) for j in compare) if compare else "",
+        [str(j.path) for j in compare], f"compare.json from `{KNOWN_FILES['compare.json']}`")
+
+
+def _campaign_section(campaign: list[JsonInput]) -> _Section:
+    """The campaign statistics: every campaign.json."""
+    return _Section(
         "campaign", "Campaign statistics",
         "<p>Statistics per method of the improvement ratio ||e_j|| / ||e'_j|| over the sampled plants "
         "(&lt; 1: learning improved on what system j would have had without it).</p>\n"
-        + "\n".join(_campaign_html(j) for j in inputs.campaign)
-        if inputs.campaign else "",
-        [str(j.path) for j in inputs.campaign], f"campaign.json from `{KNOWN_FILES['campaign.json']}`"))
+        + "\n".join(_campaign_html(j) for j in campaign)
+        if campaign else "",
+        [str(j.path) for j in campaign], f"campaign.json from `{KNOWN_FILES['campaign.json']}`")
 
-    # assemble: a section without any input (nothing run for it) is left out and named once
+
+def _document(sections: list[_Section], provenance: list[str], title: str) -> str:
+    """The HTML document: the sections with an input, a table of them, and the ones left out named once."""
     shown = [s for s in sections if s.sources or s.body.strip()]
     left_out = [s for s in sections if s not in shown]
     status_rows = []
@@ -1289,8 +1310,8 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
                     + "; ".join(_left_out(s) for s in left_out) + ".</p>") if left_out else ""
     out = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
            '<meta name="viewport" content="width=device-width, initial-scale=1">',
-           f"<title>{html_text(options.title)}</title><style>{_CSS}</style></head><body>",
-           f"<h1>{html_text(options.title)}</h1>",
+           f"<title>{html_text(title)}</title><style>{_CSS}</style></head><body>",
+           f"<h1>{html_text(title)}</h1>",
            "<p>Modi, Chen, Liang, Zheng (2024), <em>Improving Disturbance Estimation and Suppression via "
            "Learning among Systems with Mismatched Dynamics</em>: quadrotors with PID + disturbance observer "
            "learn a repetitive task in wind from each other through the learning filters L1, L2. Generated by "

@@ -493,35 +493,54 @@ def check_output_path(out: str | Path, *, folder: bool, overwrite: bool = False,
     except OSError:
         st = None  # missing (or a parent that is a file: reported below)
     if st is not None:
-        if stat.S_ISDIR(st.st_mode) and not folder:
-            raise OutputError(f"`{option}` ({given}): is a folder; expected a file name")
-        if stat.S_ISREG(st.st_mode) and folder:
-            raise OutputError(f"`{option}` ({given}): is a file; expected a folder (a new or an earlier output folder)")
-        if not stat.S_ISDIR(st.st_mode) and not stat.S_ISREG(st.st_mode):
-            raise OutputError(f"`{option}` ({given}): is {file_kind(st.st_mode)}; expected "
-                              f"{'a folder' if folder else 'a regular file'}: results are written to regular files "
-                              f"and folders only, never over a device, FIFO or socket. Give another `{option}`")
-        if os.path.ismount(out):
-            raise OutputError(f"`{option}` ({given}): is a mount point (the root of a file system), which an output "
-                              f"cannot replace; give a {'folder' if folder else 'file'} inside it, e.g. "
-                              f"`{option} {Path(given, 'results')}`")
+        _check_existing(out, given, st, option, folder)
     if folder:
-        try:
-            cwd = Path.cwd().resolve()
-        except OSError:
-            cwd = None
-        if cwd is not None and _inside(cwd, out.resolve()):
-            raise OutputError(f"`{option}` ({given}): is the working folder (or holds it); an output folder is "
-                              "replaced as a whole, which would pull it from under the shell. Give a new folder, "
-                              f"e.g. `{option} results`")
-        try:
-            home = Path.home().resolve()
-        except (OSError, RuntimeError):
-            home = None
-        if home is not None and home != Path(home.anchor) and _inside(home, out.resolve()):
-            raise OutputError(f"`{option}` ({given}): is the home folder (or holds it), which an output folder never "
-                              f"replaces, even with --overwrite. Give a new folder, e.g. `{option} {home / 'results'}`")
+        _check_not_cwd_or_home(out, given, option)
     _check_inputs(out, option, folder, inputs)
+    _check_parent(out, given, option)
+    if folder and st is not None:
+        _check_replaceable(out, option, overwrite, resumable)
+    return out
+
+
+def _check_existing(out: Path, given: Path, st: os.stat_result, option: str, folder: bool) -> None:
+    """Refuse an existing ``out`` of the wrong kind (a folder for a file and the reverse, a device, FIFO or
+    socket) or a mount point (``given``: the path as given, for the message; ``st``: its lstat)."""
+    if stat.S_ISDIR(st.st_mode) and not folder:
+        raise OutputError(f"`{option}` ({given}): is a folder; expected a file name")
+    if stat.S_ISREG(st.st_mode) and folder:
+        raise OutputError(f"`{option}` ({given}): is a file; expected a folder (a new or an earlier output folder)")
+    if not stat.S_ISDIR(st.st_mode) and not stat.S_ISREG(st.st_mode):
+        raise OutputError(f"`{option}` ({given}): is {file_kind(st.st_mode)}; expected "
+                          f"{'a folder' if folder else 'a regular file'}: results are written to regular files "
+                          f"and folders only, never over a device, FIFO or socket. Give another `{option}`")
+    if os.path.ismount(out):
+        raise OutputError(f"`{option}` ({given}): is a mount point (the root of a file system), which an output "
+                          f"cannot replace; give a {'folder' if folder else 'file'} inside it, e.g. "
+                          f"`{option} {Path(given, 'results')}`")
+
+
+def _check_not_cwd_or_home(out: Path, given: Path, option: str) -> None:
+    """Refuse an output folder that is (or holds) the working folder or the home folder."""
+    try:
+        cwd = Path.cwd().resolve()
+    except OSError:
+        cwd = None
+    if cwd is not None and _inside(cwd, out.resolve()):
+        raise OutputError(f"`{option}` ({given}): is the working folder (or holds it); an output folder is "
+                          "replaced as a whole, which would pull it from under the shell. Give a new folder, "
+                          f"e.g. `{option} results`")
+    try:
+        home = Path.home().resolve()
+    except (OSError, RuntimeError):
+        home = None
+    if home is not None and home != Path(home.anchor) and _inside(home, out.resolve()):
+        raise OutputError(f"`{option}` ({given}): is the home folder (or holds it), which an output folder never "
+                          f"replaces, even with --overwrite. Give a new folder, e.g. `{option} {home / 'results'}`")
+
+
+def _check_parent(out: Path, given: Path, option: str) -> None:
+    """Refuse an output whose parent folder cannot be created (a file on the way) or written."""
     parent = out.absolute().parent
     existing = parent
     while not existing.exists():
@@ -530,9 +549,6 @@ def check_output_path(out: str | Path, *, folder: bool, overwrite: bool = False,
         raise OutputError(f"`{option}` ({given}): {existing} is a file, so the folder {parent} cannot be created")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise OutputError(f"`{option}` ({given}): the folder {existing} is not writable; choose another location")
-    if folder and st is not None:
-        _check_replaceable(out, option, overwrite, resumable)
-    return out
 
 
 def _staging_prefix(out: Path) -> str:
