@@ -174,6 +174,11 @@ class _Band(Stage):
     def __init__(self, spec: BandSpec):
         self.spec = spec
 
+    @classmethod
+    def from_dict(cls, filters: dict[str, Any], ctx: LawContext) -> "_Band | None":  # noqa: D102
+        spec = band_spec(filters, ctx)
+        return None if spec is None else cls(spec)
+
     def to_dict(self) -> dict[str, Any]:  # noqa: D102 - Stage.to_dict
         return {"band": self.spec.entry}
 
@@ -185,11 +190,6 @@ class BandIn(_Band):
 
     kind = "band in"
     place = 30
-
-    @classmethod
-    def from_dict(cls, filters: dict[str, Any], ctx: LawContext) -> "BandIn | None":  # noqa: D102
-        spec = band_spec(filters, ctx)
-        return None if spec is None else cls(spec)
 
     def apply(self, x: Signals, n: int, notes: dict[str, Any]) -> Signals:  # noqa: D102 - Stage.apply
         s = self.spec
@@ -228,11 +228,6 @@ class BandOut(_Band):
 
     kind = "band out"
     place = 60
-
-    @classmethod
-    def from_dict(cls, filters: dict[str, Any], ctx: LawContext) -> "BandOut | None":  # noqa: D102
-        spec = band_spec(filters, ctx)
-        return None if spec is None else cls(spec)
 
     def apply(self, x: Signals, n: int, notes: dict[str, Any]) -> Signals:  # noqa: D102 - Stage.apply
         s = self.spec
