@@ -73,7 +73,7 @@ from .closed_form import LearningFilters, inverse_gd_filter
 from .noncausal import ZPKFilter, lookahead
 from .trial_edges import trend_weights
 
-__all__ = ["LinearMap", "causal_map", "sos_map", "zpk_map", "fir_map",
+__all__ = ["LinearMap", "identity_map", "causal_map", "sos_map", "zpk_map", "fir_map",
            "trend_map", "odd_start_map", "extension_map", "crop_map", "fold_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio",
            "finite_horizon_ratio", "PairTrials"]
 
@@ -137,6 +137,19 @@ class LinearMap:
 
 def _rev(x: np.ndarray) -> np.ndarray:
     return x[::-1]
+
+
+def identity_map(n: int, name: str = "I") -> LinearMap:
+    """The identity over ``n`` samples.
+
+    Parameters
+    ----------
+    n : int
+        Samples.
+    name : str
+        Its name.
+    """
+    return LinearMap(n, n, lambda v: v, lambda v: v, name)
 
 
 def causal_map(sys: ct.StateSpace | np.ndarray, n: int, name: str = "G") -> LinearMap:

@@ -33,7 +33,7 @@ from ilcdob.loop import LoopSystem
 from .closed_form import LearningFilters, inverse_gd_filter
 from .delta import DeltaSet
 from .export import robust_set_maps, zpk_to_coefficients
-from .finite_horizon import LinearMap, causal_map, zpk_map
+from .finite_horizon import LinearMap, causal_map, identity_map, zpk_map
 from .law import Stage
 from .law.designed import Designed
 from .law.filters import FilterPair
@@ -231,7 +231,7 @@ class NormOptimal(Method):
             """What :func:`norm_optimal_learning` computes on m samples: the cost's solve (its dense matrix,
             m solves) of ``e0 = Gd_hat_j Gd_hat_{j-1}^{-1}{e + Gf_hat_{j-1}{d_f}}``; for checks on short trials."""
             sol = np.column_stack([NormOptimalDesigner(tgt, m, opts).solve(c) for c in np.eye(m)])
-            eye = LinearMap(m, m, lambda v: v, lambda v: v, "I")
+            eye = identity_map(m)
             e0 = (causal_map(tgt.nominal.G_d, m, "Gd_hat_j") @ zpk_map(inverse_gd_filter(src, True), m)
                   @ hstack_maps([eye, causal_map(src.nominal.G_f, m, "Gf_hat_{j-1}")], "e + Gf d_f"))
             return LinearMap(m, m, sol.__matmul__, sol.T.__matmul__, "solve") @ e0
@@ -303,7 +303,7 @@ class RobustSet(Method):
         gf = rs.filters.source.nominal.G_f
 
         def maps(m: int) -> LinearMap:  # the law on (e, d_f): its map of e' = e + Gf_hat_{j-1}{d_f}
-            eye = LinearMap(m, m, lambda v: v, lambda v: v, "I")
+            eye = identity_map(m)
             return rs.trial_map(m) @ hstack_maps([eye, causal_map(gf, m, "Gf_hat_{j-1}")], "e + Gf d_f")
 
         entries = {k: filters[k] for k in ("law_maps", "F", "trial_ends") if k in filters}

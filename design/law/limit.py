@@ -9,7 +9,7 @@ from typing import Any
 from ilcdob.errors import SpecError
 from ilcdob.specs import LimitSpec
 
-from ..finite_horizon import LinearMap
+from ..finite_horizon import LinearMap, identity_map
 from ..limit import LIMIT_POLICIES, enforce_limit
 from .stage import CParts, LawContext, Signals, Stage, register
 
@@ -89,7 +89,7 @@ class Limit(Stage):
         return (d_f,)
 
     def linear_map(self, m: int, k: int, n: int) -> LinearMap:  # noqa: D102 - Stage.linear_map
-        return LinearMap(m, m, lambda v: v, lambda v: v, "inside the limit")
+        return identity_map(m, "inside the limit")
 
     def c_parts(self, prefix: str) -> CParts:  # noqa: D102 - Stage.c_parts
         macro, limit = prefix.upper(), self.limits.max_acceleration

@@ -13,7 +13,7 @@ from ilcdob.errors import SpecError
 from ..c_text import DOUBLE, array_c, state_space_c
 from ..entries import check_count, check_filter_entry, check_state_space
 from ..export import apply_coefficients, apply_state_space
-from ..finite_horizon import LinearMap, causal_map, fir_map, trend_map
+from ..finite_horizon import LinearMap, causal_map, fir_map, identity_map, trend_map
 from ..trial_edges import fir_on_trial
 from .filters import coefficients_map
 from .stage import CORE_PLACE, CParts, LawContext, Signals, Stage, hstack_maps, register
@@ -112,7 +112,7 @@ class RobustSetMaps(Stage):
         out = steps[0]
         for s in steps[1:]:
             out = s @ out
-        eye = LinearMap(m, m, lambda v: v, lambda v: v, "I")
+        eye = identity_map(m)
         return out @ hstack_maps([eye, state_space_map(self.gf, m, "Gf_hat_{j-1}")], "e + Gf d_f")
 
     def c_parts(self, prefix: str) -> CParts:  # noqa: D102 - Stage.c_parts
