@@ -164,3 +164,20 @@ def test_the_source_tree_imports_without_installing(code, tmp_path):
     run = subprocess.run([sys.executable, "-m", "ilcdob", "--version"], cwd=ROOT, capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 0 and run.stdout.startswith("ilcdob "), run.stderr[-2000:]
+
+
+def test_every_package_folder_is_installed() -> None:
+    """``pip install .`` (not editable) installs only the packages pyproject.toml lists: a
+    sub-package folder missing there imports from the source tree but not once installed."""
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    listed = set(config["packages"])
+    dirs = {name: Path(folder) for name, folder in config["package-dir"].items()}
+    found = set()
+    for init in ROOT.rglob("__init__.py"):
+        rel = init.parent.relative_to(ROOT)
+        for name, folder in dirs.items():
+            if rel == folder or folder in rel.parents:
+                found.add(".".join([name, *rel.relative_to(folder).parts]))
+    assert found - listed == set(), f"package folders not in pyproject.toml: {found - listed}"
