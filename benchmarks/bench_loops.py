@@ -56,7 +56,6 @@ from threadpoolctl import ThreadpoolController
 
 import ilcdob
 import ilcdob.statespace as kernel
-from ilcdob.controller import OuterLoopController
 from ilcdob.design import simulate_map
 from ilcdob.design.closed_form import one_minus
 from ilcdob.fleet import fleet_from_dict
@@ -92,21 +91,10 @@ def old_simulate_map(sys: ct.StateSpace, u: np.ndarray) -> np.ndarray:
 
 
 def old_simulate_flight(loop, r, d, d_f, a_ref, noise) -> dict[str, np.ndarray]:
-    """The trial loop of ``simulate_flight`` before the kernel (mode "dob"): plant and controller stepped."""
-    ap, bp, cp = np.asarray(loop.P.A, float), np.asarray(loop.P.B, float)[:, 0], np.asarray(loop.P.C, float)[0]
-    n = r.size
-    aff = a_ref if loop.spec.controller.acceleration_feedforward else np.zeros(n)
-    ctl = OuterLoopController(loop, dob=True)
-    xp = np.zeros(ap.shape[0])
-    y, e, dh, u2 = (np.zeros(n) for _ in range(4))
-    r_l, aff_l, df_l, nz_l, d_l = r.tolist(), aff.tolist(), d_f.tolist(), noise.tolist(), d.tolist()
-    for k in range(n):
-        yk = float(cp @ xp)
-        ymk = yk + nz_l[k]
-        u2k = ctl.step(r_l[k], ymk, feedforward=aff_l[k], learning=df_l[k])
-        xp = ap @ xp + bp * (u2k + d_l[k])
-        y[k], e[k], dh[k], u2[k] = yk, r_l[k] - ymk, ctl.d_hat, u2k
-    return {"y": y, "e_meas": e, "d_hat": dh, "u2": u2}
+    """The trial loop of ``simulate_flight`` before the kernel (mode "dob"): plant and controller stepped sample by
+    sample, the path ``simulate_flight(..., stepped=True)`` still runs."""
+    f = simulate_flight(loop, r, d, d_f=d_f, a_ref=a_ref, sensor_noise=noise, stepped=True)
+    return {"y": f.y, "e_meas": f.e_meas, "d_hat": f.d_hat, "u2": f.u2}
 
 
 # --- the previous kernel: a Schur solve with one refinement pass (the plain recursion above 50 states) ---

@@ -50,15 +50,12 @@ import numpy as np
 from scipy import optimize
 from scipy import signal as sps
 
+from ilcdob.identification.results import fit_percent
 from ilcdob.identification.tfest import FitOptions, tfest
 from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_tfest: the baseline start search
-
-
-def _fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
-    return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / np.linalg.norm(y - np.mean(y))))
 
 
 def _simulate(num: np.ndarray, den: np.ndarray, u: np.ndarray, ts: float, lag: int) -> np.ndarray:
@@ -189,7 +186,7 @@ def _corrupt(scale: int = 1):
 def _held_out(num, den, lag, val, ts) -> float:
     yhat = [_simulate(num, den, u, ts, lag) for u, _ in val]
     y = np.concatenate([y for _, y in val])
-    return _fit_percent(y, np.concatenate([yh + np.mean(yv - yh) for yh, (_, yv) in zip(yhat, val)]))
+    return fit_percent(y, np.concatenate([yh + np.mean(yv - yh) for yh, (_, yv) in zip(yhat, val)]))
 
 
 # ---------------------------------------------------------------- the start search: baseline against shipped

@@ -6,17 +6,21 @@ without hardware: the nonlinear vehicles of :mod:`ilcdob.vehicles.quadrotor` are
 "real vehicles" and the pipeline is the paper's (Sec. IV):
 
 1. fly step and chirp experiments with every vehicle and identify its plant
-   ``P_hat(s) = b0 / (s^2 (s + a0))`` (:func:`ilcdob.identification.fleet_id.identify_vehicle`);
+   ``P_hat(s) = b0 / (s^2 (s + a0))`` (:class:`StepChirpExperiments`, through the fleet
+   identification of every vehicle, :func:`ilcdob.validation.vehicle_chain.identify_vehicles`);
 2. build every loop (PID ``C``, ``Q``, ``M = Q/P_hat``) and the closed-form learning filters
    of the Theorem (paper Sec. III, :func:`ilcdob.design.closed_form_filters`) from the
    identified models;
 3. fly the four scenarios with no DOB, only DOB and learning iterations 1..n, passed around
-   the fleet cyclically as in :mod:`ilcdob.validation.reproduce`.
+   the fleet cyclically as in :mod:`ilcdob.validation.reproduce` (the chain of
+   :mod:`ilcdob.validation.vehicle_chain`: :func:`~ilcdob.validation.vehicle_chain.fly_baselines`,
+   :func:`~ilcdob.validation.vehicle_chain.fly_learning`).
 
-The outer loop of one vehicle (x axis, the loop of paper Sec. II), at the flight computer's rate
-``Ts`` (the fleet's sample time), is the same control law as the linear loop's
-(:class:`ilcdob.controller.OuterLoopController` over ``C``, ``Q``, ``M``) stepped sample by
-sample with the nonlinear vehicle in between::
+Each vehicle is a :class:`~ilcdob.vehicles.quadrotor_vehicle.QuadrotorVehicle` flown by
+:func:`~ilcdob.vehicles.interface.fly_vehicle`, as rotorpy's multirotors are. The outer loop of one
+vehicle (x axis, the loop of paper Sec. II), at the flight computer's rate ``Ts`` (the fleet's sample
+time), is the same control law as the linear loop's (:class:`ilcdob.controller.OuterLoopController`
+over ``C``, ``Q``, ``M``) stepped sample by sample with the nonlinear vehicle in between::
 
     x_m[k]   = x(t_k) + n[k]                       (position sensor, white noise n)
     u1[k]    = C{r - x_m}[k] + a_ref[k]            (a_ref if the PID feeds it forward)
@@ -25,8 +29,9 @@ sample with the nonlinear vehicle in between::
 
 ``u2`` is the vehicle's commanded x acceleration and nothing else: the wind ``d(t)`` and the
 vehicle's own noise (:class:`ilcdob.specs.NoiseSpec`) act on the airframe as an external
-force ``m d(t)``, evaluated at the vehicle's inner (integration) rate. y and z are held at 0
-by their own PIDs, as in :func:`~ilcdob.vehicles.quadrotor.fly`. Every trial starts
+force ``m d(t)``, evaluated at the vehicle's inner (integration) rate; the vehicle limits the
+command's tilt and the DOB sees the command it applied. y and z are held at 0 by their own
+PIDs alone (no DOB), as in :func:`~ilcdob.vehicles.quadrotor.fly`. Every trial starts
 from hover at rest at the origin with every controller state at zero, which is consistent:
 each scenario starts with ``r = 0``, ``dr/dt = 0`` and ``d = 0``.
 
@@ -57,7 +62,6 @@ from typing import Callable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.controller import OuterLoopController
 from ilcdob.design.band import check_bandwidth
 from ilcdob.design.flown import model_attitude
 from ilcdob.design.laws import DEFAULT_LAW, check_law
@@ -68,14 +72,17 @@ from ilcdob.identification.fleet_id import VehicleIdentification, identified_sys
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 from ilcdob.specs import check_noise_std
-from ilcdob.vehicles.quadrotor import DiscretePID, QuadrotorParams, limit_tilt, make_advance, table_i_vehicles
+from ilcdob.vehicles.interface import fly_vehicle
+from ilcdob.vehicles.quadrotor import QuadrotorParams, table_i_vehicles
+from ilcdob.vehicles.quadrotor_vehicle import QuadrotorVehicle
 
 from .reproduce import (FLIGHT_ARRAYS, ReproductionResult, ScenarioResult, SystemResult, check_flights_memory,
-                        check_iterations, learning_chain, pair_designs)
+                        check_iterations, pair_designs)
 from .scenarios import Scenario, check_order, scenario
 from .simulate import Flight, rmse
+from .vehicle_chain import VehicleFit, fly_baselines, fly_learning, identify_vehicles
 
-__all__ = ["NonlinearSettings", "NonlinearFlight", "NonlinearReproduction", "fly_loop", "identify_vehicles",
+__all__ = ["NonlinearSettings", "NonlinearFlight", "NonlinearReproduction", "StepChirpExperiments", "fly_loop",
            "run_nonlinear_scenario", "reproduce_nonlinear"]
 
 
@@ -189,7 +196,9 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
              d_f: object | None = None, mode: str = "dob", a_ref: object | None = None,
              noise_std: float = 0.0, rng: np.random.Generator | None = None) -> NonlinearFlight:
     """Fly one trial of the nonlinear ``vehicle`` under ``loop``'s outer loop (see module
-    docstring; the loop of paper Sec. II with the vehicle in place of ``P``).
+    docstring; the loop of paper Sec. II with the vehicle in place of ``P``): the vehicle as a
+    :class:`~ilcdob.vehicles.quadrotor_vehicle.QuadrotorVehicle` through
+    :func:`~ilcdob.vehicles.interface.fly_vehicle`, x under ``loop``, y and z under their PIDs alone.
 
     Parameters
     ----------
@@ -229,22 +238,18 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
     if noise_std > 0 and not isinstance(rng, np.random.Generator):
         raise SpecError(f"`rng`: got {rng!r}, expected a numpy.random.Generator when noise_std > 0")
     ts = loop.ts
-    ratio = ts * vehicle.inner_rate_hz
-    nin = int(round(ratio))
-    if nin < 1 or abs(ratio - nin) > 1e-9 * max(1.0, ratio):
-        raise SpecError(f"`vehicle.inner_rate_hz`: got {vehicle.inner_rate_hz:g} Hz, expected a multiple "
-                        f"of the outer rate 1/Ts = {1 / ts:g} Hz")
     r = as_signal(r, "r")
     n = r.size
     if n < 2:
         raise SpecError(f"`r`: got {n} sample(s), expected a trial of at least 2 samples")
-    t = np.arange(n) * ts
-    t_inner = np.arange(n * nin) * vehicle.inner_dt
     if not callable(disturbance):
         raise SpecError(f"`disturbance`: got {type(disturbance).__name__}, expected a vectorised callable "
                         "of time (s) returning m/s^2")
+    # the vehicle checks its inner rate against ts and evaluates the disturbance on its inner grid, n samples at once
+    airframe = QuadrotorVehicle(vehicle, ts, disturbance=disturbance, noise_std=noise_std,
+                                seed=rng if rng is not None else 0, horizon=n)
+    t = np.arange(n) * ts
     d_out = as_signal(np.broadcast_to(np.asarray(disturbance(t), float), t.shape), "disturbance")
-    d_inner = as_signal(np.broadcast_to(np.asarray(disturbance(t_inner), float), t_inner.shape), "disturbance")
     ab, aa, adelay = model_attitude(loop)
     df = np.zeros(n) if d_f is None else as_signal(d_f, "d_f", n)
     if mode == "no_dob" and np.any(df):
@@ -252,76 +257,93 @@ def fly_loop(vehicle: QuadrotorParams, loop: LoopSystem, r: object, disturbance:
     aff = np.zeros(n)
     if a_ref is not None and loop.spec.controller.acceleration_feedforward:
         aff = as_signal(a_ref, "a_ref", n)
-    noise = rng.normal(0.0, noise_std, size=(n, 3)) if noise_std > 0 else np.zeros((n, 3))
-    ctl = OuterLoopController(loop, dob=mode == "dob")  # the control law, as any vehicle flies it
-    advance = make_advance(vehicle)
-    pid_y = DiscretePID(loop.spec.controller, ts)
-    pid_z = DiscretePID(vehicle.z_controller, ts)
-    s = [0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3 + [vehicle.hover_rotor_speed] * 4
-    wprev = (0.0, 0.0)
-    d_list = d_inner.tolist()
-    tan_max = math.tan(vehicle.max_tilt)
-    r_l, aff_l, df_l, nz = r.tolist(), aff.tolist(), df.tolist(), noise.tolist()
-    y, ym_arr, dh, u2 = (np.zeros(n) for _ in range(4))
-    saturated = 0
-    for k in range(n):
-        x_true = s[0]
-        xm, ym, zm = x_true + nz[k][0], s[1] + nz[k][1], s[2] + nz[k][2]
-        u2k = ctl.command(r_l[k], xm, feedforward=aff_l[k], learning=df_l[k])
-        u2k, ay, az, limited = limit_tilt(u2k, pid_y(-ym), pid_z(-zm), tan_max)
-        ctl.update(u2k)  # the DOB sees the command the airframe received
-        saturated += limited
-        y[k], ym_arr[k], dh[k], u2[k] = x_true, xm, ctl.d_hat, u2k
-        if k < n - 1:
-            s, wprev = advance(s, u2k, ay, az, d_list, k * nin, nin, wprev, None)
+    # x: the control law; y and z held at 0 by their PIDs alone (y: the fleet's PID, z: the vehicle's)
+    trial = fly_vehicle(airframe, {"x": loop, "y": loop.spec.controller, "z": vehicle.z_controller}, {"x": r},
+                        learning={"x": df}, feedforward={"x": aff}, dob=mode == "dob", n=n)
+    y = np.array([p[0] for p in airframe.truth])
+    ym, dh, u2 = trial.y_meas[:, 0].copy(), trial.d_hat[:, 0].copy(), trial.applied[:, 0].copy()
     est = sps.lfilter(ab, aa, dh + df)
     if adelay:
         est = np.concatenate([np.zeros(adelay), est[:-adelay]])
     return NonlinearFlight(system=loop.name, mode=mode, t=t, r=r, y=y, e=r - y, d=d_out, d_hat=dh,
-                           d_f=df, u2=u2, y_meas=ym_arr, e_meas=r - ym_arr, d_est=est,
-                           saturated=saturated)
+                           d_f=df, u2=u2, y_meas=ym, e_meas=r - ym, d_est=est,
+                           saturated=airframe.saturated)
 
 
-def identify_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams], settings: NonlinearSettings,
-                      progress: Callable[[int, int, str], None] | None = None
-                      ) -> tuple[Fleet, dict[str, VehicleIdentification], str]:
-    """Identify every vehicle from step and chirp flights and build the fleet of the models.
+@dataclass(frozen=True)
+class StepChirpExperiments:
+    """The in-house quadrotors' identification experiments, for
+    :func:`~ilcdob.validation.vehicle_chain.identify_vehicles`: per vehicle the paper's step and chirp
+    flights under the fleet's own PID, fitted with ``P_hat(s) = b0 / (s^2 (s + a0))``
+    (:func:`ilcdob.identification.fleet_id.identify_vehicle`).
 
-    Each system of the returned fleet has the identified ``P_hat`` as its plant (so its
-    loop's ``M = Q/P_hat`` and its learning filters use the model); controllers, DOBs and
-    noises are ``fleet``'s. Source: ``"identified_fleet.toml"``.
-
-    Parameters
+    Attributes
     ----------
     fleet : Fleet
-        Controllers, DOBs and noises of the systems.
+        Supplies each vehicle's PID and the sample time.
     vehicles : dict
-        Fleet name -> the nonlinear vehicle flown in the experiments.
-    settings : NonlinearSettings
-        ``seed`` (vehicle ``i`` flies with seed ``seed + 10 i``) and ``sensor_noise_std``.
-    progress : callable, optional
-        ``progress(done, total, what)`` after each vehicle (``total``: the number of
-        vehicles); None: silent.
+        Fleet name -> the nonlinear vehicle flown.
+    seed : int
+        Vehicle ``i`` flies with seed ``seed + 10 i``.
+    noise_std : float
+        Standard deviation of the white position-sensor noise, m.
+    axis : str
+        ``"x"``: the paper's experiments fly x.
+    """
+
+    fleet: Fleet
+    vehicles: dict
+    seed: int = 0
+    noise_std: float = 0.0005
+    axis: str = "x"
+
+    def fit(self, name: str, index: int) -> VehicleFit:
+        """The flights and the fit of one vehicle.
+
+        Parameters
+        ----------
+        name : str
+            The vehicle (a system of :attr:`fleet`).
+        index : int
+            Its place among the vehicles identified: it flies seed ``seed + 10 index``.
+
+        Returns
+        -------
+        VehicleFit
+            Its ``record`` is the vehicle's :class:`~ilcdob.identification.fleet_id.VehicleIdentification`.
+        """
+        vid = identify_vehicle(name, self.fleet, seed=int(self.seed) + 10 * index, noise_std=self.noise_std,
+                               vehicle=self.vehicles[name])
+        spec = identified_systems(self.fleet, {name: vid})[self.fleet.names.index(name)]  # the fleet file's record
+        est = vid.estimate
+        return VehicleFit(name, est.structure, spec.plant, {VehicleFit.label(est.structure): est.fit_validation},
+                          est.fit_estimation, spec.identification, vid)
+
+
+def _identify(fleet: Fleet, vehicles: dict[str, QuadrotorParams], settings: NonlinearSettings,
+              progress: Callable[[int, int, str], None] | None = None
+              ) -> tuple[Fleet, dict[str, VehicleIdentification], str]:
+    """Identify every vehicle (:class:`StepChirpExperiments` through
+    :func:`~ilcdob.validation.vehicle_chain.identify_vehicles`) and build the fleet of the models: each
+    system has the identified ``P_hat`` as its plant (so its loop's ``M = Q/P_hat`` and its learning
+    filters use the model); controllers, DOBs and noises are ``fleet``'s. Source:
+    ``"identified_fleet.toml"``.
 
     Returns
     -------
     (Fleet, dict, str)
-        The fleet of the models, the identification of every vehicle, and the fleet file
-        of the models (TOML text, :func:`ilcdob.fleet_io.fleet_to_toml`).
+        The fleet of the models (as its fleet file loads), the identification of every vehicle, and
+        the fleet file of the models (TOML text, :func:`ilcdob.fleet_io.fleet_to_toml`).
     """
-    results = {}
-    for i, name in enumerate(fleet.names):
-        results[name] = identify_vehicle(name, fleet, seed=int(settings.seed) + 10 * i,
-                                         noise_std=settings.sensor_noise_std, vehicle=vehicles[name])
-        if progress is not None:
-            est = results[name].estimate
-            progress(i + 1, len(fleet.names), f"identified {name}: fit {est.fit_estimation:.2f} % (estimation), "
-                                              f"{est.fit_validation:.2f} % (held out)")
+    experiments = StepChirpExperiments(fleet, vehicles, settings.seed, settings.sensor_noise_std)
+    models, fits = identify_vehicles(experiments, fleet.names, None, None, fleet.sample_time, base=fleet,
+                                     progress=progress, source="identified_fleet.toml")
     header = (f"# Identified from synthetic step + chirp flights of the nonlinear vehicles "
               f"(ilcdob.validation.nonlinear, seed {settings.seed}, sensor noise "
               f"{settings.sensor_noise_std:g} m); controllers, DOBs and noises from {fleet.source}")
-    text = fleet_to_toml(fleet.sample_time, identified_systems(fleet, results), header=header)
-    return fleet_from_dict(tomllib.loads(text), "identified_fleet.toml"), results, text
+    text = fleet_to_toml(fleet.sample_time, models.systems, header=header)
+    return (fleet_from_dict(tomllib.loads(text), "identified_fleet.toml"), {n: f.record for n, f in fits.items()},
+            text)
 
 
 def _check_vehicles(fleet: Fleet, vehicles: dict[str, QuadrotorParams] | None,
@@ -398,24 +420,22 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
         noise = specs[name].noise
         return lambda tt: sc.disturbance(tt) + noise(tt)
 
-    def flight(name: str, trial: int, mode: str, d_f: np.ndarray | None = None) -> NonlinearFlight:
+    def flight(name: str, mode: str, trial: int, d_f: np.ndarray | None) -> NonlinearFlight:
+        """Flight ``trial`` of ``name`` (:data:`~ilcdob.validation.vehicle_chain.FlyTrial`; its noise seed)."""
         return fly_loop(vehicles[name], fleet.loop(name), r, dist(name), d_f=d_f, mode=mode, a_ref=a_ref,
                         noise_std=settings.sensor_noise_std, rng=_rng(settings, sc.id, index[name], trial))
 
     if check_law(law) == "multi-source":
         raise SpecError("`law`: the nonlinear reproduction learns one pair at a time (the airframe correction "
                         "is per pair); use 'paper' or 'exact-reference'")
-    base = {name: (flight(name, 0, "no_dob"), flight(name, 1, "dob")) for name in order}
-    flown = {name: 0 for name in order}  # learning flights so far: trial index of the noise seed
+    base = fly_baselines(order, flight)
     pair_design = pair_designs(fleet, filters, law, r, a_ref, settings.bandwidth,
                                "airframe" if settings.airframe_disturbance else "command")
 
-    def step(src: str, tgt: str, prev: NonlinearFlight) -> NonlinearFlight:
-        df = pair_design(src, tgt).learning(prev.e_meas, prev.d_f, gain=settings.learning_gain).d_f
-        flown[tgt] += 1
-        return flight(tgt, 1 + flown[tgt], "dob", df)
+    def signal(src: str, tgt: str, prev: NonlinearFlight) -> np.ndarray:
+        return pair_design(src, tgt).learning(prev.e_meas, prev.d_f, gain=settings.learning_gain).d_f
 
-    learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
+    learning, chain = fly_learning(order, iterations, base, flight, signal)
     systems = {name: SystemResult(base[name][0], base[name][1], tuple(learning[name])) for name in order}
     return ScenarioResult(scenario=sc, order=order, systems=systems, chain=chain)
 
@@ -570,8 +590,7 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     say = progress if progress is not None else (lambda done, total_, what: None)
     start = time.perf_counter()
     if settings.identify:
-        models, ident, toml_text = identify_vehicles(base, vehicles, settings,
-                                                     lambda done, _, what: say(done, total, what))
+        models, ident, toml_text = _identify(base, vehicles, settings, lambda done, _, what: say(done, total, what))
     else:
         models, ident = base, {}
         toml_text = fleet_to_toml(base.sample_time, identified_systems(base, {}))

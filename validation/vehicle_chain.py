@@ -3,19 +3,25 @@
 Any vehicle with the protocol of :mod:`ilcdob.vehicles.interface` (rotorpy's multirotors,
 :mod:`ilcdob.vehicles.rotorpy_vehicle`, are the test bed) goes through what a lab does:
 
-1. :func:`identify_vehicles`: per vehicle and axis, closed-loop flights with a rough outer loop (the
-   PID alone, a chirp added to the axis's command, smoothed reference steps), fitted with each
-   candidate model structure (:data:`STRUCTURES`) and held out on a second flight; the structure
-   is chosen from the data (the best held-out fit; one with fewer parameters wins unless a larger
-   one fits 1 point better). The paper assumes ``b0/(s^2 (s + a0))``; a vehicle whose drag damps
-   its velocity needs one integrator and a drag pole.
+1. :func:`identify_vehicles`: every vehicle's experiments flown and fitted, and the fleet of the fits
+   built (the one way ilcdob identifies a fleet of vehicles; the experiments are a
+   :class:`VehicleExperiments`). By default (:class:`ChirpExperiments`), per vehicle and axis,
+   closed-loop flights with a rough outer loop (the PID alone, a chirp added to the axis's command,
+   smoothed reference steps), fitted with each candidate model structure (:data:`STRUCTURES`) and
+   held out on a second flight; the structure is chosen from the data (the best held-out fit; one
+   with fewer parameters wins unless a larger one fits 1 point better). The paper assumes
+   ``b0/(s^2 (s + a0))``; a vehicle whose drag damps its velocity needs one integrator and a drag
+   pole. The in-house quadrotors fly the paper's step and chirp experiments instead
+   (:class:`ilcdob.validation.nonlinear.StepChirpExperiments`).
 2. :func:`run_vehicle_axes` (one axis: :func:`run_vehicle_laws`, one law: :func:`run_vehicle_scenario`):
    a scenario flown with every vehicle, no DOB, DOB only and the cyclic learning chain of
-   :mod:`ilcdob.validation.reproduce` for every learning law, each learning signal computed from
-   the previous flight's measured error as ``ilcdob design --trial`` does, every axis by its own
-   models; the disturbance is the scenario's, either added to the command (the paper's) or a
-   wind velocity through each airframe's drag (the scenario's signal scaled, or any wind such as
-   :func:`dryden_gust`).
+   :mod:`ilcdob.validation.reproduce` for every learning law (:func:`fly_baselines`,
+   :func:`fly_learning`), each learning signal computed from the previous flight's measured error as
+   ``ilcdob design --trial`` does, every axis by its own models; the disturbance is the scenario's,
+   either added to the command (the paper's) or a wind velocity through each airframe's drag (the
+   scenario's signal scaled, or any wind such as :func:`dryden_gust`). The nonlinear reproduction
+   (:mod:`ilcdob.validation.nonlinear`) flies its chain through the same two functions and
+   :func:`~ilcdob.vehicles.interface.fly_vehicle`.
 
 Units: s, m, m/s, m/s^2. The flights are :class:`~ilcdob.validation.simulate.Flight` records per
 axis, so results, tables and figures are those of the other reproductions.
@@ -23,8 +29,9 @@ axis, so results, tables and figures are those of the other reproductions.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Callable, Mapping
+import math
+from dataclasses import dataclass, field, replace
+from typing import Callable, Mapping, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 from scipy import signal as sps
@@ -34,7 +41,7 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, fleet_from_systems
 from ilcdob.loop import LoopSystem, build_loop
 from ilcdob.signals import FlightData, check_grid
-from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec, SystemSpec
+from ilcdob.specs import DOBSpec, IdentificationSpec, PIDSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.interface import AXES, Vehicle, fly_vehicle
 
@@ -42,8 +49,9 @@ from .reproduce import ScenarioResult, SystemResult, check_iterations, learning_
 from .scenarios import Scenario, check_order
 from .simulate import Flight
 
-__all__ = ["STRUCTURES", "VehicleFit", "identify_vehicles", "run_vehicle_axes", "run_vehicle_laws",
-           "run_vehicle_scenario", "rough_loop", "dryden_gust", "MakeVehicle", "LawPath"]
+__all__ = ["STRUCTURES", "VehicleFit", "VehicleExperiments", "ChirpExperiments", "identify_vehicles",
+           "fly_baselines", "fly_learning", "run_vehicle_axes", "run_vehicle_laws", "run_vehicle_scenario",
+           "rough_loop", "dryden_gust", "MakeVehicle", "FlyTrial", "LawPath"]
 
 #: Candidate structures of an axis's plant, fewest free parameters first: the paper's two integrators and a pole
 #: (2: gain and pole), one integrator with a drag pole and an attitude pole (3), and with one pole more (4).
@@ -67,22 +75,80 @@ class VehicleFit:
     plant : PlantSpec
         Its fit.
     fits : dict of str to float
-        Held-out fit (%) of every candidate structure, by ``repr``-like label ``"3p1i"``.
+        Held-out fit (%) of every candidate structure, by label (:meth:`label`, e.g. ``"3p0z1i"``).
+    fit_estimation : float
+        Fit (%) of the chosen structure on the estimation flights (nan: not known).
+    identification : IdentificationSpec or None
+        What the fleet file keeps of the fit (parameters, covariance, fits: the Delta set of
+        docs/theory.md section 3); None: the fleet keeps the plant alone.
+    record : object
+        What the experiments keep of their flights and fit (the in-house quadrotors':
+        :class:`~ilcdob.identification.fleet_id.VehicleIdentification`); None: nothing.
     """
 
     name: str
     structure: ModelStructure
     plant: PlantSpec
     fits: dict[str, float]
+    fit_estimation: float = math.nan
+    identification: IdentificationSpec | None = None
+    record: object = field(default=None, repr=False, compare=False)
 
     @property
     def fit(self) -> float:
         """Held-out fit of the chosen structure, %."""
-        return self.fits[_label(self.structure)]
+        return self.fits[self.label(self.structure)]
+
+    @staticmethod
+    def label(st: ModelStructure) -> str:
+        """The label of a structure in :attr:`fits`.
+
+        Parameters
+        ----------
+        st : ModelStructure
+
+        Returns
+        -------
+        str
+            ``"<poles>p<zeros>z<integrators>i"``.
+        """
+        return f"{st.n_poles}p{st.n_zeros}z{st.n_integrators}i"
 
 
-def _label(st: ModelStructure) -> str:
-    return f"{st.n_poles}p{st.n_zeros}z{st.n_integrators}i"
+@runtime_checkable
+class VehicleExperiments(Protocol):
+    """How :func:`identify_vehicles` identifies a vehicle: its experiments flown and fitted.
+
+    A structural type (:class:`ChirpExperiments`; the in-house quadrotors'
+    :class:`~ilcdob.validation.nonlinear.StepChirpExperiments`).
+
+    Parameters
+    ----------
+    *args, **kwargs
+        None: a protocol is not instantiated.
+
+    Attributes
+    ----------
+    axis : str
+        The axis identified (``"x"``, ``"y"`` or ``"z"``): the fleet's.
+    """
+
+    axis: str
+
+    def fit(self, name: str, index: int) -> VehicleFit:
+        """Fly a vehicle's experiments and fit its plant.
+
+        Parameters
+        ----------
+        name : str
+            The vehicle.
+        index : int
+            Its place among the vehicles identified (for seeds).
+
+        Returns
+        -------
+        VehicleFit
+        """
 
 
 def rough_loop(ts: float) -> LoopSystem:
@@ -118,52 +184,133 @@ def _chirp_flight(make: MakeVehicle, name: str, ts: float, seed: int, duration: 
     return FlightData(t, {"u": trial.applied[:, i], "y": trial.y_meas[:, i]}, {"u": "m/s^2", "y": "m"})
 
 
-def identify_vehicles(make: MakeVehicle, names: list[str], controllers: dict[str, PIDSpec],
-                      dobs: dict[str, DOBSpec], ts: float, duration: float = 20.0,
-                      axis: str = "x") -> tuple[Fleet, dict[str, VehicleFit]]:
-    """Identify every vehicle's plant of one axis from its own flights and build the fleet of the fits (module
-    docstring).
+@dataclass(frozen=True)
+class ChirpExperiments:
+    """The experiments of a vehicle nobody modelled (module docstring, step 1): two closed-loop flights of
+    ``duration`` under :func:`rough_loop`'s PID (a chirp on ``axis``'s command, smoothed reference steps;
+    seeds 0 and 1: estimation and held out), every structure of :data:`STRUCTURES` fitted and the one with
+    the best held-out fit chosen (fewest parameters within 1 point).
 
-    Parameters
+    Attributes
     ----------
     make : callable
         ``make(name, command_disturbance, wind, seed)``: a fresh vehicle (:data:`MakeVehicle`).
-    names : list of str
-        The vehicles.
-    controllers, dobs : dict
-        Per vehicle its PID and DOB for the fleet (the DOB's ``q_order`` raised to the chosen
-        model's relative degree where it is lower, so that ``M = Q/P_hat`` is proper).
     ts : float
         Sample time, s.
     duration : float
-        Length of each identification flight, s (two per vehicle: estimation and held out).
+        Length of each flight, s.
     axis : {"x", "y", "z"}
         The axis flown and identified (its chirp and steps; the others hold their start).
+    """
+
+    make: MakeVehicle
+    ts: float
+    duration: float = 20.0
+    axis: str = "x"
+
+    def __post_init__(self) -> None:
+        if self.axis not in AXES:
+            raise SpecError(f"`axis`: got {self.axis!r}, expected one of {list(AXES)}")
+
+    def fit(self, name: str, index: int) -> VehicleFit:
+        """Both flights of a vehicle and the fit of every structure.
+
+        Parameters
+        ----------
+        name : str
+            Passed to ``make``.
+        index : int
+            Not used: every vehicle flies seeds 0 (estimation) and 1 (held out).
+
+        Returns
+        -------
+        VehicleFit
+            The structure with the best held-out fit (fewest parameters within 1 point).
+        """
+        from ilcdob.identification.tfest import tfest
+
+        est = _chirp_flight(self.make, name, self.ts, 0, self.duration, self.axis)
+        val = _chirp_flight(self.make, name, self.ts, 1, self.duration, self.axis)
+        results = {}
+        for st in STRUCTURES:
+            fit = tfest(est, "u", "y", st, validation=val)
+            results[VehicleFit.label(st)] = (fit.fit_validation, st, PlantSpec(tuple(fit.num), tuple(fit.den),
+                                                                              fit.delay), fit.fit_estimation)
+        best = max(results.values(), key=lambda v: v[0])
+        chosen = next(v for v in results.values() if v[0] >= best[0] - 1.0)  # fewest parameters within 1 point
+        return VehicleFit(name, chosen[1], chosen[2], {k: v[0] for k, v in results.items()}, chosen[3])
+
+
+def identify_vehicles(make: MakeVehicle | VehicleExperiments, names: Sequence[str],
+                      controllers: Mapping[str, PIDSpec] | None, dobs: Mapping[str, DOBSpec] | None, ts: float,
+                      duration: float | None = None, axis: str | None = None, *, base: Fleet | None = None,
+                      progress: Callable[[int, int, str], None] | None = None,
+                      source: str = "<memory>") -> tuple[Fleet, dict[str, VehicleFit]]:
+    """Identify every vehicle's plant of one axis from its own flights and build the fleet of the fits (module
+    docstring): the one way ilcdob identifies a fleet of vehicles, whatever flies the experiments.
+
+    Per vehicle, in ``names``' order: its experiments' fit (:meth:`VehicleExperiments.fit`), then its system:
+    the fitted plant as the plant (no separate model) and the fit's ``identification``, its PID and DOB (the
+    DOB's ``q_order`` raised to the fitted model's relative degree where it is lower, so that ``M = Q/P_hat``
+    is proper), everything else ``base``'s.
+
+    Parameters
+    ----------
+    make : callable or VehicleExperiments
+        The experiments; a :data:`MakeVehicle` ``make(name, command_disturbance, wind, seed)`` flies
+        :class:`ChirpExperiments` with it.
+    names : list of str
+        The vehicles.
+    controllers, dobs : dict or None
+        Per vehicle its PID and DOB for the fleet (None: ``base``'s).
+    ts : float
+        Sample time, s.
+    duration : float, optional
+        With a ``MakeVehicle``: the length of each identification flight, s (default 20; two per vehicle:
+        estimation and held out).
+    axis : {"x", "y", "z"}, optional
+        With a ``MakeVehicle``: the axis flown and identified (default ``"x"``). Experiments carry their own.
+    base : Fleet, optional
+        Supplies each system's noise, stated uncertainty, limits and sensor (default: none of them).
+    progress : callable, optional
+        ``progress(done, total, what)`` after each vehicle; None (default): silent.
+    source : str
+        The fleet's ``source`` (names it in messages).
 
     Returns
     -------
     (Fleet, dict of str to VehicleFit)
         The fleet records its ``axis``.
     """
-    from ilcdob.identification.tfest import tfest
-
-    if axis not in AXES:
-        raise SpecError(f"`axis`: got {axis!r}, expected one of {list(AXES)}")
+    if isinstance(make, VehicleExperiments):
+        if duration is not None or axis is not None:
+            raise SpecError("`duration`, `axis`: given with experiments, which carry their own; pass a MakeVehicle "
+                            "for the chirp experiments of that duration and axis")
+        experiments = make
+    else:
+        experiments = ChirpExperiments(make, ts, 20.0 if duration is None else duration, axis or "x")
+    if controllers is None or dobs is None:
+        if base is None:
+            raise SpecError("`controllers`, `dobs`: got None without a `base` fleet to take them from")
+        given = {s.name: s for s in base.systems}
+        controllers = controllers if controllers is not None else {n: given[n].controller for n in names}
+        dobs = dobs if dobs is not None else {n: given[n].dob for n in names}
+    kept = {s.name: s for s in base.systems} if base is not None else {}
+    say = progress if progress is not None else (lambda done, total, what: None)
     systems, fits = [], {}
-    for name in names:
-        est = _chirp_flight(make, name, ts, 0, duration, axis)
-        val = _chirp_flight(make, name, ts, 1, duration, axis)
-        results = {}
-        for st in STRUCTURES:
-            fit = tfest(est, "u", "y", st, validation=val)
-            results[_label(st)] = (fit.fit_validation, st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay))
-        best = max(results.values(), key=lambda v: v[0])
-        chosen = next(v for v in results.values() if v[0] >= best[0] - 1.0)  # fewest parameters within 1 point
-        fits[name] = VehicleFit(name, chosen[1], chosen[2], {k: v[0] for k, v in results.items()})
-        relative_degree = chosen[1].n_poles - chosen[1].n_zeros  # M = Q/P_hat must stay proper
+    for i, name in enumerate(names):
+        fit = experiments.fit(name, i)
+        relative_degree = fit.structure.n_poles - fit.structure.n_zeros  # M = Q/P_hat must stay proper
         dob = dobs[name] if dobs[name].q_order >= relative_degree else replace(dobs[name], q_order=relative_degree)
-        systems.append(SystemSpec(name, chosen[2], controllers[name], dob))
-    return replace(fleet_from_systems(systems, ts), axis=axis), fits
+        if name in kept:
+            systems.append(replace(kept[name], plant=fit.plant, controller=controllers[name], dob=dob, model=None,
+                                   identification=fit.identification))
+        else:
+            systems.append(SystemSpec(name, fit.plant, controllers[name], dob, identification=fit.identification))
+        fits[name] = fit
+        estimation = "" if math.isnan(fit.fit_estimation) else f"{fit.fit_estimation:.2f} % (estimation), "
+        say(i + 1, len(names), f"identified {name}: fit {estimation}{fit.fit:.2f} % (held out)")
+    return replace(fleet_from_systems(systems, ts, source), axis=experiments.axis), fits
 
 
 def dryden_gust(duration: float, ts: float, wind_20ft: float = 2.0, altitude: float = 1.0, seed: int = 0,
@@ -198,6 +345,65 @@ def dryden_gust(duration: float, ts: float, wind_20ft: float = 2.0, altitude: fl
     t = np.arange(field.series.shape[0]) * ts
     field.series *= (0.5 - 0.5 * np.cos(np.pi * np.clip(t / onset, 0.0, 1.0)))[:, None]
     return field
+
+
+#: ``flight(name, mode, k, d_f) -> flight record``: flight ``k`` of vehicle ``name`` in a scenario (0: no DOB,
+#: 1: DOB only, 2, 3, ...: its learning flights, in :func:`fly_learning`'s order), ``mode`` ``"no_dob"`` or
+#: ``"dob"``, ``d_f`` its learning signal (None for the first two).
+FlyTrial = Callable[[str, str, int, object], object]
+
+
+def fly_baselines(order: Sequence[str], flight: FlyTrial) -> dict[str, tuple[object, object]]:
+    """Every vehicle's flights without DOB (flight 0) and with the DOB only (flight 1), in ``order``.
+
+    Parameters
+    ----------
+    order : list of str
+        The vehicles, in learning order.
+    flight : callable
+        :data:`FlyTrial`.
+
+    Returns
+    -------
+    dict of str to (record, record)
+        Per vehicle ``(no_dob, dob)``.
+    """
+    return {name: (flight(name, "no_dob", 0, None), flight(name, "dob", 1, None)) for name in order}
+
+
+def fly_learning(order: Sequence[str], iterations: int, base: Mapping[str, tuple[object, object]], flight: FlyTrial,
+                 signal: Callable[[str, str, object], object]) -> tuple[dict[str, list], list[tuple[str, str]]]:
+    """The learning chain of :mod:`ilcdob.validation.reproduce` around ``order``, from the first vehicle's DOB-only
+    flight in ``base``: each flight flies ``signal(source, target, previous_flight)``, a vehicle's ``j``-th
+    learning flight being its flight ``j + 1`` (:data:`FlyTrial`).
+
+    Parameters
+    ----------
+    order : list of str
+        The vehicles, in learning order.
+    iterations : int
+        Learning flights per vehicle.
+    base : mapping
+        :func:`fly_baselines`' flights.
+    flight : callable
+        :data:`FlyTrial`.
+    signal : callable
+        ``signal(source, target, previous) -> d_f``: the learning signal the target flies.
+
+    Returns
+    -------
+    learning : dict of str to list
+        Each vehicle's learning flights, in order.
+    chain : list of (str, str)
+        (source, target) of every step.
+    """
+    count = {name: 1 for name in order}  # the last flight of each: its DOB-only one
+
+    def step(src: str, tgt: str, prev: object) -> object:
+        count[tgt] += 1
+        return flight(tgt, "dob", count[tgt], signal(src, tgt, prev))
+
+    return learning_chain(list(order), iterations, base[order[0]][1], step)
 
 
 #: A learning law flown by :func:`run_vehicle_laws`: (law, path), ``law`` of :mod:`ilcdob.design.laws`
@@ -281,7 +487,7 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
     else:
         raise SpecError(f"`wind`: got {wind!r}, expected None, a gain in m/s per m/s^2 or a callable t -> (3,) m/s")
 
-    def flight(name: str, mode: str, k: int, d_f: dict | None = None) -> dict[str, Flight]:
+    def flight(name: str, mode: str, k: int, d_f: dict | None) -> dict[str, Flight]:
         """Flight ``k`` of a vehicle in the scenario (its seed; the laws' learning flights share them)."""
         loops = {ax: fleets.get(ax, first).loop(name) for ax in AXES}
         ff = {ax: acc[:, i] for i, ax in enumerate(AXES) if loops[ax].spec.controller.acceleration_feedforward}
@@ -293,19 +499,16 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
                            d_f=trial.d_f[:, i], u2=trial.command[:, i])
                 for i, ax in enumerate(AXES) if ax in fleets}
 
-    base = {name: (flight(name, "no_dob", 0), flight(name, "dob", 1)) for name in order}
+    base = fly_baselines(order, flight)
     out: dict[LawPath, dict[str, ScenarioResult]] = {}
     for law, path in laws:
         designs = {ax: pair_designs(fleets[ax], {}, law, pos[:, AXES.index(ax)], acc[:, AXES.index(ax)], "auto", path)
                    for ax in axes}
-        count = {name: 2 for name in order}  # after the two baseline flights
 
-        def step(src: str, tgt: str, prev: dict[str, Flight]) -> dict[str, Flight]:
-            count[tgt] += 1
-            d_f = {ax: designs[ax](src, tgt).learning(prev[ax].e, prev[ax].d_f).d_f for ax in axes}
-            return flight(tgt, "dob", count[tgt] - 1, d_f)
+        def signal(src: str, tgt: str, prev: dict[str, Flight]) -> dict[str, np.ndarray]:
+            return {ax: designs[ax](src, tgt).learning(prev[ax].e, prev[ax].d_f).d_f for ax in axes}
 
-        learning, chain = learning_chain(order, iterations, base[order[0]][1], step)
+        learning, chain = fly_learning(order, iterations, base, flight, signal)
         out[(law, path)] = {ax: ScenarioResult(scenario=sc, order=order, chain=chain, systems={
             name: SystemResult(base[name][0][ax], base[name][1][ax], tuple(f[ax] for f in learning[name]))
             for name in order}) for ax in axes}

@@ -5,7 +5,10 @@ acceleration command per axis goes in, a measured position comes out. Anything t
 it (a third-party simulator, a hardware-in-the-loop bench, a companion computer's link to
 the autopilot) is flown by :func:`fly_vehicle` with one
 :class:`~ilcdob.controller.OuterLoopController` per axis: the same control law as ilcdob's own
-linear and nonlinear simulations.
+linear simulations. ilcdob's own nonlinear quadrotor is such a vehicle
+(:class:`~ilcdob.vehicles.quadrotor_vehicle.QuadrotorVehicle`), as are rotorpy's multirotors
+(:class:`~ilcdob.vehicles.rotorpy_vehicle.RotorpyVehicle`). An axis that is only held (not learned)
+may fly its PID alone: give it a :class:`~ilcdob.specs.PIDSpec` instead of a loop.
 
 Frames and units: world frame, z up; positions in m, accelerations in m/s^2 with gravity
 excluded (a hovering vehicle is commanded 0). Axis ``i`` of a command or a position is x, y, z
@@ -23,6 +26,7 @@ from ilcdob.controller import OuterLoopController
 from ilcdob.errors import SpecError
 from ilcdob.fleet import AXES  # the fleet file's axes, in the order of the command and position vectors
 from ilcdob.loop import LoopSystem
+from ilcdob.specs import PIDSpec
 
 __all__ = ["Vehicle", "VehicleTrial", "fly_vehicle", "AXES"]
 
@@ -137,17 +141,42 @@ def _per_axis(value: object, n: int, name: str) -> np.ndarray:
     return out
 
 
-def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem], reference: object, *, learning: object = None,
-                feedforward: object = None, dob: bool = True, n: int | None = None) -> VehicleTrial:
+class _PIDAlone:
+    """An axis held by its PID alone, with the interface of :class:`~ilcdob.controller.OuterLoopController`
+    (no DOB: ``d_hat`` 0, no learning signal); stepped as :class:`~ilcdob.vehicles.quadrotor.DiscretePID`."""
+
+    d_hat = 0.0
+
+    def __init__(self, spec: PIDSpec, ts: float, axis: str) -> None:
+        from .quadrotor import DiscretePID
+
+        self._pid, self._axis = DiscretePID(spec, ts), axis
+
+    def command(self, reference: float, measurement: float, *, feedforward: float = 0.0,
+                learning: float = 0.0) -> float:
+        if learning:
+            raise SpecError(f"`learning`: axis {self._axis!r} flies its PID alone (a PIDSpec in `loops`), which takes "
+                            "no learning signal")
+        return self._pid(reference - measurement) + feedforward
+
+    def update(self, applied: float | None = None) -> None:
+        """Nothing to advance: the PID advanced in :meth:`command`."""
+
+
+def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem | PIDSpec], reference: object, *,
+                learning: object = None, feedforward: object = None, dob: bool = True,
+                n: int | None = None) -> VehicleTrial:
     """Fly one trial of ``vehicle`` with ilcdob's control law on every axis, from :meth:`Vehicle.reset`.
 
     Parameters
     ----------
     vehicle : Vehicle
         Anything with the protocol (module docstring).
-    loops : mapping of str to LoopSystem
+    loops : mapping of str to LoopSystem or PIDSpec
         The loop (PID, Q, M from the model) of each axis ``"x"``, ``"y"``, ``"z"``; all three are
-        needed. Their sample time must be ``vehicle.ts``.
+        needed. Their sample time must be ``vehicle.ts``. An axis given a ``PIDSpec`` is held by
+        that PID alone (discretised at ``vehicle.ts``; no DOB, whatever ``dob`` says, and no
+        learning signal).
     reference : array_like or mapping
         Reference position, m: ``N x 3``, or per axis (missing axes: 0, i.e. hold the start).
     learning, feedforward : array_like or mapping, optional
@@ -174,6 +203,10 @@ def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem], reference: ob
     if missing:
         raise SpecError(f"`loops`: no loop for axes {missing}; every axis needs one (the same loop may serve several)")
     for ax in AXES:
+        if isinstance(loops[ax], PIDSpec):
+            continue
+        if not isinstance(loops[ax], LoopSystem):
+            raise SpecError(f"`loops[{ax!r}]`: got {type(loops[ax]).__name__}, expected a LoopSystem or a PIDSpec")
         if abs(loops[ax].ts - vehicle.ts) > 1e-12 * vehicle.ts:
             raise SpecError(f"`loops[{ax!r}]`: sample time {loops[ax].ts} s, but the vehicle steps {vehicle.ts} s")
     if n is None:
@@ -189,14 +222,17 @@ def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem], reference: ob
     a_ff = _per_axis(feedforward, n, "feedforward")
     if not dob and np.any(d_f):
         raise SpecError("`learning`: a learning signal needs the DOB (dob=True)")
-    ctl = [OuterLoopController(loops[ax], dob=dob) for ax in AXES]
+    ctl = [_PIDAlone(loops[ax], vehicle.ts, ax) if isinstance(loops[ax], PIDSpec) else
+           OuterLoopController(loops[ax], dob=dob) for ax in AXES]
     vehicle.reset()
     y, cmd, applied, d_hat = (np.zeros((n, 3)) for _ in range(4))
+    r_l, d_f_l, a_ff_l = r.tolist(), d_f.tolist(), a_ff.tolist()  # Python floats: the loop runs per sample
     for k in range(n):
         y[k] = vehicle.position()
-        cmd[k] = [c.command(r[k, i], y[k, i], feedforward=a_ff[k, i], learning=d_f[k, i]) for i, c in enumerate(ctl)]
+        y_k, r_k, d_f_k, a_ff_k = y[k].tolist(), r_l[k], d_f_l[k], a_ff_l[k]
+        cmd[k] = [c.command(r_k[i], y_k[i], feedforward=a_ff_k[i], learning=d_f_k[i]) for i, c in enumerate(ctl)]
         d_hat[k] = [c.d_hat for c in ctl]
         applied[k] = vehicle.step(cmd[k].copy())
-        for i, c in enumerate(ctl):
-            c.update(applied[k, i])
+        for c, a in zip(ctl, applied[k].tolist()):
+            c.update(a)
     return VehicleTrial(np.arange(n) * vehicle.ts, r, y, cmd, applied, d_hat, d_f)
