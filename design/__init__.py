@@ -10,8 +10,8 @@ from .band import LearningBand, choose_band
 from .limit import LearningLimitError, LearningLimitWarning
 from .fir import FIRDesign, FIRDesignError, FIRFilter, FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, norm_optimal_learning
-from .laws import LAWS, ReferenceTerms, check_law, reference_terms
-from .methods import METHODS, Method
+from .laws import LAWS, ExactReference, ReferenceTerms, check_law, law_for, reference_terms
+from .methods import FIR, METHODS, ClosedForm, Method, MethodSettings, NormOptimal, Robust, RobustSet
 from .pair import LearningSignal, PairDesign, design_pair, with_law
 from .robust import RobustDesigner, RobustOptions, RobustPairDesigner
 from .theorem import PairCheck, format_theorem_table, theorem_check
@@ -22,7 +22,8 @@ __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "ZPKFilter"
            "reconstruct_disturbance", "DeltaSet", "delta_set",
            "FIRDesign", "FIRDesignError", "FIRFilter", "FIROptions", "design_fir",
            "NormOptimalDesigner", "NormOptimalOptions", "norm_optimal_learning",
-           "METHODS", "Method", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
+           "METHODS", "Method", "MethodSettings", "ClosedForm", "FIR", "NormOptimal", "Robust", "RobustSet",
+           "ExactReference", "law_for", "PairDesign", "design_pair", "with_law", "LAWS", "check_law", "ReferenceTerms",
            "reference_terms", "PairCheck", "format_theorem_table", "theorem_check",
            "LiftedLearningFilters", "lifted_filters", "RobustDesigner", "RobustOptions", "RobustPairDesigner",
            "LearningBand", "choose_band", "LearningSignal", "LearningLimitError", "LearningLimitWarning"]

@@ -1,7 +1,7 @@
 """Learning laws: what system j's learning signal is computed from (paper Sec. III and beyond).
 
 A *law* says which trials system j learns from and which part of their error it treats as
-disturbance; a *method* (:data:`ilcdob.design.pair.METHODS`) says how the filter from that
+disturbance; a *method* (:data:`ilcdob.design.methods.METHODS`) says how the filter from that
 error to the learning signal is designed. Three laws:
 
 ``paper`` (the default everywhere)
@@ -53,7 +53,8 @@ from ilcdob.signals import as_signal
 
 from .reference import inverse_gf_filter, reference_error
 
-__all__ = ["LAWS", "DEFAULT_LAW", "LAW_DESCRIPTIONS", "check_law", "ReferenceTerms", "reference_terms"]
+__all__ = ["LAWS", "DEFAULT_LAW", "LAW_DESCRIPTIONS", "check_law", "ExactReference", "law_for",
+           "ReferenceTerms", "reference_terms"]
 
 #: The learning laws (module docstring).
 LAWS = ("paper", "exact-reference", "multi-source")
@@ -86,6 +87,51 @@ def check_law(law: object, what: str = "law") -> str:
                         "filters; exact-reference: the same with the reference term kept; multi-source: every "
                         "earlier system's trial at once)")
     return law
+
+
+@dataclass(frozen=True)
+class ExactReference:
+    """The ``exact-reference`` law with the trial's reference it needs (module docstring).
+
+    Attributes
+    ----------
+    reference : array_like
+        Reference position of the trial, m, one sample per fleet sample time.
+    acceleration : array_like, optional
+        Its acceleration, m/s^2, for controllers that feed it forward.
+    """
+
+    reference: object
+    acceleration: object = None
+    name = "exact-reference"
+
+
+def law_for(name: object, reference: object = None, acceleration: object = None,
+            what: str = "law") -> str | ExactReference:
+    """The law a design is asked for by ``name``: the name, or for ``exact-reference`` the law with
+    the trial's reference (:class:`ExactReference`).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`LAWS`.
+    reference, acceleration : array_like, optional
+        The trial's reference (m) and acceleration (m/s^2); only ``exact-reference`` uses them.
+    what : str
+        Name of the input in messages.
+
+    Returns
+    -------
+    str or ExactReference
+
+    Raises
+    ------
+    SpecError
+        Unknown law.
+    """
+    if check_law(name, what) == ExactReference.name and reference is not None:
+        return ExactReference(reference, acceleration)
+    return name
 
 
 @dataclass(frozen=True)

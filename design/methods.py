@@ -9,19 +9,23 @@ guaranteed over the Delta set. Each is one class here with the same faces:
 * ``guaranteed``: robust to the Delta set by its own construction, so the learning band leaves
   the model edge to it (:func:`~.pair.design_pair`);
 * ``needs_delta_sets``: it designs over the fleet's Delta sets (:mod:`.delta`);
+* ``compared_by_default``: comparisons and campaigns run it unless told otherwise;
 * ``per_trial``: its learning signal is solved anew for every trial (its cost grows with the
   Delta-set models it carries);
 * ``cli_options``: the ``ilcdob design`` options only some methods use, of which it uses these;
+* its options as fields (``FIR(options=FIROptions(...), deltas=...)``); :meth:`Method.configured`
+  takes them from the :class:`MethodSettings` a caller running methods by name states once;
 * :meth:`Method.check_options`: the command-line options it takes, checked before anything is built;
 * :meth:`Method.design`: the filters and the ``filters.json`` content, before the band;
 * :meth:`Method.order`: the implementation size a report shows.
 
-:data:`METHODS` is built from the classes; nothing else asks which method a name is.
+:data:`METHODS` is built from the classes (each with its default options); nothing else asks which
+method a name is.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -43,8 +47,8 @@ from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_op
 from .robust import RobustOptions, RobustPairDesigner
 from .robust_set import RobustSetOptions, design_robust_set, structured_set
 
-__all__ = ["DesignInputs", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust", "RobustSet",
-           "METHODS", "DEFAULT_METHOD", "method_named"]
+__all__ = ["DesignInputs", "MethodSettings", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust", "RobustSet",
+           "METHODS", "DEFAULT_METHOD", "DEFAULT_METHODS", "GUARANTEED", "method_named"]
 
 @dataclass(frozen=True)
 class DesignInputs:
@@ -60,15 +64,8 @@ class DesignInputs:
     closed_form : callable () -> LearningFilters
         The Theorem's filters of the pair, built once when first asked for.
     deltas : dict of str to DeltaSet, or None
-        The Delta sets by system name (methods with ``needs_delta_sets``).
-    n : int or None
-        Norm-optimal: trial length, samples (default 500).
-    norm_optimal, fir, robust, robust_set : options or None
-        Each method's options (None: its defaults).
-    relax : bool
-        Robust: relax the SOCP where the exact one is infeasible.
-    lifted : bool
-        Norm-optimal: also the N x N lifted matrices.
+        The Delta sets by system name (methods with ``needs_delta_sets``: the method's own, else the
+        fleet's, :func:`~.pair.fleet_delta_sets`).
     """
 
     fleet: Fleet
@@ -77,13 +74,43 @@ class DesignInputs:
     head: dict[str, Any]
     closed_form: Callable[[], LearningFilters]
     deltas: dict[str, DeltaSet] | None = None
+
+
+@dataclass(frozen=True)
+class MethodSettings:
+    """The settings a caller that runs methods by name (the CLI, comparisons, campaigns) states once:
+    :meth:`Method.configured` takes from them what its method uses and leaves the rest.
+
+    Attributes
+    ----------
+    n : int or None
+        Norm-optimal: trial length, samples (None: 500).
+    lifted : bool
+        Norm-optimal: also the N x N lifted matrices.
+    rho : float or None
+        Robust and robust-set: the improvement factor asked for (None: the options' own).
+    relax : bool
+        Robust: relax the SOCP where the exact one is infeasible.
+    deltas : dict of str to DeltaSet, or None
+        The Delta sets the design is made for (:attr:`Method.deltas`; None: the fleet's).
+    fir, norm_optimal, robust, robust_set : options or None
+        Each method's options (None: its defaults; ``rho`` overrides theirs).
+    """
+
     n: int | None = None
-    norm_optimal: NormOptimalOptions | None = None
+    lifted: bool = False
+    rho: float | None = None
+    relax: bool = False
+    deltas: dict[str, DeltaSet] | None = None
     fir: FIROptions | None = None
+    norm_optimal: NormOptimalOptions | None = None
     robust: RobustOptions | None = None
     robust_set: RobustSetOptions | None = None
-    relax: bool = False
-    lifted: bool = False
+
+
+def _with_rho(options: Any, rho: float | None) -> Any:
+    """``options`` with ``rho`` set where one is given."""
+    return options if rho is None else replace(options, rho=rho)
 
 
 @dataclass(frozen=True)
@@ -128,6 +155,24 @@ class Method:
     needs_delta_sets: bool = False
     per_trial: bool = False
     cli_options: tuple[str, ...] = ()
+    compared_by_default: bool = True
+    #: The Delta sets the design is made for, by system name: the source's sets the learning band's
+    #: model edge, and methods with ``needs_delta_sets`` design over them (None: the fleet's).
+    deltas: dict[str, DeltaSet] | None = None
+
+    def configured(self, settings: MethodSettings) -> "Method":
+        """This method with what it uses of ``settings`` (the base: nothing to take).
+
+        Parameters
+        ----------
+        settings : MethodSettings
+
+        Returns
+        -------
+        Method
+            A method of the same kind carrying its options.
+        """
+        return self
 
     def check_options(self, given: dict[str, Any]) -> None:
         """Refuse command-line values this method cannot design with (the base: none).
@@ -172,11 +217,22 @@ class Method:
         return f"<method {self.name}>"
 
 
+@dataclass(frozen=True, repr=False)
 class ClosedForm(Method):
-    """The Theorem's filters (paper Sec. III): ``L1 = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``L2 = L1 Gf_hat_{j-1}``."""
+    """The Theorem's filters (paper Sec. III): ``L1 = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``L2 = L1 Gf_hat_{j-1}``.
+
+    Parameters
+    ----------
+    deltas : dict of str to DeltaSet, optional
+        The Delta sets the design is made for (the learning band's model edge; default: the fleet's).
+    """
 
     name = "closed-form"
     cli_options = ("--c-prefix", "--c-float")
+    deltas: dict[str, DeltaSet] | None = None
+
+    def configured(self, settings: MethodSettings) -> "ClosedForm":  # noqa: D102 - Method.configured
+        return ClosedForm(settings.deltas or self.deltas)
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
         lf = inputs.closed_form()
@@ -186,16 +242,30 @@ class ClosedForm(Method):
             [zpk_map(lf.L1, m), zpk_map(lf.L2, m)], "L1/L2")))
 
 
+@dataclass(frozen=True, repr=False)
 class FIR(Method):
-    """FIR learning filters robust over the Delta sets (:mod:`.fir`)."""
+    """FIR learning filters robust over the Delta sets (:mod:`.fir`).
+
+    Parameters
+    ----------
+    options : FIROptions, optional
+        The FIR's size, grid and robustness (default: :class:`~.fir.FIROptions`).
+    deltas : dict of str to DeltaSet, optional
+        The Delta sets of source and target (default: the fleet's).
+    """
 
     name = "fir"
     needs_delta_sets = True
     cli_options = ("--samples", "--bound", "--c-prefix", "--c-float", "--fir-unattainable")
+    options: FIROptions | None = None
+    deltas: dict[str, DeltaSet] | None = None
+
+    def configured(self, settings: MethodSettings) -> "FIR":  # noqa: D102 - Method.configured
+        return FIR(settings.fir or self.options, settings.deltas or self.deltas)
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
         fd = design_fir(inputs.src, inputs.tgt, inputs.deltas[inputs.src.name], inputs.deltas[inputs.tgt.name],
-                        inputs.fir)
+                        self.options)
         info = fd.to_dict()
         entries = {"L1": info.pop("L1"), "L2": info.pop("L2")}
         filters = {**inputs.head, **entries, "units": {"L1": "(m/s^2)/m", "L2": "1"},
@@ -204,25 +274,48 @@ class FIR(Method):
         return MethodDesign(filters, Designed(self.name, fd.apply, entries, lambda m: pair.linear_map(m, 2, m)))
 
 
+@dataclass(frozen=True, repr=False)
 class NormOptimal(Method):
-    """The lifted norm-optimal law over a trial of ``n`` samples (:mod:`.norm_optimal`)."""
+    """The lifted norm-optimal law over a trial of ``n`` samples (:mod:`.norm_optimal`).
+
+    Parameters
+    ----------
+    options : NormOptimalOptions, optional
+        Weights of the cost (default: :class:`~.norm_optimal.NormOptimalOptions`).
+    n : int
+        Trial length, samples (>= 2).
+    lifted : bool
+        Also build the N x N matrices L1, L2 (about 8 N^2 numbers of memory while they are built,
+        O(N^3) time; not needed to learn). Without, the design holds its law in compact form
+        (:class:`~.norm_optimal.NormOptimalLaw`, O(N)).
+    deltas : dict of str to DeltaSet, optional
+        The Delta sets the design is made for (the learning band's model edge; default: the fleet's).
+    """
 
     name = "norm-optimal"
     cli_options = ("--n", "--lifted")
+    options: NormOptimalOptions | None = None
+    n: int = 500
+    lifted: bool = False
+    deltas: dict[str, DeltaSet] | None = None
+
+    def configured(self, settings: MethodSettings) -> "NormOptimal":  # noqa: D102 - Method.configured
+        return NormOptimal(settings.norm_optimal or self.options, self.n if settings.n is None else settings.n,
+                           settings.lifted or self.lifted, settings.deltas or self.deltas)
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
         src, tgt = inputs.src, inputs.tgt
-        opts = inputs.norm_optimal or NormOptimalOptions()
-        n = 500 if inputs.n is None else int(inputs.n)
+        opts = self.options or NormOptimalOptions()
+        n = int(self.n)
         if n < 2:
             raise SpecError(f"`n`: got {n}, expected a trial length >= 2 samples")
         order = max(tgt.nominal.G_f.nstates, src.nominal.G_d.nstates)
-        check_norm_optimal_size(n, order, inputs.lifted, "n", "lifted=True")
+        check_norm_optimal_size(n, order, self.lifted, "n", "lifted=True")
         designer = NormOptimalDesigner(tgt, n, opts)
         arrays = designer.law(src).to_arrays()
         what = ("lifted.npz: the law d_f,j = L1 e_{j-1} + L2 d_f,{j-1} as Riccati gains "
                 "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(...).apply(e, d_f))")
-        if inputs.lifted:
+        if self.lifted:
             arrays["L1"], arrays["L2"] = designer.lifted_matrices(src)
             what += " and as the N x N matrices L1, L2"
         filters = {**inputs.head, "options": {"lam": opts.lam, "mu": opts.mu, "weight": opts.weight}, "n": n,
@@ -244,20 +337,42 @@ class NormOptimal(Method):
         return f"Riccati gains over {filters['n']} samples{matrices}"
 
 
+@dataclass(frozen=True, repr=False)
 class Robust(Method):
-    """The per-trial SOCP over the models of both Delta sets (:mod:`.robust`)."""
+    """The per-trial SOCP over the models of both Delta sets (:mod:`.robust`).
+
+    Parameters
+    ----------
+    options : RobustOptions, optional
+        The SOCP's rho and weights (default: :class:`~.robust.RobustOptions`); its models are the
+        nominal pair plus the paired Delta-set samples.
+    deltas : dict of str to DeltaSet, optional
+        The Delta sets of source and target (default: the fleet's).
+    relax : bool
+        Design at the smallest feasible rho (with a warning) when ``rho`` is infeasible for a
+        trial, instead of raising.
+    """
 
     name = "robust"
     guaranteed = True
     needs_delta_sets = True
     per_trial = True
     cli_options = ("--rho", "--samples", "--bound")
+    options: RobustOptions | None = None
+    deltas: dict[str, DeltaSet] | None = None
+    relax: bool = False
+
+    def configured(self, settings: MethodSettings) -> "Robust":  # noqa: D102 - Method.configured
+        options = settings.robust or self.options
+        if settings.rho is not None:
+            options = _with_rho(options or RobustOptions(), settings.rho)
+        return Robust(options, settings.deltas or self.deltas, settings.relax or self.relax)
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
         source, target = inputs.src.name, inputs.tgt.name
-        opts = inputs.robust or RobustOptions()
+        opts = self.options or RobustOptions()
         designer = RobustPairDesigner([inputs.src, *inputs.deltas[source].loops],
-                                      [inputs.tgt, *inputs.deltas[target].loops], opts, inputs.relax)
+                                      [inputs.tgt, *inputs.deltas[target].loops], opts, self.relax)
         filters = {**inputs.head, "models": len(designer.sources),
                    "delta_set": {source: inputs.deltas[source].source, target: inputs.deltas[target].source},
                    "options": {"rho": opts.rho, "lam": opts.lam, "mu": opts.mu, "reduction_tol": opts.reduction_tol},
@@ -274,17 +389,36 @@ class Robust(Method):
         return f"per-trial SOCP, {filters['models']} models"
 
 
+@dataclass(frozen=True, repr=False)
 class RobustSet(Method):
-    """The closed form with a robustness FIR guaranteed over the source's whole Delta set (:mod:`.robust_set`)."""
+    """The closed form with a robustness FIR guaranteed over the source's whole Delta set (:mod:`.robust_set`).
+
+    Parameters
+    ----------
+    options : RobustSetOptions, optional
+        The FIR's rho, size and grids (default: :class:`~.robust_set.RobustSetOptions`); its bound
+        is the source's Delta set's.
+    deltas : dict of str to DeltaSet, optional
+        The Delta sets (default: the fleet's); the source's bound and model set the guarantee.
+    """
 
     name = "robust-set"
     guaranteed = True
     needs_delta_sets = True
+    compared_by_default = False  # a minute or more per source vehicle: on request
     cli_options = ("--rho", "--bound", "--c-prefix")
+    options: RobustSetOptions | None = None
+    deltas: dict[str, DeltaSet] | None = None
+
+    def configured(self, settings: MethodSettings) -> "RobustSet":  # noqa: D102 - Method.configured
+        options = settings.robust_set or self.options
+        if settings.rho is not None:
+            options = _with_rho(options or RobustSetOptions(), settings.rho)
+        return RobustSet(options, settings.deltas or self.deltas)
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
         source = inputs.src.name
-        opts = inputs.robust_set or RobustSetOptions(rho=inputs.robust.rho if inputs.robust is not None else 0.95)
+        opts = self.options or RobustSetOptions()
         spec = next(s for s in inputs.fleet.systems if s.name == source)
         ds = inputs.deltas[source]
         rs = design_robust_set(inputs.src, inputs.tgt, ds.w, ds.bound, opts,
@@ -323,17 +457,25 @@ class RobustSet(Method):
 #: The design methods by name, in the order the tool lists them.
 METHODS: dict[str, Method] = {m.name: m for m in (ClosedForm(), FIR(), NormOptimal(), Robust(), RobustSet())}
 
+#: The designs whose improvement is guaranteed over the Delta set by their own construction (the
+#: robust SOCP over its models, robust-set over the whole set): their learning band takes the
+#: noise edges only, the model edge is theirs (:func:`~.pair.design_pair`).
+GUARANTEED = tuple(name for name, m in METHODS.items() if m.guaranteed)
+
+#: The designs that comparisons and campaigns run unless told otherwise.
+DEFAULT_METHODS = tuple(name for name, m in METHODS.items() if m.compared_by_default)
+
 #: The method a command designs with when none is named: the Theorem's closed form.
 DEFAULT_METHOD = ClosedForm.name
 
 
 def method_named(name: object, option: str = "method") -> Method:
-    """The method called ``name``.
+    """The method called ``name`` (with its default options), or ``name`` itself if it is a method.
 
     Parameters
     ----------
-    name : str
-        One of :data:`METHODS`.
+    name : str or Method
+        One of :data:`METHODS`, or a method object carrying its options.
     option : str
         The option or argument it came from, for the message.
 
@@ -342,6 +484,8 @@ def method_named(name: object, option: str = "method") -> Method:
     SpecError
         No method has that name.
     """
+    if isinstance(name, Method):
+        return name
     if not isinstance(name, str) or name not in METHODS:
         raise SpecError(f"`{option}`: got {name!r}, valid methods are {list(METHODS)}")
     return METHODS[name]

@@ -35,26 +35,16 @@ from .law import LawContext, LearningLaw, Stage
 from .law.designed import Designed
 from .law.limit import Limit
 from .delta import DeltaSet, delta_bound, delta_set
-from .fir import FIROptions
 from .flown import airframe_path_filter, check_disturbance
-from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ReferenceTerms, check_law, reference_terms
+from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTerms, check_law, reference_terms
 from .limit import LIMIT_POLICIES, LimitReport
-from .methods import METHODS, DesignInputs, method_named
-from .norm_optimal import NormOptimalOptions
-from .robust import RobustOptions, RobustPairDesigner
-from .robust_set import RobustSetOptions
+from .methods import METHODS, DesignInputs, Method, method_named
+from .robust import RobustPairDesigner
 from .theorem import theorem_rhs
 
-__all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets", "METHODS",
-           "DEFAULT_METHODS", "design_with_band"]
+__all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets",
+           "design_with_band"]
 
-#: The designs whose improvement is guaranteed over the Delta set by their own construction (the
-#: robust SOCP over its models, robust-set over the whole set): their learning band takes the
-#: noise edges only, the model edge is theirs (:func:`design_pair`).
-GUARANTEED = tuple(name for name, m in METHODS.items() if m.guaranteed)
-#: The designs that comparisons and campaigns run unless told otherwise (robust-set takes a
-#: minute or more per source vehicle: on request).
-DEFAULT_METHODS = ("closed-form", "fir", "norm-optimal", "robust")
 
 Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -392,13 +382,9 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
         error=error)
 
 
-def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-form", n: int | None = None,
-                norm_optimal: NormOptimalOptions | None = None, fir: FIROptions | None = None,
-                deltas: dict[str, DeltaSet] | None = None, robust: RobustOptions | None = None,
-                relax: bool = False, lifted: bool = False, law: str = DEFAULT_LAW,
-                reference: np.ndarray | None = None, acceleration: np.ndarray | None = None,
-                robust_set: RobustSetOptions | None = None, bandwidth: object = "auto",
-                disturbance: str = "command", on_limit: str = "clip") -> PairDesign:
+def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "closed-form", *,
+                law: str | ExactReference = DEFAULT_LAW, band: object = "auto", disturbance: str = "command",
+                on_limit: str = "clip") -> PairDesign:
     """Design the learning filters of ``target`` from ``source`` with ``method``.
 
     Parameters
@@ -406,42 +392,24 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     fleet : Fleet
     source, target : str
         System names (j-1 and j).
-    method : {"closed-form", "fir", "norm-optimal", "robust", "robust-set"}
-        ``robust-set``: closed form followed by a FIR whose improvement is guaranteed for every
-        multiplicative error of the source within its Delta set's bound (:mod:`.robust_set`).
-    n : int, optional
-        Trial length in samples for the lifted matrices of the lifted methods (default 500).
-    norm_optimal : NormOptimalOptions, optional
-    fir : FIROptions, optional
-    deltas : dict name -> DeltaSet, optional
-        Sampled true loops of ``source`` and ``target`` for the robust constraint of the FIR
-        design and the models of the robust design (default: :func:`fleet_delta_sets` with
-        K = 8 from the identifications); the source's bound also sets the band's ``model`` edge.
-    robust : RobustOptions, optional
-        Options of the robust SOCP; its models are the nominal pair plus the paired samples.
-    relax : bool
-        Robust method: design at the smallest feasible rho (with a warning) when ``rho`` is
-        infeasible for a trial, instead of raising.
-    lifted : bool
-        Norm-optimal: also build the N x N matrices L1, L2 (about 8 N^2 numbers of memory while
-        they are built, O(N^3) time; not needed to learn). Without, the design holds its law in
-        compact form (:class:`~ilcdob.design.norm_optimal.NormOptimalLaw`, O(N)).
-    law : {"paper", "exact-reference"}
-        Learning law (:mod:`ilcdob.design.laws`). ``exact-reference`` adds the reference terms
-        of ``reference`` around the method's learning; ``multi-source`` learns from several
-        trials and is refused here.
-    reference : array, m, optional
-        ``exact-reference``: reference position of the trial (required).
-    acceleration : array, m/s^2, optional
-        ``exact-reference``: reference acceleration, for controllers that feed it forward.
-    robust_set : RobustSetOptions, optional
-        Options of the robust-set design (default: ``rho`` of ``robust``, which must then lie in
-        (0, 1], else 0.95); its bound is ``deltas[source].bound``.
-    bandwidth : "auto", float or None
+    method : str or Method
+        A name of :data:`~.methods.METHODS` (``"closed-form"``, ``"fir"``, ``"norm-optimal"``,
+        ``"robust"``, ``"robust-set"``) with its default options, or a method object carrying its
+        own (``FIR(options=FIROptions(...), deltas=...)``, ``NormOptimal(n=3000)``,
+        ``RobustSet(RobustSetOptions(rho=0.8))``, :mod:`.methods`). Its ``deltas`` are the Delta
+        sets the design is made for: the source's bound sets the band's ``model`` edge, and methods
+        that design over Delta sets use them (without: :func:`fleet_delta_sets`, K = 8, from the
+        identifications).
+    law : {"paper", "exact-reference"} or ExactReference
+        Learning law (:mod:`ilcdob.design.laws`). The exact-reference law needs the trial's
+        reference: give :class:`~.laws.ExactReference` (``law_for(name, reference,
+        acceleration)``); it adds the reference terms around the method's learning.
+        ``multi-source`` learns from several trials and is refused here.
+    band : "auto", float or None
         The learning band's corner (:mod:`.band`): ``"auto"`` (default) chooses it per trial
         from the trial's error and the fleet (sensor noise, the target's acceleration limit, the
         source's Delta set); a number states it (rad/s); ``None`` or ``"off"``: the method's
-        filter as it is. For the designs of :data:`GUARANTEED` the automatic band leaves out
+        filter as it is. For the designs of :data:`~.methods.GUARANTEED` the automatic band leaves out
         the model edge: they are robust to the Delta set by construction, and a band closed on
         it only takes learning away (and, on whole trials, some of their guarantee).
     disturbance : {"command", "airframe", "wind"}
@@ -452,33 +420,34 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str = "closed-fo
     on_limit : {"clip", "refuse"}
         A learning signal beyond the target's acceleration limit (fleet ``limits``) is clipped
         with a warning, or refused.
+
     Raises
     ------
     SpecError
         Unknown method, law, disturbance path or limit policy; ``multi-source``;
-        ``exact-reference`` without ``reference``; a bad bandwidth.
+        ``exact-reference`` without its reference; a bad band.
     """
-    if check_law(law) != DEFAULT_LAW:  # every other argument forwarded as given (locals() holds only them here)
-        given = {k: v for k, v in locals().items() if k not in ("law", "reference", "acceleration")}
-        return with_law(design_pair(**given), fleet, source, target, law, reference, acceleration)
-    if reference is not None or acceleration is not None:
-        raise SpecError("`reference`/`acceleration`: only the exact-reference law uses the reference trajectory; "
-                        "got one with law 'paper' (pass law='exact-reference')")
+    if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
+        name, reference, acceleration = ((law.name, law.reference, law.acceleration) if isinstance(law, ExactReference)
+                                         else (law, None, None))
+        _check_law_request(fleet, source, target, name, reference)  # before the design, which may take long
+        design = design_pair(fleet, source, target, method, band=band, disturbance=disturbance, on_limit=on_limit)
+        return with_law(design, fleet, source, target, name, reference, acceleration)
     chosen = method_named(method)
     check_disturbance(disturbance)
     if on_limit not in LIMIT_POLICIES:
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
-    request = check_bandwidth(bandwidth, fleet.sample_time)
+    request = check_bandwidth(band, fleet.sample_time)
     src, tgt = fleet.loop(source), fleet.loop(target)
     path = airframe_path_filter(src, tgt, disturbance == "wind") if disturbance != "command" else None
     closed_form = cache(partial(closed_form_filters, src, tgt))  # built once, when first needed
-    head = {"method": method, "law": DEFAULT_LAW, "from": source, "to": target, "sample_time": fleet.sample_time}
-    if chosen.needs_delta_sets:
-        deltas = deltas or fleet_delta_sets(fleet, [source, target])
-    made = chosen.design(DesignInputs(fleet, src, tgt, head, closed_form, deltas=deltas, n=n,
-                                      norm_optimal=norm_optimal, fir=fir, robust=robust, robust_set=robust_set,
-                                      relax=relax, lifted=lifted))
-    design = PairDesign(method, made.filters, made.core, made.lifted, robust=made.robust, loops=(src, tgt))
+    head = {"method": chosen.name, "law": DEFAULT_LAW, "from": source, "to": target,
+            "sample_time": fleet.sample_time}
+    deltas = chosen.deltas
+    if chosen.needs_delta_sets and deltas is None:
+        deltas = fleet_delta_sets(fleet, [source, target])
+    made = chosen.design(DesignInputs(fleet, src, tgt, head, closed_form, deltas=deltas))
+    design = PairDesign(chosen.name, made.filters, made.core, made.lifted, robust=made.robust, loops=(src, tgt))
     chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=not chosen.guaranteed)
     limits = {s.name: s for s in fleet.systems}[target].limits
     filters = {**design.filters, "disturbance": {"at": disturbance,
@@ -511,6 +480,18 @@ def design_with_band(design: PairDesign, band: LearningBand) -> PairDesign:
     return replace(design, band=band, filters={**design.filters, "band": {"request": request, **band.to_dict()}})
 
 
+def _check_law_request(fleet: Fleet, source: str, target: str, law: str, reference: object) -> None:
+    """Refuse a law a pair design cannot learn with: ``multi-source``, or ``exact-reference`` without its reference."""
+    if law == "multi-source":
+        raise SpecError("`law`: 'multi-source' learns from the trials of every earlier system at once, and a pair "
+                        f"design ({source} -> {target}) learns from one trial of {source}; use "
+                        "ilcdob.design.multi_source.multi_source_learning with every trial, or "
+                        "reproduce(..., law='multi-source') for a learning chain")
+    if reference is None:
+        raise SpecError(f"`reference`: the exact-reference law needs the reference trajectory of the trial "
+                        f"(m, sampled every {fleet.sample_time} s); got none")
+
+
 def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: str,
              reference: np.ndarray | None = None, acceleration: np.ndarray | None = None) -> PairDesign:
     """``design`` (made for the paper's law) learning with ``law`` instead (see :func:`design_pair`).
@@ -537,14 +518,7 @@ def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: st
         return design
     if design.law != DEFAULT_LAW:
         raise SpecError(f"`design`: already learns with law {design.law!r}; give a design made with the paper's law")
-    if law == "multi-source":
-        raise SpecError("`law`: 'multi-source' learns from the trials of every earlier system at once, and a pair "
-                        f"design ({source} -> {target}) learns from one trial of {source}; use "
-                        "ilcdob.design.multi_source.multi_source_learning with every trial, or "
-                        "reproduce(..., law='multi-source') for a learning chain")
-    if reference is None:
-        raise SpecError(f"`reference`: the exact-reference law needs the reference trajectory of the trial "
-                        f"(m, sampled every {fleet.sample_time} s); got none")
+    _check_law_request(fleet, source, target, law, reference)
     terms = reference_terms(fleet.loop(source), fleet.loop(target), reference, acceleration)
     filters = {**design.filters, "law": law,
                "reference_terms": {**terms.to_dict(),

@@ -102,7 +102,7 @@ def test_noise_budget_edge_keeps_the_noise_driven_learning_signal_at_its_share(f
     band = choose_band(TS, "auto", noise_std=2e-3, a_max=a_max, l1_gain=lambda w: np.abs(lf.l1_response(w)))
     assert band.reason == "set by the noise budget edge" and band.source == "fleet"
     noise = np.random.default_rng(3).normal(0.0, 2e-3, 18000)
-    stated = design_pair(fleet, "UAV1", "UAV2", bandwidth=band.cutoff)
+    stated = design_pair(fleet, "UAV1", "UAV2", band=band.cutoff)
     rms = np.sqrt(np.mean(stated.learn(noise, np.zeros_like(noise))[1000:-1000] ** 2))
     assert rms == pytest.approx(NOISE_SHARE * a_max, rel=0.1)
     # pure noise carries no signal: from the trial alone the band closes to the lowest Welch bin

@@ -343,16 +343,16 @@ def test_default_fleet_code_compiles_cleanly(cc, tmp_path):
 def learn_designs():
     """Closed-form UAV1 -> UAV2 designs: a stated band, the band with the airframe correction, no band."""
     fleet = default_fleet()
-    return {"band": design_pair(fleet, "UAV1", "UAV2", bandwidth=10.0),
-            "band + airframe": design_pair(fleet, "UAV1", "UAV2", bandwidth=10.0, disturbance="airframe"),
-            "no band": design_pair(fleet, "UAV1", "UAV2", bandwidth=None),
-            "no band + airframe": design_pair(fleet, "UAV1", "UAV2", bandwidth=None, disturbance="airframe")}
+    return {"band": design_pair(fleet, "UAV1", "UAV2", band=10.0),
+            "band + airframe": design_pair(fleet, "UAV1", "UAV2", band=10.0, disturbance="airframe"),
+            "no band": design_pair(fleet, "UAV1", "UAV2", band=None),
+            "no band + airframe": design_pair(fleet, "UAV1", "UAV2", band=None, disturbance="airframe")}
 
 
 @pytest.fixture(scope="module")
 def fir_design():
     """The FIR design of UAV1 -> UAV2 with a band (about 5 s)."""
-    return design_pair(default_fleet(), "UAV1", "UAV2", method="fir", bandwidth=10.0)
+    return design_pair(default_fleet(), "UAV1", "UAV2", method="fir", band=10.0)
 
 
 def _learn_trials(ts: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -445,7 +445,7 @@ def test_c_learn_is_the_paper_filter_times_the_band_on_a_sinusoid(cc, tmp_path, 
 
     fleet = default_fleet()
     ts, wc = fleet.sample_time, 10.0
-    design = design_pair(fleet, "UAV1", "UAV2", bandwidth=wc, disturbance=disturbance)
+    design = design_pair(fleet, "UAV1", "UAV2", band=wc, disturbance=disturbance)
     pad = design.filters["band"]["pad"]
     exe = _build_learn(cc, tmp_path, design.filters)
     src, tgt = fleet.loop("UAV1").nominal, fleet.loop("UAV2")

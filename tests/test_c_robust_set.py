@@ -26,7 +26,7 @@ CASES = {"no band": (None, "command"), "band 3 rad/s": (3.0, "command"), "band, 
 def designs():
     """Robust-set designs UAV1 -> UAV2 of the built-in fleet (its identification's Delta set)."""
     fleet = default_fleet()
-    return {label: design_pair(fleet, "UAV1", "UAV2", method="robust-set", bandwidth=bw, disturbance=dist)
+    return {label: design_pair(fleet, "UAV1", "UAV2", method="robust-set", band=bw, disturbance=dist)
             for label, (bw, dist) in CASES.items()}
 
 

@@ -156,7 +156,7 @@ def test_allpass_counterexample_flown_learning_makes_the_error_worse(fleet_file)
     ts, n = flt.sample_time, int(120 / flt.sample_time)
     d = np.sin(w_k * np.arange(n) * ts)
     src_flight = simulate_flight(flt.loop("UAV3"), np.zeros(n), d)
-    d_f = design_pair(flt, "UAV3", "UAV2", bandwidth=None).learn(src_flight.e, np.zeros(n))
+    d_f = design_pair(flt, "UAV3", "UAV2", band=None).learn(src_flight.e, np.zeros(n))
     base = simulate_flight(flt.loop("UAV2"), np.zeros(n), d)
     learned = simulate_flight(flt.loop("UAV2"), np.zeros(n), d, d_f=d_f)
     mid = slice(n // 4, 3 * n // 4)  # steady state, away from the trial's ends

@@ -19,6 +19,7 @@ from ilcdob.design.band import fade_out, fold_start
 from ilcdob.design.delta import delta_set
 from ilcdob.design.finite_horizon import (PairTrials, causal_map, error_maps, finite_horizon_ratio,
                                           invisible_disturbances, law_map)
+from ilcdob.design.methods import RobustSet
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.design.robust_set import RobustSetOptions, admissible, design_robust_set
 from ilcdob.errors import SpecError, UnstableLoopError
@@ -34,13 +35,12 @@ SINES = (1, 2, 3, 4, 6, 8, 10, 13, 16, 20, 26, 30)  # rad/s
 
 
 def _design(fleet, src, tgt, method, bound=0.3, bandwidth="auto", **opts):
-    kw = {}
     if method == "robust-set":
-        kw = dict(deltas=fleet_delta_sets(fleet, [src, tgt], k=1, bound=bound),
-                  robust_set=RobustSetOptions(rho=0.95, **{**FAST, **opts}))
+        method = RobustSet(RobustSetOptions(rho=0.95, **{**FAST, **opts}),
+                           fleet_delta_sets(fleet, [src, tgt], k=1, bound=bound))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return design_pair(fleet, src, tgt, method, bandwidth=bandwidth, **kw)
+        return design_pair(fleet, src, tgt, method, band=bandwidth)
 
 
 def _disturbances(ts, duration=60.0, sines=SINES, scenarios=(1, 3, 4), trends=True):

@@ -10,6 +10,7 @@ from scipy import signal as sps
 
 import ilcdob
 from ilcdob.design.flown import airframe_path_filter, model_attitude, rigid_body_split
+from ilcdob.design.laws import law_for
 from ilcdob.errors import SpecError
 
 PID = ilcdob.PIDSpec(kp=2.0, ki=0.2, kd=2.0, derivative_filter=0.05)
@@ -105,8 +106,7 @@ def test_every_law_designs_on_drag_damped_models():
     for law, (r, a), tol in (("paper", (np.zeros_like(t), np.zeros_like(t)), 1e-6), ("exact-reference", moving, 1e-5)):
         src = simulate_flight(flt.loop("D1"), r, d, a_ref=a)
         base = simulate_flight(flt.loop("D2"), r, d, a_ref=a)
-        kw = {"reference": r, "acceleration": a} if law == "exact-reference" else {}
-        design = design_pair(flt, "D1", "D2", law=law, **kw)
+        design = design_pair(flt, "D1", "D2", law=law_for(law, r, a))
         learned = simulate_flight(flt.loop("D2"), r, d, d_f=design.learn(src.e, src.d_f), a_ref=a)
         assert learned.rmse <= tol * base.rmse, (law, learned.rmse / base.rmse)
     assert design_pair(flt, "D1", "D2", disturbance="airframe").filters["disturbance"]["at"] == "airframe"

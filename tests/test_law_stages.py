@@ -18,18 +18,17 @@ sections with the stable-inversion series cut at 1e-12; measured 1e-13 .. 1e-11 
 from __future__ import annotations
 
 import shutil
-import subprocess
 import warnings
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal as sps
 
-from ilcdob.design.c_export import c_code
 from ilcdob.design.law import STAGE_KINDS, LawContext, LearningLaw
 from ilcdob.design.law.designed import Designed, file_core
+from ilcdob.design.laws import law_for
+from ilcdob.design.methods import METHODS, MethodSettings
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.errors import SpecError
 from ilcdob.fleet import default_fleet, fleet_from_dict
@@ -98,18 +97,15 @@ def _design(pair: str, method: str, bandwidth: float | None, disturbance: str, l
     fleet = _fleet(fleet_name)
     ts = fleet.sample_time
     e, _ = _trial(ts, seconds)
-    kw = {}
-    if law == "exact-reference":
-        t = np.arange(e.size) * ts
-        kw = {"reference": 0.5 * (1.0 - np.cos(0.5 * t)), "acceleration": 0.125 * np.cos(0.5 * t)}
-    if method in ("fir", "robust", "robust-set"):
-        kw["deltas"] = fleet_delta_sets(fleet, [src, tgt], bound=0.2)
-    if method == "norm-optimal":
-        kw["n"] = e.size
+    t = np.arange(e.size) * ts
+    law = law_for(law, 0.5 * (1.0 - np.cos(0.5 * t)), 0.125 * np.cos(0.5 * t))
+    chosen = METHODS[method]
+    deltas = fleet_delta_sets(fleet, [src, tgt], bound=0.2) if chosen.needs_delta_sets else None
     wc = None if bandwidth is None else bandwidth * np.pi / ts
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return design_pair(fleet, src, tgt, method, bandwidth=wc, disturbance=disturbance, law=law, **kw)
+        return design_pair(fleet, src, tgt, chosen.configured(MethodSettings(n=e.size, deltas=deltas)), band=wc,
+                           disturbance=disturbance, law=law)
 
 
 def _rel(y: np.ndarray, ref: np.ndarray) -> float:

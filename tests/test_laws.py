@@ -17,7 +17,7 @@ import pytest
 
 import ilcdob
 from ilcdob.app.cli import main
-from ilcdob.design.laws import LAWS, check_law, reference_terms
+from ilcdob.design.laws import LAWS, ExactReference, check_law, reference_terms
 from ilcdob.design.pair import design_pair, with_law
 from ilcdob.errors import SpecError
 from ilcdob.app.html import build_report
@@ -133,8 +133,8 @@ def test_bad_laws_are_refused_with_the_valid_ones(fleet):
         design_pair(fleet, "UAV1", "UAV2", law="multi-source")
     with pytest.raises(SpecError, match="reference trajectory"):
         design_pair(fleet, "UAV1", "UAV2", law="exact-reference")
-    with pytest.raises(SpecError, match="only the exact-reference law"):
-        design_pair(fleet, "UAV1", "UAV2", reference=np.zeros(10))
+    with pytest.raises(SpecError, match="reference trajectory"):
+        design_pair(fleet, "UAV1", "UAV2", law=ExactReference(None))
     with pytest.raises(SpecError, match="acceleration_feedforward"):  # the built-in controllers feed it forward
         reference_terms(fleet.loop("UAV1"), fleet.loop("UAV2"), np.zeros(10))
     with pytest.raises(SpecError, match="single DOB-only trial"):

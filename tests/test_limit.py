@@ -89,7 +89,7 @@ def test_the_unfiltered_law_on_noisy_data_hits_the_limit_and_the_band_does_not(f
     noise = np.random.default_rng(1).normal(0.0, 5e-4, t.size)
     flight = simulate_flight(fleet.loop("UAV1"), sc.reference(t), sc.disturbance(t), sensor_noise=noise)
     with pytest.warns(LearningLimitWarning, match="learning signal of UAV2 from UAV1: peaks at"):
-        raw = design_pair(fleet, "UAV1", "UAV2", bandwidth="off").learning(flight.measured_error, flight.d_f)
+        raw = design_pair(fleet, "UAV1", "UAV2", band="off").learning(flight.measured_error, flight.d_f)
     assert raw.limit.peak > 100.0 and raw.limit.beyond > t.size // 2 and raw.limit.clipped
     auto = design_pair(fleet, "UAV1", "UAV2").learning(flight.measured_error, flight.d_f)
     assert auto.band.cutoff is not None and auto.limit.peak <= 0.6 and not auto.limit.clipped

@@ -10,8 +10,7 @@ from pathlib import Path
 import pytest
 
 from ilcdob.app.cli import build_parser
-from ilcdob.design.methods import DEFAULT_METHOD, METHODS, Method, method_named
-from ilcdob.design.pair import DEFAULT_METHODS, GUARANTEED
+from ilcdob.design.methods import DEFAULT_METHOD, DEFAULT_METHODS, GUARANTEED, METHODS, Method, method_named
 from ilcdob.errors import SpecError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -75,3 +74,26 @@ def test_the_branch_finder_sees_a_branch():
         assert _branches_on_method_names() == ["design/_methods_probe_never_committed.py:2"] * 2  # both tests
     finally:
         fake.unlink()
+
+
+def test_a_method_carries_its_options_and_design_pair_takes_eight_parameters():
+    """The options travel with the method object: ``configured`` takes from shared settings what each
+    method uses, and the design reads them from the method (no option objects side by side)."""
+    import inspect
+
+    import ilcdob
+    from ilcdob.design.methods import FIR, ClosedForm, MethodSettings, NormOptimal, Robust, RobustSet
+    from ilcdob.design.pair import design_pair
+    from ilcdob.design.robust import RobustOptions
+    from ilcdob.design.robust_set import RobustSetOptions
+
+    assert len(inspect.signature(design_pair).parameters) <= 8
+    settings = MethodSettings(n=120, rho=0.8, lifted=True)
+    assert METHODS["norm-optimal"].configured(settings) == NormOptimal(n=120, lifted=True)
+    assert METHODS["robust"].configured(settings) == Robust(RobustOptions(rho=0.8))
+    assert METHODS["robust-set"].configured(settings) == RobustSet(RobustSetOptions(rho=0.8))
+    assert METHODS["closed-form"].configured(settings) == ClosedForm()
+    assert METHODS["fir"].configured(settings) == FIR()
+    assert method_named(NormOptimal(n=7)) == NormOptimal(n=7)  # an object is its own method
+    design = design_pair(ilcdob.default_fleet(), "UAV1", "UAV2", METHODS["norm-optimal"].configured(settings))
+    assert design.method == "norm-optimal" and design.filters["n"] == 120 and design.lifted["L1"].shape == (120, 120)

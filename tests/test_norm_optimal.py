@@ -17,6 +17,7 @@ from ilcdob.design.norm_optimal import (
     norm_optimal_bytes,
     norm_optimal_learning,
 )
+from ilcdob.design.methods import NormOptimal
 from ilcdob.design.pair import design_pair
 from ilcdob.errors import SpecError
 from ilcdob.validation.simulate import rmse, simulate_flight
@@ -243,7 +244,7 @@ def test_long_trial_design_is_compact(fleet):
     n = 50000
     tracemalloc.start()
     try:
-        design = design_pair(fleet, "UAV1", "UAV2", "norm-optimal", n=n)
+        design = design_pair(fleet, "UAV1", "UAV2", NormOptimal(n=n))
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

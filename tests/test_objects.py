@@ -166,7 +166,7 @@ def test_reprs_are_one_short_line(estimate, closed_form):
 
 
 def test_design_to_mat_holds_the_numbers_and_the_law(tmp_path):
-    design = design_pair(ilcdob.default_fleet(), "UAV1", "UAV2", "closed-form", bandwidth=5.0,
+    design = design_pair(ilcdob.default_fleet(), "UAV1", "UAV2", "closed-form", band=5.0,
                          disturbance="airframe")
     f = design.filters
     path = design_to_mat(f, tmp_path / "out" / "design.mat")

@@ -17,6 +17,7 @@ import pytest
 import ilcdob
 from ilcdob.design.closed_form import closed_form_filters
 from ilcdob.design.delta import delta_set
+from ilcdob.design.methods import RobustSet
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.design.robust_set import RobustSetInfeasibleError, RobustSetOptions, bound_on_grid, design_robust_set
 from ilcdob.design.worst_case import ratio_for_delta, uncertainty_cones, worst_case_ratio
@@ -191,7 +192,7 @@ def test_a_whole_trial_figure_too_long_is_refused_before_the_design(fleet):
 
 def test_pair_design_and_options(fleet):
     deltas = fleet_delta_sets(fleet, ["UAV2", "UAV3"], k=1, bound=0.3)
-    d = design_pair(fleet, "UAV2", "UAV3", "robust-set", deltas=deltas, robust_set=RobustSetOptions(rho=0.8, **FAST))
+    d = design_pair(fleet, "UAV2", "UAV3", RobustSet(RobustSetOptions(rho=0.8, **FAST), deltas))
     assert d.filters["rho_guaranteed"] <= 0.8 + 2e-3 and len(d.filters["F"]["num"]) == 101
     assert d.order == "closed form + 101-tap FIR" and "L1" not in d.filters
     e = np.sin(np.linspace(0, 20, 500)) * 1e-2

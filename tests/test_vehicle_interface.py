@@ -246,7 +246,7 @@ def test_fly_log_learn_fly_on_rotorpy_through_files_only(tmp_path):
     written = np.fromfile(tmp_path / "next" / "learning_signal.bin", dtype="<f8")
     from_csv = load_csv(tmp_path / "next" / "learning_signal.csv", {"d_f": "learning"})["d_f"]
     log = load_csv(tmp_path / "crazyflie_trial.csv", {"r": "ref", "y": "x"})
-    in_process = design_pair(fleet, "crazyflie", "hummingbird", "closed-form", bandwidth="off").learning(
+    in_process = design_pair(fleet, "crazyflie", "hummingbird", "closed-form", band="off").learning(
         log["r"] - log["y"], np.zeros(n)).d_f
     peak = np.max(np.abs(in_process))
     np.testing.assert_allclose(written, in_process, rtol=0, atol=1e-9 * peak)

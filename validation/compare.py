@@ -35,9 +35,10 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 import numpy as np
 
 from ilcdob.design.fir import FIROptions
-from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.design.laws import DEFAULT_LAW, check_law, law_for
+from ilcdob.design.methods import DEFAULT_METHODS, METHODS, MethodSettings, method_named
 from ilcdob.design.norm_optimal import NormOptimalOptions
-from ilcdob.design.pair import DEFAULT_METHODS, METHODS, PairDesign, design_pair, fleet_delta_sets
+from ilcdob.design.pair import PairDesign, design_pair, fleet_delta_sets
 from ilcdob.design.robust import RobustOptions
 from ilcdob.errors import IlcdobError, NumericalError, SpecError
 from ilcdob.fleet import Fleet
@@ -112,7 +113,7 @@ class MethodComparison:
     Attributes
     ----------
     method : str
-        The design (:data:`ilcdob.design.pair.METHODS`).
+        The design (:data:`ilcdob.design.methods.METHODS`).
     order : str
         Orders of its filters, as text ("-" for a failed design).
     design_time_s : float
@@ -444,7 +445,7 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEF
     scenario_id : int
         1-4 (:mod:`ilcdob.validation.scenarios`); its learning order's first pair is used.
     methods : sequence of str
-        Subset of :data:`ilcdob.design.pair.METHODS` (default :data:`~ilcdob.design.pair.DEFAULT_METHODS`).
+        Subset of :data:`ilcdob.design.methods.METHODS` (default :data:`~ilcdob.design.methods.DEFAULT_METHODS`).
     options : CompareOptions, optional
         Samples, uncertainty, duration, design options and law (default: ``CompareOptions()``).
     progress : callable, optional
@@ -472,11 +473,10 @@ def compare_designs(fleet: Fleet, scenario_id: int, methods: Sequence[str] = DEF
     for method in methods:
         t0 = time.perf_counter()
         try:
-            designs[method] = design_pair(fleet, source, target, method, n=pair.t.size,
-                                          norm_optimal=opts.norm_optimal, fir=opts.fir, deltas=deltas,
-                                          robust=opts.robust, lifted=False, law=opts.law,
-                                          **({"reference": pair.r, "acceleration": pair.a_ref}
-                                             if opts.law == "exact-reference" else {}))
+            settings = MethodSettings(n=pair.t.size, deltas=deltas, fir=opts.fir, norm_optimal=opts.norm_optimal,
+                                      robust=opts.robust)
+            designs[method] = design_pair(fleet, source, target, method_named(method).configured(settings),
+                                          law=law_for(opts.law, pair.r, pair.a_ref))
         except IlcdobError as exc:  # a design that cannot be made is a result of the comparison
             failed[method] = MethodComparison.failed(method, str(exc), time.perf_counter() - t0)
         build[method] = time.perf_counter() - t0

@@ -46,7 +46,7 @@ import numpy as np
 
 from ilcdob.design import LearningFilters, closed_form_filters
 from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law
+from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law, law_for
 from ilcdob.design.multi_source import SourceTrial, multi_source_learning
 from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
@@ -487,10 +487,9 @@ def pair_designs(fleet: Fleet, filters: dict, law: str, r: np.ndarray, a_ref: np
         if (src, tgt) not in designs:
             if law != "multi-source":
                 _filters_for(fleet, filters, src, tgt)
-            reference = {"reference": r, "acceleration": a_ref} if law == "exact-reference" else {}
-            designs[(src, tgt)] = design_pair(fleet, src, tgt, "closed-form", bandwidth=bandwidth,
-                                              law=DEFAULT_LAW if law == "multi-source" else law,
-                                              disturbance=disturbance, **reference)
+            designs[(src, tgt)] = design_pair(fleet, src, tgt, "closed-form", band=bandwidth,
+                                              law=DEFAULT_LAW if law == "multi-source" else law_for(law, r, a_ref),
+                                              disturbance=disturbance)
         return designs[(src, tgt)]
 
     return design

@@ -897,21 +897,21 @@ def _pair_design(flt: Fleet, source: str, target: str, chosen: Any, o: DesignOpt
     """The pair's design (:func:`ilcdob.design.pair.design_pair`), its learning band fixed to the trial's when
     ``data`` is a trial and the band is chosen from one (``bandwidth="auto"``)."""
     from ilcdob.design.fir import FIROptions
+    from ilcdob.design.laws import law_for
+    from ilcdob.design.methods import MethodSettings
     from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
-    from ilcdob.design.robust import RobustOptions
 
-    n = o.n or (len(data) if data is not None else None)
-    deltas = None
-    if chosen.needs_delta_sets:
-        deltas = fleet_delta_sets(flt, [source, target], k=o.samples, bound=o.bound)
-    reference = {}
-    if o.law == "exact-reference":
-        reference = {"reference": data["r"], "acceleration": data["a"] if "a" in data.signals else None}
-    design = design_pair(flt, source, target, o.method, n=n, deltas=deltas,
-                         fir=FIROptions(unattainable=o.fir_unattainable) if o.fir_unattainable is not None else None,
-                         robust=RobustOptions(rho=o.rho) if "--rho" in chosen.cli_options else None,
-                         law=o.law, bandwidth=o.bandwidth, disturbance=o.disturbance, on_limit=o.on_limit,
-                         lifted=o.lifted, **reference)
+    deltas = fleet_delta_sets(flt, [source, target], k=o.samples, bound=o.bound) if chosen.needs_delta_sets else None
+    settings = MethodSettings(n=o.n or (len(data) if data is not None else None), lifted=o.lifted,
+                              rho=o.rho if "--rho" in chosen.cli_options else None, deltas=deltas,
+                              fir=FIROptions(unattainable=o.fir_unattainable) if o.fir_unattainable is not None
+                              else None)
+    law = o.law
+    if data is not None:
+        law = law_for(o.law, data["r"] if "r" in data.signals else None,
+                      data["a"] if "a" in data.signals else None, "--law")
+    design = design_pair(flt, source, target, chosen.configured(settings), law=law, band=o.bandwidth,
+                         disturbance=o.disturbance, on_limit=o.on_limit)
     if data is not None and design.choose is not None:  # fix the band (filters.json, C code) to the trial's
         _check_noise_samples(o.trial, len(data))
         e_in = design.reference.error_in(data["e"]) if design.reference is not None else data["e"]
@@ -1265,6 +1265,7 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
         raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
                         "(or give --design FOLDER)")
     from ilcdob.design.fir import UNATTAINABLE, FIROptions
+    from ilcdob.design.methods import MethodSettings, method_named
     from ilcdob.design.pair import design_pair, design_with_band
 
     _refuse_unused(method, {"--fir-unattainable": fir_unattainable})
@@ -1273,8 +1274,10 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
     flt, digest = fleet_and_hash(fleet, axis or "x")
     if abs(data.ts - flt.sample_time) > 1e-9:
         raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
-    made = design_pair(flt, source, target, method, bandwidth=bandwidth, on_limit=on_limit,
-                       fir=None if fir_unattainable is None else FIROptions(unattainable=fir_unattainable))
+    chosen = method_named(method, "--method")
+    if fir_unattainable is not None:
+        chosen = chosen.configured(MethodSettings(fir=FIROptions(unattainable=fir_unattainable)))
+    made = design_pair(flt, source, target, chosen, band=bandwidth, on_limit=on_limit)
     if made.choose is not None:
         _check_noise_samples(trial, e.size)
         made = design_with_band(made, made.band_for(e, df_prev))
@@ -1427,7 +1430,7 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
     fleet : str or Path or None
         Fleet TOML (None: the built-in fleet).
     methods : sequence of str, optional
-        Designs to compare (default: :data:`ilcdob.design.pair.DEFAULT_METHODS`).
+        Designs to compare (default: :data:`ilcdob.design.methods.DEFAULT_METHODS`).
     overwrite : bool
         Replace a non-empty folder that ilcdob did not write.
     progress : callable, optional
@@ -1439,7 +1442,7 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
     -------
     Comparison
     """
-    from ilcdob.design.pair import DEFAULT_METHODS
+    from ilcdob.design.methods import DEFAULT_METHODS
     from ilcdob.validation.compare import compare_designs
 
     output = _Output("compare", out, overwrite, argv)

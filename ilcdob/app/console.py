@@ -320,7 +320,7 @@ def _robust_set_rho(rho: float | None, methods: list[str]) -> None:
 def _compare(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     from ilcdob.design.delta import check_scale
     from ilcdob.design.fir import FIROptions
-    from ilcdob.design.pair import DEFAULT_METHODS
+    from ilcdob.design.methods import DEFAULT_METHODS
     from ilcdob.design.robust import RobustOptions
     from ilcdob.validation.compare import CompareOptions
     from ilcdob.validation.scenarios import SCENARIOS
@@ -351,7 +351,7 @@ def _extensions(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
 
 def _campaign(a: argparse.Namespace, argv: list[str], con: Console) -> int:
-    from ilcdob.design.pair import DEFAULT_METHODS
+    from ilcdob.design.methods import DEFAULT_METHODS
     from ilcdob.validation.campaign import CampaignOptions
 
     methods = list(a.methods or DEFAULT_METHODS)

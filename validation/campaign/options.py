@@ -11,7 +11,7 @@ import numpy as np
 
 from ilcdob.design.delta import MAX_DELTA_SAMPLES, check_scale
 from ilcdob.design.laws import DEFAULT_LAW, check_law
-from ilcdob.design.pair import DEFAULT_METHODS, METHODS
+from ilcdob.design.methods import DEFAULT_METHODS, METHODS
 from ilcdob.design.robust_set import DELTA_SETS
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
@@ -61,8 +61,8 @@ class CampaignOptions:
     scenarios : tuple of int
         Scenario ids, each 1-4.
     methods : tuple of str
-        Designs, a subset of :data:`ilcdob.design.pair.METHODS` (default
-        :data:`~ilcdob.design.pair.DEFAULT_METHODS`).
+        Designs, a subset of :data:`ilcdob.design.methods.METHODS` (default
+        :data:`~ilcdob.design.methods.DEFAULT_METHODS`).
     duration : float, optional
         Fly only the first ``duration`` seconds of each scenario (s, > 0; default: all).
     robust_models : int

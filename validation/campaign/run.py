@@ -14,9 +14,8 @@ import numpy as np
 
 from ilcdob.design.delta import DeltaSet, delta_set
 from ilcdob.design.laws import DEFAULT_LAW
-from ilcdob.design.methods import METHODS
+from ilcdob.design.methods import METHODS, MethodSettings
 from ilcdob.design.pair import PairDesign, design_pair, with_law
-from ilcdob.design.robust import RobustOptions
 from ilcdob.design.robust_set import RobustSetOptions
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
@@ -110,9 +109,9 @@ class _WorkerState:
                       for name in (source, target)}
             try:
                 # robust-set guarantees over the family the true plants are drawn from (value sets, not samples)
-                self.designs[key] = design_pair(self.fleet, source, target, method, n=n, deltas=deltas,
-                                                robust=RobustOptions(rho=self.options.rho), lifted=False,
-                                                robust_set=self._robust_set_options())
+                settings = MethodSettings(n=n, rho=self.options.rho, deltas=deltas,
+                                          robust_set=self._robust_set_options())
+                self.designs[key] = design_pair(self.fleet, source, target, METHODS[method].configured(settings))
             except IlcdobError as exc:  # e.g. FIR constraint not met: every run of it is recorded as failed
                 self.designs[key] = f"design failed: {exc}"
         return self.designs[key]
