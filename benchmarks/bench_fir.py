@@ -1,6 +1,6 @@
 """Benchmark: the FIR learning-filter fit, Clarabel against IPOPT, and the design's status over three fleets.
 
-Part 1 solves the same constrained fits (:func:`ilcdob.design.fir.fit_fir`, default options: 80 taps,
+Part 1 solves the same constrained fits (:func:`ilcdob.design.methods.fir.fit_fir`, default options: 80 taps,
 advance 8, 200 grid points) in one process with
 
 * ``clarabel``: the cone program in orthonormal coordinates (the default);
@@ -12,17 +12,17 @@ advance 8, 200 grid points) in one process with
 Single fits on the design grid: fits whose |Te1| <= 0.9 constraint is active (the conftest fleets with a 20 % bound);
 the no-harm fit of the scenario-1 comparison (UAV1 -> UAV2, 6 samples, bound 0.6, seed 0: the bounds
 ``FIRDesign.limit``); and that comparison's strict problem, which no filter can meet (reported:
-time to the verdict). Then two whole designs (:func:`ilcdob.design.fir.design_fir` with each solver: the
+time to the verdict). Then two whole designs (:func:`ilcdob.design.methods.fir.design_fir` with each solver: the
 exchange rounds on the check grid included). Every objective is recomputed from the returned coefficients
 with one formula, and ``viol`` is the largest ``|Te1| / bound - 1`` (<= 1e-6 counts as met).
 
-Part 2 designs every ordered pair of each fleet with :func:`ilcdob.design.fir.design_fir` at its
+Part 2 designs every ordered pair of each fleet with :func:`ilcdob.design.methods.fir.design_fir` at its
 defaults, with the model only, with the fleet's own Delta set (the built-in fleet: its identification,
 8 samples; the others: a 20 % bound, 4 samples) and with the comparison's Delta set (6 samples, bound
 0.6, seed 0), and prints each design's status: ``ok`` (the margin held on the whole grid), ``no-harm``
 (the margin given up in the stated bands, where no filter can meet it: ``unattainable``) or the error.
 
-Times are wall times with BLAS single-threaded (as :func:`~ilcdob.design.fir.design_fir` runs), best of
+Times are wall times with BLAS single-threaded (as :func:`~ilcdob.design.methods.fir.design_fir` runs), best of
 ``--repeat`` for the single fits; on a shared machine they vary by a factor of 2-3 from run to run.
 
 Run:  python benchmarks/bench_fir.py [--part 1|2|all] [--repeat 3]
@@ -41,7 +41,7 @@ from threadpoolctl import threadpool_limits
 
 import ilcdob
 from ilcdob.design import closed_form_filters
-from ilcdob.design.fir import (CHECK_REFINE, FIRGuaranteeWarning, FIROptions, _fir_matrix, _quadrature, _realify,
+from ilcdob.design.methods.fir import (CHECK_REFINE, FIRGuaranteeWarning, FIROptions, _fir_matrix, _quadrature, _realify,
                                 design_fir, fit_fir)
 from ilcdob.design.pair import fleet_delta_sets
 from ilcdob.fleet import fleet_from_dict
@@ -84,7 +84,7 @@ def problem(fleet: ilcdob.Fleet, src: str, tgt: str, kind: str, options: FIROpti
 
 
 def objective(h: np.ndarray, target: np.ndarray, w: np.ndarray, ts: float, o: FIROptions) -> float:
-    """The weighted least-squares objective of the module docstring of :mod:`ilcdob.design.fir`."""
+    """The weighted least-squares objective of the module docstring of :mod:`ilcdob.design.methods.fir`."""
     wt = np.sqrt(o.weights(w) * _quadrature(w)) / np.abs(target)
     res = (_fir_matrix(w, o.n_taps, o.advance, ts) @ h - target) * wt
     s = float(np.max(np.abs(target)))

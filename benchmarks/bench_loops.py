@@ -3,7 +3,7 @@
 Part 1, the two functions, each against a copy of its implementation before the kernel (kept
 here as the baseline), at N = 3000 and N = 300000 samples:
 
-* ``simulate_map`` (design/closed_form.py): the built-in fleet's ``G_f`` of UAV1 driven by white
+* ``simulate_map`` (design/maps/closed_form.py): the built-in fleet's ``G_f`` of UAV1 driven by white
   noise; baseline: python-control's ``forced_response`` (a Python loop over the samples);
 * ``simulate_flight`` (validation/simulate.py): UAV1's DOB loop with a learning signal, sensor
   noise and a reference; baseline: the plant and the :class:`~ilcdob.controller.OuterLoopController`
@@ -57,7 +57,7 @@ from threadpoolctl import ThreadpoolController
 import ilcdob
 import ilcdob.statespace as kernel
 from ilcdob.design import simulate_map
-from ilcdob.design.closed_form import one_minus
+from ilcdob.design.maps.closed_form import one_minus
 from ilcdob.fleet import fleet_from_dict
 import ilcdob.validation.simulate as flight_module
 from ilcdob.validation.simulate import simulate_flight

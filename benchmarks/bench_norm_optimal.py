@@ -6,7 +6,7 @@ lifted matrices.
    the built-in fleet's UAV2 (learning from UAV1, hover scenario). ilcdob: gains plus one trial
    solve (the whole design, from the loop); baseline in the same process: cvxpy with the lifted
    (dense, lower-triangular Toeplitz) Gf, solved by Clarabel. The optima are compared.
-2. At N = 300,000 (``--big-n``): the compiled recursion of :mod:`ilcdob.design.norm_optimal`
+2. At N = 300,000 (``--big-n``): the compiled recursion of :mod:`ilcdob.design.methods.norm_optimal`
    (Chandrasekhar gains and the passes, the system's zero entries left out, compiled to native code
    by :mod:`ilcdob.native`) against the per-sample Python loop it replaced (kept below as
    :class:`LoopDesigner`, that implementation verbatim) and against the earlier compiled forms
@@ -51,7 +51,7 @@ import numpy as np
 import ilcdob
 from ilcdob.design import simulate_map
 from ilcdob.design import norm_optimal
-from ilcdob.design.norm_optimal import NormOptimalDesigner, NormOptimalOptions
+from ilcdob.design.methods.norm_optimal import NormOptimalDesigner, NormOptimalOptions
 from ilcdob.errors import NativeBuildError
 from ilcdob.lifted import lifted_operator, markov_parameters
 

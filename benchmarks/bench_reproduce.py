@@ -104,7 +104,7 @@ def _sampled_check(fleet, orders: list[list[str]]) -> dict:
     """The report's Theorem check as built before: Delta sets of 8 sampled plants per order (the reference)."""
     from ilcdob.app.html import THEOREM_SAMPLES, _theorem_pair
     from ilcdob.design.pair import fleet_delta_sets, pair_band
-    from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
+    from ilcdob.design.checks.theorem import format_theorem_table, learning_pairs, theorem_check
 
     data = {"samples": THEOREM_SAMPLES, "seed": 0, "orders": []}
     for order in orders:

@@ -1,6 +1,6 @@
 """Benchmark: robust design over K = 20 models at N = 1000 (design issue: under 20 s).
 
-The SOCP of :mod:`ilcdob.design.robust` (worst case over K sampled UAV2 loops with the
+The SOCP of :mod:`ilcdob.design.methods.robust` (worst case over K sampled UAV2 loops with the
 improvement constraints ``||e_k|| <= rho ||e0_k||``) for a hover-scenario disturbance.
 ilcdob: sparse state-space constraints on balanced-truncated ``Gf_k`` (Clarabel called with the
 conic data assembled once; a second trial re-solves with new right-hand sides only). Baseline
@@ -23,7 +23,7 @@ import numpy as np
 
 import ilcdob
 from ilcdob.design import delta_set
-from ilcdob.design.robust import RobustDesigner, RobustOptions, predicted_errors
+from ilcdob.design.methods.robust import RobustDesigner, RobustOptions, predicted_errors
 from ilcdob.lifted import lifted_operator, markov_parameters
 
 RHO, LAM, MU = 0.5, 1e-6, 1e-4

@@ -1,4 +1,4 @@
-"""Benchmark: the robust-set design (:func:`ilcdob.design.robust_set.design_robust_set`), before and after.
+"""Benchmark: the robust-set design (:func:`ilcdob.design.methods.robust_set.design_robust_set`), before and after.
 
 Per pair, the whole design (the FIR ``F``, its verification, the closed form and the whole-trial figure
 ``rho_N``) is timed in one process with
@@ -7,7 +7,7 @@ Per pair, the whole design (the FIR ``F``, its verification, the closed form and
   design for the run): the structured set's polygon and sagitta built from every value of its grid on
   all 20,199 verification frequencies, the 60 worst violations per exchange round, ``F`` on the
   verification grid as a dense ``20,199 x n_taps`` matrix;
-* ``after``: the current :mod:`ilcdob.design.robust_set` / :mod:`ilcdob.design.value_set` (the
+* ``after``: the current :mod:`ilcdob.design.methods.robust_set` / :mod:`ilcdob.design.sets.value_set` (the
   set's boundary values where they decide the polygon, runs of violations in the exchange, ``F`` by
   Horner's rule).
 
@@ -38,15 +38,15 @@ from dataclasses import dataclass
 import numpy as np
 
 import ilcdob
-from ilcdob.design import robust_set as rs
-from ilcdob.design import value_set as vs
+from ilcdob.design.methods import robust_set as rs
+from ilcdob.design.sets import value_set as vs
 from ilcdob.design.pair import fleet_delta_sets
-from ilcdob.design.robust_set import RobustSetDesign, RobustSetOptions, structured_set
-from ilcdob.design.value_set import EllipseFamily, ValueSet
+from ilcdob.design.methods.robust_set import RobustSetDesign, RobustSetOptions, structured_set
+from ilcdob.design.sets.value_set import EllipseFamily, ValueSet
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Before: only what the formulation did differently (design/robust_set.py and design/value_set.py as they were).
+# Before: only what the formulation did differently (design/methods/robust_set.py and design/sets/value_set.py as they were).
 # ``before`` runs today's ``_design_filter`` (and SOCP, verification, polygon and image, unchanged since) with these
 # four pieces swapped in: the set's rows from every value of its grid (its values by ``einsum``), the sagitta as the
 # distance to the chord of the images, the 60 worst violations per exchange round, and ``F`` on the verification

@@ -2,8 +2,8 @@
 
 This is the API behind ``ilcdob design``: it builds the design, the ``filters.json``
 content (discrete filters applied to the previous system's error and learning signal:
-second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.export`; the C
-code of :mod:`.c_export` runs them), the norm-optimal law's gains (and, when asked, its
+second-order sections or FIR taps with a non-causal ``advance``, see :mod:`.filters.coefficients`; the C
+code of :mod:`.export.c_export` runs them), the norm-optimal law's gains (and, when asked, its
 lifted matrices), and the learning signal for a given trial of the previous system.
 
 Every design learns through the chain of stages of :mod:`.law` (docs/theory.md section 6),
@@ -28,19 +28,19 @@ from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 from ilcdob.specs import LimitSpec
 
-from .band import LearningBand, check_bandwidth, choose_band
-from .closed_form import LearningFilters, closed_form_filters, simulate_map
-from .finite_horizon import finite_horizon_ratio
+from .filters.band import LearningBand, check_bandwidth, choose_band
+from .maps.closed_form import LearningFilters, closed_form_filters, simulate_map
+from .maps.finite_horizon import finite_horizon_ratio
 from .law import LawContext, LearningLaw, Stage
 from .law.designed import Designed
 from .law.limit import Limit
-from .delta import DeltaSet, delta_bound, delta_set
-from .flown import airframe_path_filter, check_disturbance
-from .laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTerms, check_law, reference_terms
-from .limit import LIMIT_POLICIES, LimitReport
+from .sets.delta import DeltaSet, delta_bound, delta_set
+from .maps.flown import airframe_path_filter, check_disturbance
+from .law.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTerms, check_law, reference_terms
+from .law.limit import LIMIT_POLICIES, LimitReport
 from .methods import METHODS, DesignInputs, Method, method_named
-from .robust import RobustPairDesigner
-from .theorem import theorem_rhs
+from .methods.robust import RobustPairDesigner
+from .checks.theorem import theorem_rhs
 
 __all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets",
            "design_with_band"]
@@ -92,12 +92,12 @@ class PairDesign:
         into one.
     lifted : dict of str -> array, or None
         Norm-optimal: its learning law in compact form (the gains of
-        :meth:`~ilcdob.design.norm_optimal.NormOptimalLaw.to_arrays`, O(N)), and the N x N
+        :meth:`~ilcdob.design.methods.norm_optimal.NormOptimalLaw.to_arrays`, O(N)), and the N x N
         matrices ``L1``, ``L2`` when asked for (``lifted=True``).
     robust : RobustPairDesigner or None
         For the robust method: the per-trial SOCP (its ``design`` gives ratios per model).
     law : str
-        Learning law (:mod:`ilcdob.design.laws`): ``"paper"`` or ``"exact-reference"``.
+        Learning law (:mod:`ilcdob.design.law.laws`): ``"paper"`` or ``"exact-reference"``.
     reference : ReferenceTerms or None
         ``exact-reference``: the pair's reference terms, applied by :meth:`learning`.
     band : LearningBand or None
@@ -106,7 +106,7 @@ class PairDesign:
         :func:`design_with_band`.
     choose : callable or None
         With ``bandwidth="auto"``: ``choose(error=e)`` chooses the band of each trial from its
-        error (:func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound).
+        error (:func:`~ilcdob.design.filters.band.choose_band` with the fleet's inputs bound).
     path : numpy.ndarray or None
         Sections of the airframe correction W (disturbance on the airframe; the band's choice).
     limits : LimitSpec or None
@@ -163,7 +163,7 @@ class PairDesign:
         ``bandwidth="auto"``: chosen from the error the source would have had without learning,
         ``e' = e + Gf_hat_{j-1}{d_f,{j-1}}`` (its spectrum carries the whole disturbance, even
         when learning has already removed most of it from ``e``), and the fleet
-        (:mod:`.band`); otherwise the band fixed at design time.
+        (:mod:`.filters.band`); otherwise the band fixed at design time.
 
         Parameters
         ----------
@@ -245,7 +245,7 @@ class PairDesign:
     def finite_trial(self, n: int, source: LoopSystem | None = None, target: LoopSystem | None = None) -> Any:
         """The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` of this law over ``n`` samples.
 
-        The linear map of :meth:`learning_law` over ``n`` samples (:mod:`.finite_horizon`): the
+        The linear map of :meth:`learning_law` over ``n`` samples (:mod:`.maps.finite_horizon`): the
         fixed band (:attr:`band`), no limit, one trial of the source flown without learning.
 
         Parameters
@@ -298,7 +298,7 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
         Sampled true plants per system.
     bound : float, optional
         A common multiplicative bound for every system (default: each system's own stated
-        bound or identification, see :func:`~ilcdob.design.delta.delta_set`).
+        bound or identification, see :func:`~ilcdob.design.sets.delta.delta_set`).
     scale : float
         Multiplier of the identified standard deviations.
     seed : int
@@ -323,7 +323,7 @@ def _sos_gain(sos: np.ndarray | None, w: np.ndarray, ts: float) -> np.ndarray:
 def _band_inputs(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, path: np.ndarray | None,
                  deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters],
                  model_edge: bool = True) -> dict[str, Any]:
-    """What the band's choice knows from the fleet (:func:`~ilcdob.design.band.choose_band` keywords);
+    """What the band's choice knows from the fleet (:func:`~ilcdob.design.filters.band.choose_band` keywords);
     without ``model_edge`` the Delta set is left out (designs that are robust to it themselves)."""
     specs = {s.name: s for s in fleet.systems}
     s_spec, t_spec = specs[src.name], specs[tgt.name]
@@ -347,7 +347,7 @@ def _band_inputs(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, path: np.ndarra
 def _band_chooser(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, request: object, path: np.ndarray | None,
                   deltas: dict[str, DeltaSet] | None, closed_form: Callable[[], LearningFilters],
                   model_edge: bool = True) -> Callable[..., LearningBand]:
-    """``choose(error=...)``: :func:`~ilcdob.design.band.choose_band` with the fleet's inputs bound."""
+    """``choose(error=...)``: :func:`~ilcdob.design.filters.band.choose_band` with the fleet's inputs bound."""
     return partial(choose_band, fleet.sample_time, request,
                    **_band_inputs(fleet, src, tgt, path, deltas, closed_form, model_edge))
 
@@ -401,19 +401,19 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
         that design over Delta sets use them (without: :func:`fleet_delta_sets`, K = 8, from the
         identifications).
     law : {"paper", "exact-reference"} or ExactReference
-        Learning law (:mod:`ilcdob.design.laws`). The exact-reference law needs the trial's
-        reference: give :class:`~.laws.ExactReference` (``law_for(name, reference,
+        Learning law (:mod:`ilcdob.design.law.laws`). The exact-reference law needs the trial's
+        reference: give :class:`~.law.laws.ExactReference` (``law_for(name, reference,
         acceleration)``); it adds the reference terms around the method's learning.
         ``multi-source`` learns from several trials and is refused here.
     band : "auto", float or None
-        The learning band's corner (:mod:`.band`): ``"auto"`` (default) chooses it per trial
+        The learning band's corner (:mod:`.filters.band`): ``"auto"`` (default) chooses it per trial
         from the trial's error and the fleet (sensor noise, the target's acceleration limit, the
         source's Delta set); a number states it (rad/s); ``None`` or ``"off"``: the method's
         filter as it is. For the designs of :data:`~.methods.GUARANTEED` the automatic band leaves out
         the model edge: they are robust to the Delta set by construction, and a band closed on
         it only takes learning away (and, on whole trials, some of their guarantee).
     disturbance : {"command", "airframe", "wind"}
-        Where the disturbance acts (:mod:`.flown`): at the command, as in the paper's loop, on
+        Where the disturbance acts (:mod:`.maps.flown`): at the command, as in the paper's loop, on
         the airframe (adds the correction W; models with a rigid body to split off), or as a
         wind velocity through each airframe's drag (W times the ratio of the drag poles; models
         with one integrator and a drag pole).
@@ -485,7 +485,7 @@ def _check_law_request(fleet: Fleet, source: str, target: str, law: str, referen
     if law == "multi-source":
         raise SpecError("`law`: 'multi-source' learns from the trials of every earlier system at once, and a pair "
                         f"design ({source} -> {target}) learns from one trial of {source}; use "
-                        "ilcdob.design.multi_source.multi_source_learning with every trial, or "
+                        "ilcdob.design.law.multi_source.multi_source_learning with every trial, or "
                         "reproduce(..., law='multi-source') for a learning chain")
     if reference is None:
         raise SpecError(f"`reference`: the exact-reference law needs the reference trajectory of the trial "

@@ -14,7 +14,7 @@ import control as ct
 
 import ilcdob
 from ilcdob.app.commands import check_to_json, design_to_folder
-from ilcdob.design.theorem import format_theorem_table
+from ilcdob.design.checks.theorem import format_theorem_table
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("my_design")
 

@@ -49,7 +49,7 @@ therefore never realised from high-degree polynomials:
   spaced poles near z = 1 are not rounded together by the representation ``1 - small``.
 
 Poles of ``Q``, ``M`` and ``C`` are known analytically (:attr:`DiscreteBlock.poles`), so
-the learning filters need no eigenvalues of these blocks (``design/closed_form.py``).
+the learning filters need no eigenvalues of these blocks (``design/maps/closed_form.py``).
 """
 
 from __future__ import annotations

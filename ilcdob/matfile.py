@@ -14,7 +14,7 @@ In MATLAB::
     m = load('model.mat');
     G = tf(m.num, m.den, 'InputDelay', m.delay);
 
-A design's filters are written by :func:`ilcdob.design.objects.design_to_mat` (the design layer
+A design's filters are written by :func:`ilcdob.design.export.objects.design_to_mat` (the design layer
 checks a ``filters.json``; this module, in the kernel, cannot).
 """
 

@@ -6,11 +6,11 @@ One place computes what every filter object of ilcdob reports as its ``freqresp`
   each anything callable at complex points ``z`` (a discrete python-control system, a
   zero-pole-gain filter), with an optional look-ahead ``z^a``. It serves
   :func:`ilcdob.loop.freqresp` (one system, no look-ahead),
-  :meth:`ilcdob.design.noncausal.ZPKFilter.freqresp` and
-  :meth:`ilcdob.design.objects.LearningFilterTF.freqresp` (the factors of ``filters.json`` and
+  :meth:`ilcdob.design.filters.noncausal.ZPKFilter.freqresp` and
+  :meth:`ilcdob.design.export.objects.LearningFilterTF.freqresp` (the factors of ``filters.json`` and
   their look-ahead);
 * :func:`fir_response` - the same response of a non-causal FIR ``z^a sum_i h[i] z^-i``
-  (:class:`ilcdob.design.fir.FIRFilter`), evaluated as ``sum_i h[i] e^{-jw Ts (i - a)}`` with
+  (:class:`ilcdob.design.methods.fir.FIRFilter`), evaluated as ``sum_i h[i] e^{-jw Ts (i - a)}`` with
   the look-ahead inside each tap's exponent (:func:`fir_matrix`, also the matrix the FIR
   designs fit with): one rounding of the phase per tap, where ``e^{jw Ts a}`` times a
   polynomial in ``z^-1`` would add the rounding of a long sum of cancelling terms.

@@ -471,7 +471,7 @@ class LimitSpec:
     ``g tan(tilt)`` with a tilt limit, ``g sqrt(k^2 - 1)`` with a thrust-to-weight ratio ``k``
     while holding its altitude. Give any of the three; the smallest bound counts
     (:attr:`max_acceleration`). The learning signal is checked against it
-    (:mod:`ilcdob.design.limit`).
+    (:mod:`ilcdob.design.law.limit`).
 
     Attributes
     ----------
@@ -547,7 +547,7 @@ class SensorSpec:
     ----------
     noise_std : float
         Standard deviation of its white noise, m (>= 0, < 0.1). Sets the learning band when
-        no trial is given to measure it from (:mod:`ilcdob.design.band`).
+        no trial is given to measure it from (:mod:`ilcdob.design.filters.band`).
     """
 
     noise_std: float

@@ -59,7 +59,7 @@ def test_a_special_file_is_never_replaced(kind, tmp_path):
 
 @pytest.mark.skipif(not hasattr(os, "mknod"), reason="needs os.mknod")
 def test_design_to_mat_refuses_a_device_before_computing(tmp_path):
-    from ilcdob.design.objects import design_to_mat
+    from ilcdob.design.export.objects import design_to_mat
 
     if os.geteuid() != 0:
         pytest.skip("making a device node needs root")

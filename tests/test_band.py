@@ -1,4 +1,4 @@
-"""The learning band: the robustness filter F around the learning filter and its corner (ilcdob.design.band)."""
+"""The learning band: the robustness filter F around the learning filter and its corner (ilcdob.design.filters.band)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from ilcdob.design.band import (AMPLIFICATION_TOL, END_FIT_S, NOISE_SHARE, OFF_FRACTION, LearningBand, check_bandwidth,
+from ilcdob.design.filters.band import (AMPLIFICATION_TOL, END_FIT_S, NOISE_SHARE, OFF_FRACTION, LearningBand, check_bandwidth,
                                 choose_band, estimate_noise, learning_horizon)
 from ilcdob.design.law import LawContext, LearningLaw
 from ilcdob.design.law.designed import Designed

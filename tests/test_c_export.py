@@ -12,14 +12,14 @@ import pytest
 
 from ilcdob.app.cli import main
 from ilcdob.app.output import OutputFolder, Provenance
-from ilcdob.design.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
+from ilcdob.design.export.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
 from ilcdob.design.law import apply_learning
-from ilcdob.design.export import (DIRECT_FORM_RTOL, apply_coefficients, apply_lookahead,
+from ilcdob.design.filters.coefficients import (DIRECT_FORM_RTOL, apply_coefficients, apply_lookahead,
                                   coefficients_freqresp, direct_form_disagreement, section_growth,
                                   zpk_to_coefficients)
-from ilcdob.design.noncausal import ZPKFilter, lookahead
+from ilcdob.design.filters.noncausal import ZPKFilter, lookahead
 from ilcdob.design.pair import design_pair
-from ilcdob.design.limit import LearningLimitWarning
+from ilcdob.design.law.limit import LearningLimitWarning
 from ilcdob.errors import SpecError
 from ilcdob.fleet import default_fleet, load_fleet
 from ilcdob.signals import extend_smoothly
@@ -440,7 +440,7 @@ def test_c_learn_is_the_paper_filter_times_the_band_on_a_sinusoid(cc, tmp_path, 
     """
     import control as ct
 
-    from ilcdob.design.band import FILTER_ORDER
+    from ilcdob.design.filters.band import FILTER_ORDER
     from scipy import signal
 
     fleet = default_fleet()
@@ -583,7 +583,7 @@ def test_header_and_readme_recommend_learn(learn_designs):
 
 def _exact_filter(zeros, poles, gain: float, ts: float) -> ZPKFilter:
     """The filter; its anti-causal poles in the right half-plane are inverted exactly (the images of
-    continuous non-minimum-phase zeros: their look-ahead, ~27.6/z s, is physics, design/noncausal.py)."""
+    continuous non-minimum-phase zeros: their look-ahead, ~27.6/z s, is physics, design/filters/noncausal.py)."""
     f = ZPKFilter(np.asarray(zeros, dtype=complex), np.asarray(poles, dtype=complex), gain, ts)
     assert not f.substituted.size, "expected an exact inversion of right-half-plane poles"
     return f

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ilcdob.app.cli import main
-from ilcdob.design.c_export import c_code, check_filters
+from ilcdob.design.export.c_export import c_code, check_filters
 from ilcdob.design.law import apply_learning
 from ilcdob.design.pair import design_pair
 from ilcdob.errors import SpecError

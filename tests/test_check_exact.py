@@ -145,7 +145,7 @@ def test_allpass_counterexample_flown_learning_makes_the_error_worse(fleet_file)
     """A trial: a sinusoidal disturbance at the stated plant's worst frequency, UAV3 (true plant) flies it with the
     DOB, UAV2 learns from it with the closed-form law (band off, as the check judged it) and flies it again."""
     from ilcdob.design import design_pair
-    from ilcdob.design.theorem import theorem_check
+    from ilcdob.design.checks.theorem import theorem_check
     from ilcdob.design.pair import fleet_delta_sets
     from ilcdob.validation.simulate import rmse, simulate_flight
 
@@ -231,9 +231,9 @@ def test_a_designed_filter_and_the_band_enter_the_exact_figure(fleet_file):
     F = |Butterworth|^4 (scipy, zero-pole form) times the given response."""
     from scipy import signal as sps
 
-    from ilcdob.design.band import LearningBand
+    from ilcdob.design.filters.band import LearningBand
     from ilcdob.design.pair import fleet_delta_sets
-    from ilcdob.design.theorem import theorem_check
+    from ilcdob.design.checks.theorem import theorem_check
 
     flt = ilcdob.load_fleet(fleet_file(_allpass_fleet_text()))
     ds = fleet_delta_sets(flt, flt.names, k=2)
@@ -253,7 +253,7 @@ def test_a_stated_plant_outside_the_stated_bound_decides_when_it_is_worse(fleet_
     """The all-pass plant (|Delta| = 0.3) under a stated bound of 0.2: the disc's worst case is below 1, but the
     stated plant lies outside it and learning from it makes the error worse: the verdict fails and says why."""
     from ilcdob.design.pair import fleet_delta_sets
-    from ilcdob.design.theorem import theorem_check
+    from ilcdob.design.checks.theorem import theorem_check
 
     flt = ilcdob.load_fleet(fleet_file(_allpass_fleet_text().replace("bound = 0.3", "bound = 0.2")))
     c = theorem_check(flt, None, fleet_delta_sets(flt, flt.names, k=2))[1]
@@ -269,7 +269,7 @@ def test_the_stability_boundary_inside_the_set_is_unbounded_and_said(fleet):
     from dataclasses import replace
 
     from ilcdob.design.pair import fleet_delta_sets
-    from ilcdob.design.theorem import theorem_check
+    from ilcdob.design.checks.theorem import theorem_check
 
     ds = fleet_delta_sets(fleet, fleet.names, k=2, bound=0.6)
     c = theorem_check(fleet, None, ds)[0]

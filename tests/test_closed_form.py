@@ -1,7 +1,7 @@
 """Closed-form learning filters (the Theorem, Case I) and their lifted form.
 
 The filters are checked against maps built here, independently of :mod:`ilcdob.loop` and
-:mod:`ilcdob.design.closed_form`, on the built-in fleet and on two fleets with unequal plants
+:mod:`ilcdob.design.maps.closed_form`, on the built-in fleet and on two fleets with unequal plants
 (``unequal_fleet``: Ts = 0.01 s, an input delay and a fourth-order Q; ``feedforward_fleet``:
 a plant without a second integrator, a fractional-sample delay, unequal Q time constants).
 """
@@ -177,7 +177,7 @@ def test_lifted_form_matches_closed_form_and_reports_conditioning(fleet):
 def test_mismatched_zero_pole_form_is_a_numerical_error(fleet):
     # a zero-pole form that does not reproduce its block formula is a numerical failure (exit 3), and the
     # message names the filter, the disagreement and the frequency
-    from ilcdob.design.closed_form import _l1_exact, matched
+    from ilcdob.design.maps.closed_form import _l1_exact, matched
     from ilcdob.errors import IlcdobError, NumericalError
 
     a, b = fleet.loops[0], fleet.loops[1]
@@ -196,9 +196,9 @@ def test_mismatched_zero_pole_form_is_a_numerical_error(fleet):
 
 def test_check_uses_the_rational_filter_not_its_applied_approximation():
     # relative degree 2 at 1 ms: the sampling zero at -1.002 becomes an anti-causal pole whose look-ahead
-    # (13800 samples) is replaced by its zero-phase substitute when applied (design/noncausal.py). The
+    # (13800 samples) is replaced by its zero-phase substitute when applied (design/filters/noncausal.py). The
     # zero-pole form is checked with its exact rational response, which matches the block formula
-    from ilcdob.design.closed_form import _l1_exact
+    from ilcdob.design.maps.closed_form import _l1_exact
     from ilcdob.fleet import fleet_from_dict
 
     table = {"plant": {"num": [0.8, 8.0], "den": [1.0, 4.0, 0.0, 0.0]},

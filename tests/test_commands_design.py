@@ -11,7 +11,7 @@ import pytest
 
 from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters
-from ilcdob.design.export import apply_coefficients
+from ilcdob.design.filters.coefficients import apply_coefficients
 from ilcdob.signals import FlightData
 from ilcdob.identification.loaders import load_csv
 from ilcdob.validation.simulate import rmse, simulate_flight

@@ -10,7 +10,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from ilcdob.app.cli import main
-from ilcdob.design.robust import RobustOptions
+from ilcdob.design.methods.robust import RobustOptions
 from ilcdob.errors import SpecError
 from ilcdob.validation.compare import CompareOptions, compare_designs
 

@@ -1,5 +1,5 @@
 """Fast sampling and high DOB orders: loops and learning filters stay accurate (ilcdob/discretize.py,
-"Conditioning"; ilcdob/loop.py; design/closed_form.py).
+"Conditioning"; ilcdob/loop.py; design/maps/closed_form.py).
 
 Stress fleet at Ts = 1, 5, 20 and 50 ms with ``q_order`` 3, 6 and 8:
 

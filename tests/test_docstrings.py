@@ -235,5 +235,5 @@ def test_walk_finds_the_packages() -> None:
     found = set(modules) | set(broken)
     for root in ROOTS:
         assert root in found
-    assert "ilcdob.design.closed_form" in found and "ilcdob.identification.tfest" in found
+    assert "ilcdob.design.maps.closed_form" in found and "ilcdob.identification.tfest" in found
     assert not any(name.startswith("ilcdob.app") for name in found)

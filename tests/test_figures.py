@@ -1,4 +1,4 @@
-"""Figures of the reproduction (``ilcdob.validation.figures``), of a design (``ilcdob.design.figure``,
+"""Figures of the reproduction (``ilcdob.validation.figures``), of a design (``ilcdob.design.checks.figure``,
 ``bode.png`` of ``ilcdob design``) and of the comparison: every learning iteration is drawn, and
 iterations that coincide are one line said so in words; Bode curves that coincide are drawn once,
 phases are wrapped; the design's curves are the paper's block formulas; line styles are distinct,
@@ -18,8 +18,8 @@ from matplotlib.lines import Line2D
 
 import ilcdob
 from ilcdob.app.cli import main
-from ilcdob.design.band import LearningBand
-from ilcdob.design.figure import COINCIDE_RTOL, pair_bode_figure
+from ilcdob.design.filters.band import LearningBand
+from ilcdob.design.checks.figure import COINCIDE_RTOL, pair_bode_figure
 from ilcdob.fleet import fleet_from_dict
 from ilcdob.validation.compare import Comparison, MethodComparison
 from ilcdob.validation.figures import ITERATIONS_RTOL, reproduction_figures
@@ -369,7 +369,7 @@ def test_design_command_writes_the_bode_figure(tmp_path):
 
 
 def test_design_figure_says_what_it_cannot_draw(monkeypatch):
-    import ilcdob.design.figure as module
+    import ilcdob.design.checks.figure as module
     from ilcdob.errors import UnstableLoopError
 
     def unstable(loop, gain):
@@ -441,7 +441,7 @@ def test_titles_stand_where_matplotlibs_automatic_placement_puts_them(which, nam
     the one automatic placement draws (TITLE_Y None: matplotlib places them), byte for byte. In
     ``one_row_coincides`` only the second row's iterations coincide: its note is the title of its right
     panel, in the row below the first row's x axis."""
-    from ilcdob.design import figure as design_figure
+    from ilcdob.design.checks import figure as design_figure
     from ilcdob.validation import figures
     from ilcdob.validation.figures import figure_png
 
@@ -569,7 +569,7 @@ def test_minor_log_grid_draws_matplotlibs_minor_positions_as_one_collection():
     from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
 
-    from ilcdob.design.figure import minor_log_grid
+    from ilcdob.design.checks.figure import minor_log_grid
 
     def build():
         fig = Figure(figsize=(6, 4))
@@ -611,7 +611,7 @@ def test_long_log_views_label_their_decades_as_matplotlib_does_without_mathtext(
     from matplotlib.figure import Figure
     from matplotlib.ticker import FormatStrFormatter
 
-    from ilcdob.design.figure import minor_log_grid
+    from ilcdob.design.checks.figure import minor_log_grid
 
     sup = {"-": "\u207b", "0": "\u2070", "1": "\u00b9", "2": "\u00b2", "3": "\u00b3", "4": "\u2074",
            "5": "\u2075", "6": "\u2076", "7": "\u2077", "8": "\u2078", "9": "\u2079"}

@@ -15,7 +15,7 @@ import pytest
 
 from ilcdob.app import cli, commands
 from ilcdob.app.cli import main
-from ilcdob.design.fir import UNATTAINABLE
+from ilcdob.design.methods.fir import UNATTAINABLE
 from ilcdob.errors import SpecError
 
 FIR = ["design", "--from", "UAV1", "--to", "UAV2", "--method", "fir", "--samples", "2", "--bound", "0.6"]

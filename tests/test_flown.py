@@ -1,4 +1,4 @@
-"""The airframe correction of the learning law for wind on the rigid body (ilcdob.design.flown)."""
+"""The airframe correction of the learning law for wind on the rigid body (ilcdob.design.maps.flown)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from scipy import signal as sps
 
 import ilcdob
-from ilcdob.design.flown import airframe_path_filter, model_attitude, rigid_body_split
-from ilcdob.design.laws import law_for
+from ilcdob.design.maps.flown import airframe_path_filter, model_attitude, rigid_body_split
+from ilcdob.design.law.laws import law_for
 from ilcdob.errors import SpecError
 
 PID = ilcdob.PIDSpec(kp=2.0, ki=0.2, kd=2.0, derivative_filter=0.05)

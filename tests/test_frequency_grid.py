@@ -1,4 +1,4 @@
-"""The grids, weights and option checks the FIR designs share (ilcdob.design.frequency_grid).
+"""The grids, weights and option checks the FIR designs share (ilcdob.design.filters.frequency_grid).
 
 FIROptions and RobustSetOptions build their grids and weights through the shared functions; the
 grids are pinned here against the formulas the options used before they shared them, to the bit,
@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
-from ilcdob.design.export import direct_form_grid
-from ilcdob.design.fir import POINTS_PER_RIPPLE, FIROptions
-from ilcdob.design.frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
-from ilcdob.design.robust_set import RobustSetOptions
+from ilcdob.design.filters.coefficients import direct_form_grid
+from ilcdob.design.methods.fir import POINTS_PER_RIPPLE, FIROptions
+from ilcdob.design.filters.frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
+from ilcdob.design.methods.robust_set import RobustSetOptions
 from ilcdob.errors import SpecError
 
 

@@ -25,7 +25,7 @@ import pytest
 from ilcdob.app.cli import main
 from ilcdob.app.commands import reproduce_to_folder
 from ilcdob.app.html import ReportError, build_report
-from ilcdob.design.c_export import c_code
+from ilcdob.design.export.c_export import c_code
 from ilcdob.design.pair import design_pair
 from ilcdob.errors import FleetError
 from ilcdob.fleet import load_fleet

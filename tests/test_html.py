@@ -23,7 +23,7 @@ from ilcdob.app.cli import main
 from ilcdob.app.commands import compare_to_folder, report_to_html, reproduce_to_folder
 from ilcdob.app.html import ReportError, ReportOptions, build_report, json_tables
 from ilcdob.app.output import OutputError
-from ilcdob.design.fir import FIROptions
+from ilcdob.design.methods.fir import FIROptions
 from ilcdob.validation.compare import CompareOptions
 from ilcdob.validation.reproduce import reproduce
 
@@ -402,11 +402,11 @@ def test_theorem_json_is_the_check_on_sampled_sets_without_sampling(fleet, monke
     """The report's check reads the Delta sets' bounds only: theorem.json is that of the sets of 8 sampled
     plants it names, and no sampled plant's loop is built."""
     import ilcdob
-    import ilcdob.design.delta as delta
+    import ilcdob.design.sets.delta as delta
     from ilcdob.app.html import THEOREM_SAMPLES, _theorem_pair, report_files
     from ilcdob.app.output import json_text
     from ilcdob.design.pair import fleet_delta_sets, pair_band
-    from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
+    from ilcdob.design.checks.theorem import format_theorem_table, learning_pairs, theorem_check
 
     want = {"samples": THEOREM_SAMPLES, "seed": 0, "orders": []}
     for order in ORDERS:  # the check as it was built: sampled sets per order
@@ -442,7 +442,7 @@ def test_report_files_without_figures_builds_no_figure(fleet, monkeypatch):
 
 
 def test_bound_only_delta_sets_refuse_what_needs_samples(fleet):
-    from ilcdob.design.theorem import bound_delta_sets, theorem_check
+    from ilcdob.design.checks.theorem import bound_delta_sets, theorem_check
     from ilcdob.errors import SpecError
 
     sets = bound_delta_sets(fleet)

@@ -27,7 +27,7 @@ from scipy import signal as sps
 
 from ilcdob.design.law import STAGE_KINDS, LawContext, LearningLaw
 from ilcdob.design.law.designed import Designed, file_core
-from ilcdob.design.laws import law_for
+from ilcdob.design.law.laws import law_for
 from ilcdob.design.methods import METHODS, MethodSettings
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.errors import SpecError

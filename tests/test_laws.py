@@ -17,7 +17,7 @@ import pytest
 
 import ilcdob
 from ilcdob.app.cli import main
-from ilcdob.design.laws import LAWS, ExactReference, check_law, reference_terms
+from ilcdob.design.law.laws import LAWS, ExactReference, check_law, reference_terms
 from ilcdob.design.pair import design_pair, with_law
 from ilcdob.errors import SpecError
 from ilcdob.app.html import build_report

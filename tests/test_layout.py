@@ -166,6 +166,35 @@ def test_the_source_tree_imports_without_installing(code, tmp_path):
     assert run.returncode == 0 and run.stdout.startswith("ilcdob "), run.stderr[-2000:]
 
 
+#: The design's rooms, lowest first (the README's layout table): a room imports its own and lower rooms only.
+#: Modules directly in design/ (the package, ``pair``: the design verb) sit above every room.
+DESIGN_ROOMS = ("filters", "maps", "sets", "law", "methods", "checks", "export")
+
+
+def _room(module: str) -> int | None:
+    """Rank of a design module's room (None: not in design)."""
+    prefix = "ilcdob.design"
+    if not (module == prefix or module.startswith(prefix + ".")):
+        return None
+    room = module[len(prefix) + 1:].split(".")[0]
+    return DESIGN_ROOMS.index(room) if room in DESIGN_ROOMS else len(DESIGN_ROOMS)
+
+
+def test_the_design_rooms_import_downwards():
+    bad = []
+    for path, module in _modules():
+        own = _room(module)
+        if own is None:
+            continue
+        for line, name in _imports(path, module):
+            target = _room(name)
+            if target is not None and target > own:
+                bad.append(f"{path.relative_to(ROOT)}:{line}: {module} ({DESIGN_ROOMS[own]}) imports {name}")
+    assert bad == []
+    assert {p.name for p in (ROOT / "design").iterdir() if p.is_dir() and (p / "__init__.py").is_file()} \
+        == set(DESIGN_ROOMS), "a design folder that is not a room (or a room without its folder)"
+
+
 def test_every_package_folder_is_installed() -> None:
     """``pip install .`` (not editable) installs only the packages pyproject.toml lists: a
     sub-package folder missing there imports from the source tree but not once installed."""

@@ -1,4 +1,4 @@
-"""A learning signal a vehicle can fly: acceleration limits (ilcdob.specs.LimitSpec, ilcdob.design.limit)."""
+"""A learning signal a vehicle can fly: acceleration limits (ilcdob.specs.LimitSpec, ilcdob.design.law.limit)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.design.limit import LearningLimitWarning, enforce_limit
+from ilcdob.design.law.limit import LearningLimitWarning, enforce_limit
 from ilcdob.errors import FleetError, LearningLimitError, SpecError
 from ilcdob.specs import GRAVITY, LimitSpec, SensorSpec
 

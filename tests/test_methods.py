@@ -1,4 +1,4 @@
-"""The design methods as registered objects (design/methods.py): the registry is the one place that
+"""The design methods as registered objects (design/methods/__init__.py): the registry is the one place that
 knows a method by its name, every option a method claims is an option of ``ilcdob design``, and
 no module outside the registry compares a method's name with a literal."""
 
@@ -48,7 +48,7 @@ def _is_method(node: ast.AST) -> bool:
 
 
 def _branches_on_method_names() -> list[str]:
-    """``method == "fir"``, ``method in ("robust", ...)`` and the like, outside design/methods.py."""
+    """``method == "fir"``, ``method in ("robust", ...)`` and the like, outside design/methods/__init__.py."""
     found = []
     for folder in ("ilcdob", "design", "identification", "validation"):
         for path in sorted((ROOT / folder).rglob("*.py")):
@@ -84,8 +84,8 @@ def test_a_method_carries_its_options_and_design_pair_takes_eight_parameters():
     import ilcdob
     from ilcdob.design.methods import FIR, ClosedForm, MethodSettings, NormOptimal, Robust, RobustSet
     from ilcdob.design.pair import design_pair
-    from ilcdob.design.robust import RobustOptions
-    from ilcdob.design.robust_set import RobustSetOptions
+    from ilcdob.design.methods.robust import RobustOptions
+    from ilcdob.design.methods.robust_set import RobustSetOptions
 
     assert len(inspect.signature(design_pair).parameters) <= 8
     settings = MethodSettings(n=120, rho=0.8, lifted=True)

@@ -9,7 +9,7 @@ import pytest
 
 from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters
-from ilcdob.design.multi_source import SourceTrial, joint_disturbance, multi_source_learning
+from ilcdob.design.law.multi_source import SourceTrial, joint_disturbance, multi_source_learning
 from ilcdob.errors import SpecError
 from ilcdob.validation.extensions import extensions_study
 from ilcdob.validation.scenarios import scenario

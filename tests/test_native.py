@@ -1,4 +1,4 @@
-"""Native builds of the compiled recursions (ilcdob/native.py, design/norm_optimal.py).
+"""Native builds of the compiled recursions (ilcdob/native.py, design/methods/norm_optimal.py).
 
 The native library must give CasADi's virtual machine's numbers bit for bit (the same IEEE
 operations in the same order, no fused multiply-add): checked on the built-in fleet and on
@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from ilcdob import native
-from ilcdob.design import norm_optimal as no
-from ilcdob.design.norm_optimal import NormOptimalDesigner, NormOptimalOptions
+from ilcdob.design.methods import norm_optimal as no
+from ilcdob.design.methods.norm_optimal import NormOptimalDesigner, NormOptimalOptions
 from ilcdob.errors import NativeBuildError, SpecError
 from ilcdob.fleet import fleet_from_dict
 
@@ -350,7 +350,7 @@ def test_a_planted_fifo_does_not_block_a_command(tmp_path, fleet, cc):
     f = native.NativeFunction(_function(fleet))
     os.mkfifo(cache / f.library(native.compiler_command()).name)
     script = ("import warnings, ilcdob\n"
-              "from ilcdob.design import norm_optimal as no\n"
+              "from ilcdob.design.methods import norm_optimal as no\n"
               "lp = ilcdob.default_fleet().loops[0]\n"
               "f = no._native('simulate', no._pattern(no._state_space(lp.nominal.G_f)), 16)\n"
               "with warnings.catch_warnings(record=True) as seen:\n"
@@ -431,7 +431,7 @@ def test_an_unprivileged_user_does_not_run_another_users_library(tmp_path, fleet
         # the child imports as root (the interpreter may lie in root's home), then drops to nobody for good
         # before it looks for the library
         script = ("import os, warnings, ilcdob\n"
-                  "from ilcdob.design import norm_optimal as no\n"
+                  "from ilcdob.design.methods import norm_optimal as no\n"
                   "lp = ilcdob.default_fleet().loops[0]\n"
                   "f = no._native('simulate', no._pattern(no._state_space(lp.nominal.G_f)), 16)\n"
                   "f.source\n"

@@ -9,7 +9,7 @@ import pytest
 
 from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters, simulate_map
-from ilcdob.design.norm_optimal import (
+from ilcdob.design.methods.norm_optimal import (
     NormOptimalDesigner,
     NormOptimalLaw,
     NormOptimalOptions,
@@ -174,7 +174,7 @@ def test_compiled_recursion_equals_the_per_sample_loop(fleet, lam, mu, tol, mode
 
 
 def test_recursions_skip_the_systems_zero_entries(fleet, monkeypatch):
-    from ilcdob.design import norm_optimal as no
+    from ilcdob.design.methods import norm_optimal as no
 
     rng = np.random.default_rng(3)
     a = np.diag(rng.uniform(0.3, 0.9, 6)) + np.triu(rng.uniform(-0.2, 0.2, (6, 6)), 1)

@@ -19,10 +19,10 @@ import pytest
 import scipy.io
 
 import ilcdob
-from ilcdob.design.export import apply_coefficients, coefficients_freqresp
+from ilcdob.design.filters.coefficients import apply_coefficients, coefficients_freqresp
 from ilcdob.design.law import apply_learning
-from ilcdob.design.objects import LearningFilterTF, design_to_mat, filter_tf, filters_tf, load_design
-from ilcdob.design.closed_form import closed_form_filters
+from ilcdob.design.export.objects import LearningFilterTF, design_to_mat, filter_tf, filters_tf, load_design
+from ilcdob.design.maps.closed_form import closed_form_filters
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.errors import ModelFileError, NumericalError, SpecError
 from ilcdob.identified import model_from_dict
@@ -263,7 +263,7 @@ def test_identified_model_transfer_function_keeps_signal_names_and_delay(estimat
 
 
 def test_fir_design_repr_is_one_line_of_the_facts():
-    from ilcdob.design.fir import FIRGuaranteeWarning, FIROptions, design_fir
+    from ilcdob.design.methods.fir import FIRGuaranteeWarning, FIROptions, design_fir
 
     fleet = ilcdob.default_fleet()
     deltas = fleet_delta_sets(fleet, ["UAV1", "UAV2"], k=2, bound=0.6)

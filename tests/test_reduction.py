@@ -1,11 +1,11 @@
-"""Balanced truncation of discrete SISO maps (ilcdob.design.reduction)."""
+"""Balanced truncation of discrete SISO maps (ilcdob.design.filters.reduction)."""
 
 from __future__ import annotations
 
 import control as ct
 import numpy as np
 
-from ilcdob.design.reduction import hankel_singular_values, reduced_realisation
+from ilcdob.design.filters.reduction import hankel_singular_values, reduced_realisation
 from ilcdob.loop import freqresp
 
 

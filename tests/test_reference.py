@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ilcdob.design import closed_form_filters, simulate_map
-from ilcdob.design.reference import ExactReferenceLearning, inverse_gf_filter, reference_error
+from ilcdob.design.maps.reference import ExactReferenceLearning, inverse_gf_filter, reference_error
 from ilcdob.validation.scenarios import scenario
 from ilcdob.validation.simulate import rmse, simulate_flight
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ilcdob.design.closed_form import closed_form_filters
-from ilcdob.design.fir import FIRFilter
-from ilcdob.design.objects import filter_tf
+from ilcdob.design.maps.closed_form import closed_form_filters
+from ilcdob.design.methods.fir import FIRFilter
+from ilcdob.design.export.objects import filter_tf
 from ilcdob.loop import freqresp
 from ilcdob.response import fir_matrix, fir_response, response, unit_circle
 

@@ -9,7 +9,7 @@ import pytest
 
 import ilcdob
 from ilcdob.design import closed_form_filters, delta_set, simulate_map
-from ilcdob.design.robust import (RobustDesigner, RobustInfeasibleError, RobustOptions, RobustPairDesigner,
+from ilcdob.design.methods.robust import (RobustDesigner, RobustInfeasibleError, RobustOptions, RobustPairDesigner,
                                   predicted_errors)
 from ilcdob.loop import build_loop
 from ilcdob.specs import PlantSpec
@@ -171,7 +171,7 @@ class _FakeSolution:
 
 def _solve_with_fake_clarabel(fleet, monkeypatch, status: str, rho: float):
     """Solve a small problem with Clarabel replaced by a solver that returns ``status`` (and d_f = 0)."""
-    import ilcdob.design.robust as robust
+    import ilcdob.design.methods.robust as robust
 
     class Fake:
         def __init__(self, P, q, A, b, cones, settings):
@@ -193,7 +193,7 @@ def test_inaccurate_solve_warns(fleet, monkeypatch):
 
 
 def test_solver_failure_is_an_error_with_next_steps(fleet, monkeypatch):
-    from ilcdob.design.robust import RobustSolverError
+    from ilcdob.design.methods.robust import RobustSolverError
 
     with pytest.raises(RobustSolverError, match="Next steps"):
         _solve_with_fake_clarabel(fleet, monkeypatch, "NumericalError", rho=0.5)

@@ -1,7 +1,7 @@
 """Robust-set design: improvement guaranteed for every multiplicative error in the Delta set.
 
 The worst case over the disc ``|Delta| <= W`` is the closed-form cone bound of
-:mod:`ilcdob.design.robust_set`; it is checked here against brute force, against the loop
+:mod:`ilcdob.design.methods.robust_set`; it is checked here against brute force, against the loop
 maps of :mod:`ilcdob.loop`, on fresh random and adversarial Delta samples, in the time domain,
 and on the infeasible-rho path.
 """
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.design.closed_form import closed_form_filters
-from ilcdob.design.delta import delta_set
+from ilcdob.design.maps.closed_form import closed_form_filters
+from ilcdob.design.sets.delta import delta_set
 from ilcdob.design.methods import RobustSet
 from ilcdob.design.pair import design_pair, fleet_delta_sets
-from ilcdob.design.robust_set import RobustSetInfeasibleError, RobustSetOptions, bound_on_grid, design_robust_set
-from ilcdob.design.worst_case import ratio_for_delta, uncertainty_cones, worst_case_ratio
+from ilcdob.design.methods.robust_set import RobustSetInfeasibleError, RobustSetOptions, bound_on_grid, design_robust_set
+from ilcdob.design.sets.worst_case import ratio_for_delta, uncertainty_cones, worst_case_ratio
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import build_loop, freqresp
 from ilcdob.specs import PlantSpec
@@ -233,7 +233,7 @@ def test_exchange_takes_every_band_of_violations():
     """An exchange round gives every run of violations its peak and its two ends, the runs in the order of
     their peaks (the 60 worst violations alone all fell in the widest band: 5 exchange rounds for the
     structured bound-0.9 design UAV1 -> UAV2, 2 now), at most ``n_max`` frequencies."""
-    from ilcdob.design.robust_set import _exchange_points
+    from ilcdob.design.methods.robust_set import _exchange_points
     worst = np.zeros(400)
     worst[10:200] = 1.001 + 0.01 * np.hanning(190)  # a wide band, slightly over the level
     worst[250:253] = [1.1, 1.3, 1.2]              # two narrow ones, further over
@@ -249,8 +249,8 @@ def test_exchange_takes_every_band_of_violations():
 def test_fir_response_by_horner_matches_the_taps():
     """``F`` on the verification grid without the grid x taps matrix: the FIR's own response to 1e-12 of
     ``sum |h|`` (the bound of ``|F|``; measured 7e-15)."""
-    from ilcdob.design.fir import FIRFilter
-    from ilcdob.design.robust_set import _fir_response
+    from ilcdob.design.methods.fir import FIRFilter
+    from ilcdob.design.methods.robust_set import _fir_response
     h = np.random.default_rng(5).normal(size=301)
     w = RobustSetOptions().verify_grid(0.02)
     np.testing.assert_allclose(_fir_response(h, w, 0.02, 150), FIRFilter(h, 150, 0.02).freqresp(w), rtol=0,

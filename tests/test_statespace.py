@@ -29,7 +29,7 @@ import pytest
 import ilcdob
 from ilcdob.controller import OuterLoopController
 from ilcdob.design import simulate_map
-from ilcdob.design.closed_form import one_minus
+from ilcdob.design.maps.closed_form import one_minus
 from ilcdob.errors import SignalError, SpecError
 from ilcdob.fleet import fleet_from_dict
 from ilcdob import statespace

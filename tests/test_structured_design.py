@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.design.delta import delta_set, disturbance_peak
-from ilcdob.design.robust_set import RobustSetOptions, design_robust_set, structured_set
-from ilcdob.design.value_set import TAU_RANGE, BoundFamily, EllipseFamily, admissible_range
+from ilcdob.design.sets.delta import delta_set, disturbance_peak
+from ilcdob.design.methods.robust_set import RobustSetOptions, design_robust_set, structured_set
+from ilcdob.design.sets.value_set import TAU_RANGE, BoundFamily, EllipseFamily, admissible_range
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import build_loop, freqresp
 from ilcdob.specs import PlantSpec
@@ -184,7 +184,7 @@ def test_boundary_polygon_is_tighter_and_covers_every_flown_plant():
     random F), equal where values are left out for the margin (the whole grid is used there, 46 of 300
     frequencies), and, where no value is left out, above the exact ratio of 36 flown plants of the set (at
     and inside its limits)."""
-    from ilcdob.design.value_set import family_cones, value_set_cones, worst_over_set
+    from ilcdob.design.sets.value_set import family_cones, value_set_cones, worst_over_set
     spec = FLEET.systems[0]
     src = FLEET.loop(spec.name)
     fam = BoundFamily(0.9)
@@ -223,7 +223,7 @@ def test_boundary_polygon_uses_the_whole_grid_around_the_pole():
     map's pole ``-1/T0`` near UAV1's T0 peak: its boundary alone misses the unbounded inside (ring only:
     2.2 against 2.4, 10.8 against 19.2 for one F), so there :func:`family_cones` takes the whole grid and
     equals :func:`value_set_cones` of it; margin 0 leaves no value out, so only the winding test sees it."""
-    from ilcdob.design.value_set import complementary_sensitivity, family_cones, value_set_cones, worst_over_set
+    from ilcdob.design.sets.value_set import complementary_sensitivity, family_cones, value_set_cones, worst_over_set
     base = EllipseFamily.from_spec(FLEET.systems[0])
     big = replace(base, covariance=tuple(map(tuple, np.asarray(base.covariance) * 1e5)))
     src = FLEET.loop("UAV1")

@@ -22,7 +22,7 @@ import pytest
 import ilcdob
 from ilcdob import build_loop
 from ilcdob.design import closed_form_filters
-from ilcdob.design.figure import with_gain_error
+from ilcdob.design.checks.figure import with_gain_error
 from ilcdob.errors import SpecError
 
 #: A relative-degree-2 plant (double integrator) at Ts = 0.01 s: its sampling zero at z = -1 is

@@ -11,7 +11,7 @@ import pytest
 
 from ilcdob import SpecError
 from ilcdob.design import delta_set
-from ilcdob.design.theorem import format_theorem_table, learning_pairs, theorem_check
+from ilcdob.design.checks.theorem import format_theorem_table, learning_pairs, theorem_check
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +92,7 @@ def test_the_law_with_its_band_is_judged_with_the_band_in_the_ratio(fleet_file, 
     import ilcdob
     from scipy import signal as sps
 
-    from ilcdob.design.band import AMPLIFICATION_TOL
+    from ilcdob.design.filters.band import AMPLIFICATION_TOL
     from ilcdob.design.pair import pair_band
 
     text = good_fleet_text.replace("dob = { q_order = 3, q_time_constant = 0.15 }",

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.design.value_set import TAU_RANGE, bound_family, ellipse_family, value_set_cones, worst_over_set
+from ilcdob.design.sets.value_set import TAU_RANGE, bound_family, ellipse_family, value_set_cones, worst_over_set
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import build_loop, freqresp
 from ilcdob.specs import PlantSpec
@@ -62,7 +62,7 @@ def test_structured_set_is_tighter_than_the_disc_where_the_loop_is_slow():
     disturbance maps within twice the model's) is a thin set; over the disc |Delta| <= 0.9 (keeping
     |1 + T0 Delta| >= 0.5) the closed form's worst ratio is several times larger (measured: 0.015 vs
     0.060 at 0.5 rad/s, 0.11 vs 0.36 at 0.95 rad/s, 0.52 vs 0.94 at 1.5 rad/s)."""
-    from ilcdob.design.worst_case import uncertainty_cones, worst_case_ratio
+    from ilcdob.design.sets.worst_case import uncertainty_cones, worst_case_ratio
     fleet = ilcdob.default_fleet()
     src = fleet.loop("UAV1")
     w = np.array([0.5, 0.95, 1.5])
@@ -89,7 +89,7 @@ def test_ellipse_family_bounds_its_boundary():
     fleet = ilcdob.default_fleet()
     src = fleet.loop("UAV2")
     idx, a, b, R = value_set_cones(src, vs, margin=0.0)
-    from ilcdob.design.worst_case import ratio_for_delta, uncertainty_cones
+    from ilcdob.design.sets.worst_case import ratio_for_delta, uncertainty_cones
     t0 = uncertainty_cones(src, w, np.zeros(2), 0.0)[3]
     phi = np.linspace(0, 2 * np.pi, 997)
     for i in range(2):

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import ilcdob
-from ilcdob.design.value_set import (TAU_RANGE, BoundFamily, EllipseFamily, _highpass, admissible_range,
+from ilcdob.design.sets.value_set import (TAU_RANGE, BoundFamily, EllipseFamily, _highpass, admissible_range,
                                      complementary_sensitivity, family_cones, worst_over_set)
 
 FLEET = ilcdob.default_fleet()

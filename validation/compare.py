@@ -9,14 +9,14 @@ it. The figure of merit is the paper's improvement ratio ``||e_j|| / ||e'_j||`` 
 < 1 means learning helped), ``e'_j`` being system j's DOB-only error in the same case, both
 norms over the whole trial as flown (its first and last samples included: the designs'
 guarantees are per frequency, and the ends of a trial are where a finite trial departs from
-them, :mod:`ilcdob.design.finite_horizon`). The
+them, :mod:`ilcdob.design.maps.finite_horizon`). The
 robust design's models are exactly these 1 + K cases (its own sample set), so theory promises
 its ratio <= rho on them, up to what its predictions cannot know: the two systems' own
 noises differ (paper Sec. IV; docs/theory.md section 4), and the reference term ``(1 - G_r) r`` of moving
 scenarios enters its predictions only through the reconstruction.
 
 Every design learns with the same learning law (``CompareOptions.law``,
-:mod:`ilcdob.design.laws`): ``paper`` (default) or ``exact-reference``, which removes system
+:mod:`ilcdob.design.law.laws`): ``paper`` (default) or ``exact-reference``, which removes system
 j-1's model reference error before the design's filter and adds system j's reference
 correction after it.
 
@@ -34,12 +34,12 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ilcdob.design.fir import FIROptions
-from ilcdob.design.laws import DEFAULT_LAW, check_law, law_for
+from ilcdob.design.methods.fir import FIROptions
+from ilcdob.design.law.laws import DEFAULT_LAW, check_law, law_for
 from ilcdob.design.methods import DEFAULT_METHODS, METHODS, MethodSettings, method_named
-from ilcdob.design.norm_optimal import NormOptimalOptions
+from ilcdob.design.methods.norm_optimal import NormOptimalOptions
 from ilcdob.design.pair import PairDesign, design_pair, fleet_delta_sets
-from ilcdob.design.robust import RobustOptions
+from ilcdob.design.methods.robust import RobustOptions
 from ilcdob.errors import IlcdobError, NumericalError, SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
@@ -79,7 +79,7 @@ class CompareOptions:
     norm_optimal : NormOptimalOptions, optional
         Options of the norm-optimal design (default: its own).
     law : {"paper", "exact-reference"}
-        Learning law (:mod:`ilcdob.design.laws`) applied around every design. ``multi-source``
+        Learning law (:mod:`ilcdob.design.law.laws`) applied around every design. ``multi-source``
         is refused: a comparison flies one pair from one DOB-only trial, where it is the paper's law.
     """
 
@@ -182,7 +182,7 @@ class Comparison:
     methods : list of MethodComparison
         One row per design.
     law : str
-        The learning law (:mod:`ilcdob.design.laws`).
+        The learning law (:mod:`ilcdob.design.law.laws`).
     """
 
     scenario: int
@@ -253,7 +253,7 @@ class Comparison:
         """
         from matplotlib.figure import Figure  # matplotlib only when the figure is made
 
-        from ilcdob.design.figure import TITLE_Y
+        from ilcdob.design.checks.figure import TITLE_Y
 
         fig = Figure(figsize=(8, 3.8), layout="constrained")
         ax = fig.subplots()

@@ -1,9 +1,9 @@
 """Where the two extensions beyond the paper help, and by how much, scenario by scenario.
 
-* **Exact reference term** (:mod:`ilcdob.design.reference`): the chain's first pair
+* **Exact reference term** (:mod:`ilcdob.design.maps.reference`): the chain's first pair
   (j-1 -> j) with the fleet's models exact and each vehicle's noise; the learning flight's
   error with the paper's filters against the filters that keep ``(1 - G_r) r``.
-* **Learning from every earlier system** (:mod:`ilcdob.design.multi_source`): the third
+* **Learning from every earlier system** (:mod:`ilcdob.design.law.multi_source`): the third
   system of the order learns after the first two have flown (the first DOB-only, the second
   with its learning signal from the first). Case II: the second system's true plant is
   ``P_hat (1 + a tau s / (tau s + 1))`` (a model its fleet bound ``|Delta| <= a`` covers), the
@@ -26,8 +26,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ilcdob.design import closed_form_filters, delta_set
-from ilcdob.design.multi_source import SourceTrial, multi_source_learning
-from ilcdob.design.reference import ExactReferenceLearning
+from ilcdob.design.law.multi_source import SourceTrial, multi_source_learning
+from ilcdob.design.maps.reference import ExactReferenceLearning
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import build_loop

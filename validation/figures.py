@@ -10,7 +10,7 @@
 * ``bode_te.png`` - Te1, Te2 (error propagation with learning, under a stated model error)
   and Omega (disturbance -> DOB estimate).
 
-The Bode figures follow :mod:`ilcdob.design.figure`: phase wrapped to (-180, 180] degrees,
+The Bode figures follow :mod:`ilcdob.design.checks.figure`: phase wrapped to (-180, 180] degrees,
 and curves that coincide (L2 of pairs with equal Q, Omega of equal Q) drawn once with one
 legend entry naming them all. In the time series, learning iterations that coincide (within
 :data:`ITERATIONS_RTOL` of their peak, as with exact models) are drawn as one line, and the
@@ -53,7 +53,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ilcdob.design import LearningFilters
-from ilcdob.design.figure import (TE_GAIN_ERROR, TITLE_Y, BodeCurve, draw_bode, finish_bode_axes, frequency_grid,
+from ilcdob.design.checks.figure import (TE_GAIN_ERROR, TITLE_Y, BodeCurve, draw_bode, finish_bode_axes, frequency_grid,
                                   loop_maps, magnitude_db, minor_log_grid, with_gain_error)
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
@@ -291,7 +291,7 @@ def _draw_disturbance(left, right, s, iterations: int) -> tuple[_Coincide, ...]:
 
 
 def _bode_columns(fig: Figure, ts: float, w: np.ndarray, columns: list[tuple[str, list[BodeCurve]]]) -> Figure:
-    """One column per response: magnitude above, phase below (:func:`~ilcdob.design.figure.draw_bode`)."""
+    """One column per response: magnitude above, phase below (:func:`~ilcdob.design.checks.figure.draw_bode`)."""
     axes = fig.subplots(2, len(columns), sharex=True, squeeze=False)
     for col, (title, curves) in enumerate(columns):
         draw_bode(axes[0, col], axes[1, col], w, curves)

@@ -40,9 +40,9 @@ the DOB and the learning only see the measured position ``x_m``, as on a real ve
 
 Each learning flight flies the signal that ``ilcdob design`` computes from the previous
 flight's *measured* error (:meth:`ilcdob.design.pair.PairDesign.learning`): the learning law
-``law`` through the learning band chosen from that trial (:mod:`ilcdob.design.band`), with the
-airframe correction for wind on the rigid body (:mod:`ilcdob.design.flown`) and the learning
-vehicle's acceleration limit (:mod:`ilcdob.design.limit`).
+``law`` through the learning band chosen from that trial (:mod:`ilcdob.design.filters.band`), with the
+airframe correction for wind on the rigid body (:mod:`ilcdob.design.maps.flown`) and the learning
+vehicle's acceleration limit (:mod:`ilcdob.design.law.limit`).
 
 Disturbance estimate against the truth: ``d_hat + d_f`` is a command-side signal (what
 the vehicle must be commanded to cancel the wind), the true disturbance is the airframe's
@@ -62,9 +62,9 @@ from typing import Callable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.design.band import check_bandwidth
-from ilcdob.design.flown import model_attitude
-from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.design.filters.band import check_bandwidth
+from ilcdob.design.maps.flown import model_attitude
+from ilcdob.design.law.laws import DEFAULT_LAW, check_law
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, default_fleet, fleet_from_dict
 from ilcdob.fleet_io import fleet_to_toml
@@ -104,12 +104,12 @@ class NonlinearSettings:
         Identify the vehicles from step and chirp flights (the paper's pipeline, default).
         ``False`` keeps the fleet file's plants as the models.
     bandwidth : "auto", float or None
-        The learning band's corner (:mod:`ilcdob.design.band`): ``"auto"`` (default) chooses
+        The learning band's corner (:mod:`ilcdob.design.filters.band`): ``"auto"`` (default) chooses
         it from each trial learned from, a number states it in rad/s, ``None`` flies the
         Theorem's filters unfiltered.
     airframe_disturbance : bool
         Learn with the wind's true path (it acts on the airframe): the correction
-        ``W = A_hat_{j-1}/A_hat_j`` of :func:`~ilcdob.design.flown.airframe_path_filter`
+        ``W = A_hat_{j-1}/A_hat_j`` of :func:`~ilcdob.design.maps.flown.airframe_path_filter`
         (default). ``False`` flies the paper's law as is, which assumes the wind at the
         command input.
     learning_gain : float
@@ -176,7 +176,7 @@ class NonlinearFlight(Flight):
     d_est : array, m/s^2
         The total estimate ``d_hat + d_f`` (command side) expressed as the acceleration it
         stands for on the airframe: ``A_hat{d_hat + d_f}`` with the model's attitude chain
-        ``A_hat = s^2 P_hat`` under zero-order hold (:func:`~ilcdob.design.flown.model_attitude`).
+        ``A_hat = s^2 P_hat`` under zero-order hold (:func:`~ilcdob.design.maps.flown.model_attitude`).
     saturated : int
         Samples at which the tilt limit cut the commanded acceleration (``u2`` is the
         command actually sent).
@@ -392,7 +392,7 @@ def run_nonlinear_scenario(fleet: Fleet, vehicles: dict[str, QuadrotorParams], s
     settings : NonlinearSettings, optional
         Default: ``NonlinearSettings()``.
     law : {"paper", "exact-reference"}
-        Learning law (:mod:`ilcdob.design.laws`).
+        Learning law (:mod:`ilcdob.design.law.laws`).
     order : list of str, optional
         Learning order by system name (:func:`~ilcdob.validation.scenarios.check_order`);
         None (default): the scenario's.
@@ -512,8 +512,8 @@ class NonlinearReproduction(ReproductionResult):
             "the learning band "
             + ("chosen from that flight's measured error" if s.bandwidth == "auto" else
                ("switched off" if s.bandwidth is None else f"stated at {s.bandwidth:g} rad/s"))
-            + " (`ilcdob.design.band`)"
-            + (", with the airframe-wind correction (`ilcdob.design.flown`)" if s.airframe_disturbance else "")
+            + " (`ilcdob.design.filters.band`)"
+            + (", with the airframe-wind correction (`ilcdob.design.maps.flown`)" if s.airframe_disturbance else "")
             + f", learning gain {s.learning_gain:g}. Tracking RMSE: true position; disturbance "
             "estimate: A_hat{d_hat + d_f} against the wind + noise acceleration on the airframe. Regenerate "
             "with `ilcdob reproduce --plant nonlinear"
@@ -564,7 +564,7 @@ def reproduce_nonlinear(fleet: Fleet | None = None, scenario_ids: list[int] = (1
     scenarios : list of Scenario, optional
         Fly these instead of ``scenario_ids`` (e.g. shortened copies, for tests).
     law : {"paper", "exact-reference"}
-        Learning law (:mod:`ilcdob.design.laws`).
+        Learning law (:mod:`ilcdob.design.law.laws`).
     order : list of str, optional
         Learning order by system name, flown in every scenario
         (:func:`~ilcdob.validation.scenarios.check_order`); None (default): each scenario's.

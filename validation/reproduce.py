@@ -8,23 +8,23 @@ each flight learns from the flight before it in the chain::
 
 until every system has flown ``iterations`` learning trials; ``rmse_learning[i]`` is a
 system's (i+1)-th learning trial. Each learning signal comes from the learning law ``law``
-(:mod:`ilcdob.design.laws`), always built from the systems' *models*:
+(:mod:`ilcdob.design.law.laws`), always built from the systems' *models*:
 
 * ``"paper"`` (default): the closed-form filters of the Theorem (paper Sec. III,
   :func:`ilcdob.design.closed_form_filters`) on the previous flight;
 * ``"exact-reference"``: the same filters with the reference term ``(1 - G_r) r`` kept
-  (:mod:`ilcdob.design.reference`), from the scenario's reference and its acceleration;
+  (:mod:`ilcdob.design.maps.reference`), from the scenario's reference and its acceleration;
 * ``"multi-source"``: from the latest flight of every system that has flown in the chain so
   far (the first system's DOB-only trial included), confidence-weighted by each system's
   Delta set (identification or fleet ``uncertainty`` bound, 8 samples, seed 0; systems with
-  neither count as exact models) (:mod:`ilcdob.design.multi_source`).
+  neither count as exact models) (:mod:`ilcdob.design.law.multi_source`).
 
 With one earlier flight (each scenario's first learning flight) ``multi-source`` is the
 paper's law; with a hover (no reference motion) ``exact-reference`` is.
 
 Every learning signal is what ``ilcdob design`` computes from the previous flight
 (:meth:`ilcdob.design.pair.PairDesign.learning`): the law through the learning band chosen
-from that flight's measured error (:mod:`ilcdob.design.band`; ``bandwidth``), bounded by the
+from that flight's measured error (:mod:`ilcdob.design.filters.band`; ``bandwidth``), bounded by the
 learning vehicle's acceleration limit (fleet ``limits``). With ``sensor_noise_std > 0`` every
 flight measures its position with white noise (seeded per scenario, system and flight) and
 learns from its measured error; the RMSE is that of the true error. Without noise and with
@@ -45,9 +45,9 @@ from typing import Callable, Mapping
 import numpy as np
 
 from ilcdob.design import LearningFilters, closed_form_filters
-from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.design.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law, law_for
-from ilcdob.design.multi_source import SourceTrial, multi_source_learning
+from ilcdob.design.sets.delta import DeltaSet, delta_set
+from ilcdob.design.law.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, check_law, law_for
+from ilcdob.design.law.multi_source import SourceTrial, multi_source_learning
 from ilcdob.design.pair import PairDesign, design_pair
 from ilcdob.errors import SpecError
 from ilcdob.specs import check_noise_std
@@ -170,11 +170,11 @@ class ReproductionResult:
     elapsed_s : float
         Run time of the simulations, s.
     law : str
-        The learning law (:mod:`ilcdob.design.laws`).
+        The learning law (:mod:`ilcdob.design.law.laws`).
     sensor_noise_std : float
         Position-sensor noise of every flight, m (0: exact sensors).
     bandwidth : "auto", float or None
-        The learning band asked for (:mod:`ilcdob.design.band`).
+        The learning band asked for (:mod:`ilcdob.design.filters.band`).
     identified_toml : str
         The fleet file of models identified by the run (TOML text, written as
         ``identified_fleet.toml``); empty when the models were given.
@@ -309,7 +309,7 @@ def markdown_index(res: ReproductionResult, figures: list[str]) -> str:
         "",
         *res.markdown_plant(),
         "",
-        f"Learning law: **{res.law}**, {LAW_DESCRIPTIONS[res.law]} (`ilcdob.design.laws`; choose with `--law`).",
+        f"Learning law: **{res.law}**, {LAW_DESCRIPTIONS[res.law]} (`ilcdob.design.law.laws`; choose with `--law`).",
         "",
         "Tracking RMSE in mm (no DOB / only DOB / learning 1..n) and RMSE of the total disturbance "
         "estimate d_hat + d_f against the true disturbance in m/s^2 (only DOB / learning 1):",
@@ -468,13 +468,13 @@ def pair_designs(fleet: Fleet, filters: dict, law: str, r: np.ndarray, a_ref: np
     filters : dict
         Cache of closed-form filters per (source, target), filled as pairs are designed.
     law : str
-        Learning law (:mod:`ilcdob.design.laws`).
+        Learning law (:mod:`ilcdob.design.law.laws`).
     r, a_ref : numpy.ndarray
         The scenario's reference (m) and its acceleration (m/s^2), for ``exact-reference``.
     bandwidth : "auto", float or None
         The learning band.
     disturbance : {"command", "airframe", "wind"}
-        Where the disturbance acts (:mod:`ilcdob.design.flown`).
+        Where the disturbance acts (:mod:`ilcdob.design.maps.flown`).
 
     Returns
     -------
@@ -529,7 +529,7 @@ def run_scenario(fleet: Fleet, sc: Scenario, iterations: int = 3,
     filters : dict, optional
         Cache of closed-form filters per (source, target), filled as pairs are flown.
     law : {"paper", "exact-reference", "multi-source"}
-        Learning law (module docstring, :mod:`ilcdob.design.laws`).
+        Learning law (module docstring, :mod:`ilcdob.design.law.laws`).
     deltas : dict name -> DeltaSet, optional
         ``multi-source``: the confidence weights' Delta sets (default :func:`law_delta_sets`).
     sensor_noise_std : float

@@ -36,7 +36,7 @@ from typing import Callable, Mapping, Protocol, Sequence, runtime_checkable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.design.flown import DISTURBANCE_PATHS
+from ilcdob.design.maps.flown import DISTURBANCE_PATHS
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet, fleet_from_systems
 from ilcdob.loop import LoopSystem, build_loop
@@ -406,8 +406,8 @@ def fly_learning(order: Sequence[str], iterations: int, base: Mapping[str, tuple
     return learning_chain(list(order), iterations, base[order[0]][1], step)
 
 
-#: A learning law flown by :func:`run_vehicle_laws`: (law, path), ``law`` of :mod:`ilcdob.design.laws`
-#: (paper or exact-reference), ``path`` where it assumes the disturbance acts (:mod:`ilcdob.design.flown`).
+#: A learning law flown by :func:`run_vehicle_laws`: (law, path), ``law`` of :mod:`ilcdob.design.law.laws`
+#: (paper or exact-reference), ``path`` where it assumes the disturbance acts (:mod:`ilcdob.design.maps.flown`).
 LawPath = tuple[str, str]
 
 
@@ -545,7 +545,7 @@ def run_vehicle_scenario(fleet: Fleet, make: MakeVehicle, sc: Scenario, iteratio
     fleet, make, sc, iterations, wind, order
         As in :func:`run_vehicle_laws`.
     path : {"command", "airframe", "wind"}
-        Where the learning law assumes the disturbance acts (:mod:`ilcdob.design.flown`).
+        Where the learning law assumes the disturbance acts (:mod:`ilcdob.design.maps.flown`).
     law : str
         Learning law (paper or exact-reference).
 

@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from ilcdob.design.closed_form import closed_form_filters
+from ilcdob.design.maps.closed_form import closed_form_filters
 from ilcdob.errors import SpecError
 from ilcdob.fleet import fleet_from_systems
 from ilcdob.fleet_io import fleet_to_toml

@@ -1,5 +1,5 @@
 """The airframe correction W as a stage: a disturbance acting on the airframe (or as wind through
-its drag) reaches the learning vehicle through W (docs/theory.md section 6; :mod:`..flown`)."""
+its drag) reaches the learning vehicle through W (docs/theory.md section 6; :mod:`..maps.flown`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from scipy import signal as sps
 
 from ilcdob.errors import SpecError
 
-from ..c_text import DOUBLE, array_c
-from ..entries import check_sections
-from ..finite_horizon import LinearMap, sos_map
+from ..filters.c_text import DOUBLE, array_c
+from ..filters.entries import check_sections
+from ..maps.finite_horizon import LinearMap, sos_map
 from .stage import CParts, LawContext, Signals, Stage, register
 
 __all__ = ["AirframePath"]

@@ -1,5 +1,5 @@
 """The learning band's two stages: the trial extended and filtered before the method's filter,
-filtered again and folded onto the trial after it (docs/theory.md section 6; :mod:`..band`)."""
+filtered again and folded onto the trial after it (docs/theory.md section 6; :mod:`..filters.band`)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from scipy import signal as sps
 
 from ilcdob.errors import SpecError
 
-from ..band import fold_start, learning_horizon
-from ..entries import check_count, check_sections
-from ..finite_horizon import LinearMap, extension_map, fold_map, sos_map
-from ..c_text import DOUBLE, array_c
+from ..filters.band import fold_start, learning_horizon
+from ..filters.entries import check_count, check_sections
+from ..maps.finite_horizon import LinearMap, extension_map, fold_map, sos_map
+from ..filters.c_text import DOUBLE, array_c
 from .stage import CParts, LawContext, Signals, Stage, diag_maps, register
 
 __all__ = ["BandSpec", "BandIn", "BandOut", "band_spec", "check_cutoff", "forward_backward"]
@@ -28,7 +28,7 @@ class BandSpec:
     Attributes
     ----------
     entry : dict
-        The entry as written (:meth:`~ilcdob.design.band.LearningBand.to_dict`).
+        The entry as written (:meth:`~ilcdob.design.filters.band.LearningBand.to_dict`).
     sos, zi : numpy.ndarray
         One pass of F and its steady state per unit input.
     pad, end_fit : int
@@ -276,7 +276,7 @@ _HORIZON_C = """
 /* H: x[0..n), n >= 1, extended by PAD = {m}PAD samples at each end into
    h[0..n + 2 PAD): zeros before; after the end the least-squares line through the last
    m = min(END_FIT, n) samples, END_FIT = {m}END_FIT (numpy.polyfit of degree 1 in
-   ilcdob.design.band.learning_horizon; m = 1: the last sample), here on the centred abscissa
+   ilcdob.design.filters.band.learning_horizon; m = 1: the last sample), here on the centred abscissa
    t_i = i - (m - 1)/2, i = 0..m-1: mean + slope t. */
 static void {p}horizon(const double *x, size_t n, double *h)
 {{

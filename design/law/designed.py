@@ -9,7 +9,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from ..finite_horizon import LinearMap
+from ..maps.finite_horizon import LinearMap
 from .stage import CORE_PLACE, STAGE_KINDS, CParts, LawContext, Signals, Stage, register
 
 __all__ = ["Designed", "file_core"]

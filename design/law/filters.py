@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 from scipy import signal as sps
 
-from ..entries import check_filter_entry
-from ..export import apply_coefficients, lookahead_taps
-from ..finite_horizon import LinearMap, crop_map, extension_map, sos_map
+from ..filters.entries import check_filter_entry
+from ..filters.coefficients import apply_coefficients, lookahead_taps
+from ..maps.finite_horizon import LinearMap, crop_map, extension_map, sos_map
 from .stage import CORE_PLACE, CParts, LawContext, Signals, Stage, hstack_maps, register
 
 __all__ = ["FilterPair", "coefficients_map"]
@@ -24,7 +24,7 @@ def _lfilter_map(b: np.ndarray, a: np.ndarray, m: int, name: str) -> LinearMap:
 
 
 def coefficients_map(coeffs: dict[str, Any], m: int) -> LinearMap:
-    """:func:`~..export.apply_coefficients` of one filter over ``m`` samples as a linear map.
+    """:func:`~..filters.coefficients.apply_coefficients` of one filter over ``m`` samples as a linear map.
 
     The trial continued past its end by the cubic through its last 16 samples (``advance + 8``
     samples), the look-ahead pre-stage (when given) and the sections (or ``num``/``den``) run
@@ -52,12 +52,12 @@ def coefficients_map(coeffs: dict[str, Any], m: int) -> LinearMap:
 
 @register
 class FilterPair(Stage):
-    """``L1{e} + L2{d_f}`` from the coefficient entries ``L1`` and ``L2`` (:func:`~..export.apply_coefficients`).
+    """``L1{e} + L2{d_f}`` from the coefficient entries ``L1`` and ``L2`` (:func:`~..filters.coefficients.apply_coefficients`).
 
     Parameters
     ----------
     l1, l2 : dict
-        The two filters of ``filters.json``, checked (:func:`~..entries.check_filter_entry`).
+        The two filters of ``filters.json``, checked (:func:`~..filters.entries.check_filter_entry`).
     """
 
     kind = "L1/L2"

@@ -9,7 +9,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from ..finite_horizon import LinearMap
+from ..maps.finite_horizon import LinearMap
 from .stage import LawContext, Signals, Stage, register
 
 __all__ = ["Gain"]

@@ -1,5 +1,5 @@
 """The two reference terms of the ``exact-reference`` law as stages (docs/theory.md section 6;
-:mod:`..laws`): the source's reference error removed before learning, the target's own reference
+:mod:`.laws`): the source's reference error removed before learning, the target's own reference
 correction added after. Their signals are not in ``filters.json`` (``reference_terms.csv``)."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ __all__ = ["ReferenceIn", "ReferenceOut"]
 
 
 class _Reference(Stage):
-    """Both halves: the pair's :class:`~..laws.ReferenceTerms` (``LawContext.reference``)."""
+    """Both halves: the pair's :class:`~.laws.ReferenceTerms` (``LawContext.reference``)."""
 
     keys = ("reference_terms",)
     linear = False

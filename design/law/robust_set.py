@@ -1,5 +1,5 @@
 """The robust-set law as a stage: ``(1 - Q_j){F{d_hat}}``, ``d_hat = -Gd_hat_{j-1}^{-1}{e + Gf_hat_{j-1}{d_f}}``,
-from the maps ``filters.json`` records (docs/theory.md sections 3 and 6; :mod:`..robust_set`)."""
+from the maps ``filters.json`` records (docs/theory.md sections 3 and 6; :mod:`..methods.robust_set`)."""
 
 from __future__ import annotations
 
@@ -10,15 +10,16 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from ..c_text import DOUBLE, array_c, state_space_c
-from ..entries import check_count, check_filter_entry, check_state_space
-from ..export import apply_coefficients, apply_state_space
-from ..finite_horizon import LinearMap, causal_map, fir_map, identity_map, trend_map
-from ..trial_edges import fir_on_trial
+from ..filters.c_text import DOUBLE, array_c, state_space_c
+from ..filters.entries import check_count, check_filter_entry, check_state_space
+from ..filters.coefficients import apply_coefficients, apply_state_space, state_space_to_dict, zpk_to_coefficients
+from ..maps.closed_form import LearningFilters, inverse_gd_filter, one_minus
+from ..maps.finite_horizon import LinearMap, causal_map, fir_map, identity_map, trend_map
+from ..filters.trial_edges import fir_on_trial
 from .filters import coefficients_map
 from .stage import CORE_PLACE, CParts, LawContext, Signals, Stage, hstack_maps, register
 
-__all__ = ["RobustSetMaps", "state_space_map"]
+__all__ = ["RobustSetMaps", "state_space_map", "robust_set_maps"]
 
 
 def state_space_map(ss: tuple[np.ndarray, ...], m: int, name: str) -> LinearMap:
@@ -27,7 +28,7 @@ def state_space_map(ss: tuple[np.ndarray, ...], m: int, name: str) -> LinearMap:
     Parameters
     ----------
     ss : tuple of numpy.ndarray
-        ``(A, B, C, D)`` (:func:`~..entries.check_state_space`).
+        ``(A, B, C, D)`` (:func:`~..filters.entries.check_state_space`).
     m : int
         Samples.
     name : str
@@ -129,7 +130,7 @@ def _robust_c(prefix: str, rp: "RobustSetMaps") -> str:
     if rp.advance:
         out.append(f"""
 /* d[0..n) continued {macro}F_ADVANCE samples past its end into d[n..n + F_ADVANCE) along its trend
-   (ilcdob.design.trial_edges.end_continuation): the least-squares line through the FIT =
+   (ilcdob.design.filters.trial_edges.end_continuation): the least-squares line through the FIT =
    min(2 F_ADVANCE, n - m) samples before the last m = min({macro}FADE, n), weighted by the Hann
    window w_i = 0.5 - 0.5 cos(2 pi (i + 1)/(FIT + 1)) (numpy.hanning(FIT + 2)[1:-1]), on the
    centred abscissa; the last m samples blended into it, d + f_k (line - d)... exactly
@@ -192,7 +193,7 @@ static double {prefix}rs_conv(const double *d, size_t len, size_t i)
 
 /* The robust-set law on a signal pair of len >= 1 samples (the trial, or the band's extended
    horizon): a = e, b = d_f of the source in; a = (1 - Q_j){{F{{d_hat}}}} out, with
-   d_hat = -Ginv{{e + Gf{{d_f}}}} (ilcdob.design.robust_set.RobustSetDesign.apply). b is
+   d_hat = -Ginv{{e + Gf{{d_f}}}} (ilcdob.design.methods.robust_set.RobustSetDesign.apply). b is
    overwritten; d holds len + {macro}F_ADVANCE doubles. */
 static void {prefix}rs_core(double *a, double *b, size_t len, double *d)
 {{
@@ -219,3 +220,27 @@ static void {prefix}rs_core(double *a, double *b, size_t len, double *d)
 }}
 """)
     return "".join(out)
+
+
+def robust_set_maps(lf: LearningFilters) -> dict[str, Any]:
+    """The maps a robust-set design's learning law runs on a trial (``filters.json`` key ``law_maps``).
+
+    Parameters
+    ----------
+    lf : LearningFilters
+        The closed-form filters of the design (:attr:`~ilcdob.design.methods.robust_set.RobustSetDesign.filters`), whose
+        loops give the maps.
+
+    Returns
+    -------
+    dict
+        ``source_gf``: ``Gf_hat_{j-1}`` of the source's model (state space, from rest);
+        ``inverse_gd``: ``Gd_hat_{j-1}^{-1}`` in coefficient form (:func:`zpk_to_coefficients`, a
+        non-causal filter); ``one_minus_q``: ``1 - Q_j`` of the target (state space); ``rule``.
+    """
+    return {"source_gf": state_space_to_dict(lf.source.nominal.G_f),
+            "inverse_gd": zpk_to_coefficients(inverse_gd_filter(lf.source, model=True)),
+            "one_minus_q": state_space_to_dict(one_minus(lf.target.Q)),
+            "rule": "on a trial (e, d_f_prev): e' = e + source_gf{d_f_prev} (state space from rest), d_hat = "
+                    "-inverse_gd{e'} (coefficient form, continued past the end by the cubic), F on d_hat as "
+                    "`trial_ends` says, then one_minus_q (state space from rest)"}

@@ -8,7 +8,7 @@ acceleration limit. Each piece is one :class:`Stage` with four faces that agree:
 * :meth:`Stage.apply` on the signals of a trial;
 * :meth:`Stage.to_dict` / :meth:`Stage.from_dict`: its entries in ``filters.json``;
 * :meth:`Stage.linear_map`: the same computation as a linear map over a finite trial
-  (:class:`~ilcdob.design.finite_horizon.LinearMap`), for the whole-trial check;
+  (:class:`~ilcdob.design.maps.finite_horizon.LinearMap`), for the whole-trial check;
 * :meth:`Stage.c_parts`: its C (tables, helper functions and the statements of ``learn``).
 
 A stage sees a tuple of equally long signals: the error and learning signal of each source
@@ -31,7 +31,7 @@ import numpy as np
 from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal
 
-from ..finite_horizon import LinearMap
+from ..maps.finite_horizon import LinearMap
 
 __all__ = ["apply_learning", "Stage", "CParts", "LawContext", "LearningLaw", "STAGE_KINDS", "CORE_PLACE", "OUTPUT_PLACE", "register", "hstack_maps",
            "diag_maps", "Signals"]
@@ -94,9 +94,9 @@ class LawContext:
     core : Stage or None
         The method's filter as designed, in memory, in place of the file's coefficients.
     band : object or None
-        A :class:`~ilcdob.design.band.LearningBand` in place of the file's ``band`` entry.
+        A :class:`~ilcdob.design.filters.band.LearningBand` in place of the file's ``band`` entry.
     reference : object or None
-        The :class:`~ilcdob.design.laws.ReferenceTerms` of an ``exact-reference`` law (their
+        The :class:`~ilcdob.design.law.laws.ReferenceTerms` of an ``exact-reference`` law (their
         signals are not in ``filters.json``); None: the law runs without them.
     gain : float
         Learning gain in (0, 1] on the error (not recorded in ``filters.json``).
@@ -225,7 +225,7 @@ class Stage:
         Parameters
         ----------
         prefix : str
-            Start of every C symbol (:func:`~..c_export.check_c_prefix`).
+            Start of every C symbol (:func:`~..export.c_export.check_c_prefix`).
 
         Returns
         -------

@@ -217,7 +217,7 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     seed : int
         Seed of the sensor noise (rotorpy: of the Dryden turbulence).
     law : str
-        Learning law (:mod:`ilcdob.design.laws`; the nonlinear plant: paper or exact-reference).
+        Learning law (:mod:`ilcdob.design.law.laws`; the nonlinear plant: paper or exact-reference).
     figures : bool
         Write the PNG figures.
     overwrite : bool
@@ -234,7 +234,7 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         White position-sensor noise of every flight, m (default: 0 on the linear plant,
         0.5 mm on the nonlinear one).
     bandwidth : "auto", float or None
-        The learning band (:mod:`ilcdob.design.band`).
+        The learning band (:mod:`ilcdob.design.filters.band`).
     workers : int, optional
         Processes flying the scenarios; the rotorpy plant only (default 1).
     figure_workers : int, optional
@@ -270,14 +270,14 @@ class _Reproduction:
     progress: Progress | None
 
     def checked(self) -> _Reproduction:
-        """The settings with the law's name checked (:func:`ilcdob.design.laws.check_law`).
+        """The settings with the law's name checked (:func:`ilcdob.design.law.laws.check_law`).
 
         Raises
         ------
         SpecError
             A bad law, plant, count, seed or number of workers, before any work.
         """
-        from ilcdob.design.laws import check_law
+        from ilcdob.design.law.laws import check_law
         from ilcdob.validation.figures import render_workers
 
         law = check_law(self.law, "--law")
@@ -341,7 +341,7 @@ class _Reproduction:
         SpecError
             The multi-source law on the nonlinear plant, a bad band or order.
         """
-        from ilcdob.design.band import check_bandwidth
+        from ilcdob.design.filters.band import check_bandwidth
         from ilcdob.validation.figures import FigureRenderer
         from ilcdob.validation.scenarios import check_order
 
@@ -695,7 +695,7 @@ class DesignOptions:
     n : int, optional
         norm-optimal only: trial length in samples of its gains (default: the trial's, else 500).
     law : str
-        Learning law (:mod:`ilcdob.design.laws`).
+        Learning law (:mod:`ilcdob.design.law.laws`).
     trial : str or Path, optional
         CSV of the source's trial: time (s), error (m), learning (m/s^2) [, reference (m),
         acceleration (m/s^2)]; a sample at every ``k Ts``, or it is refused (:func:`_check_learning_trial`).
@@ -704,21 +704,21 @@ class DesignOptions:
     c_float : bool
         closed-form, fir and robust-set only: also emit float C functions.
     bandwidth : "auto", float or None
-        The learning band's corner, rad/s (:mod:`ilcdob.design.band`): ``"auto"`` chooses it
+        The learning band's corner, rad/s (:mod:`ilcdob.design.filters.band`): ``"auto"`` chooses it
         from the trial (or the fleet without one); None or ``"off"``: no filter.
     disturbance : {"command", "airframe", "wind"}
-        Where the disturbance acts (:mod:`ilcdob.design.flown`).
+        Where the disturbance acts (:mod:`ilcdob.design.maps.flown`).
     on_limit : {"clip", "refuse"}
         A learning signal beyond the target's acceleration limit: clip it (with a
-        :class:`~ilcdob.design.limit.LearningLimitWarning`) or refuse it.
+        :class:`~ilcdob.design.law.limit.LearningLimitWarning`) or refuse it.
     axis : {"x", "y", "z"}
         The axis designed (the fleet file's section; filters.json records it, and so the default C
-        prefix of y and z designs ends in the axis, :func:`ilcdob.design.c_export.default_c_prefix`).
+        prefix of y and z designs ends in the axis, :func:`ilcdob.design.export.c_export.default_c_prefix`).
     fir_unattainable : {"no-harm", "refuse"}, optional
         fir only: where no filter meets the margin ``|Te1| <= 1 - margin`` for every sampled model,
         keep only the no-harm promise there and warn (default, "no-harm"), or refuse the design
-        (``refuse``: :class:`~ilcdob.design.fir.FIRDesignError`, nothing written);
-        :attr:`ilcdob.design.fir.FIROptions.unattainable`.
+        (``refuse``: :class:`~ilcdob.design.methods.fir.FIRDesignError`, nothing written);
+        :attr:`ilcdob.design.methods.fir.FIROptions.unattainable`.
     lifted : bool
         norm-optimal only: also write the N x N lifted matrices L1, L2 to lifted.npz (about 8 N^2
         numbers of memory while they are built; the compact law, Riccati gains, is always written).
@@ -750,7 +750,7 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                      fir_unattainable: str | None = None, lifted: bool = False) -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
-    Written, as a unit: ``filters.json``, the C code (``filters.h``/``.c``, :func:`ilcdob.design.c_export.design_files`),
+    Written, as a unit: ``filters.json``, the C code (``filters.h``/``.c``, :func:`ilcdob.design.export.c_export.design_files`),
     ``README.md``, ``bode.png`` and, as the design has them, ``lifted.npz``, ``learning_signal.csv`` (with
     ``trial``) and ``reference_terms.csv`` (the exact-reference law).
 
@@ -783,10 +783,10 @@ fir_unattainable, lifted
     SignalError
         The trial misses samples, holds values beyond :data:`MAX_TRIAL_VALUE`, is sampled unlike the fleet,
         or is too short for ``bandwidth="auto"``.
-    ilcdob.design.fir.FIRDesignError
+    ilcdob.design.methods.fir.FIRDesignError
         ``fir_unattainable="refuse"`` and the margin cannot be met (the message names the bands).
     """
-    from ilcdob.design.c_export import design_files
+    from ilcdob.design.export.c_export import design_files
 
     options = DesignOptions(method=method, rho=rho, samples=samples, bound=bound, n=n, law=law, trial=trial,
                             c_prefix=c_prefix, c_float=c_float, bandwidth=bandwidth, disturbance=disturbance,
@@ -812,12 +812,12 @@ def _checked_design_options(o: DesignOptions) -> tuple[Any, DesignOptions]:
         A bad value, an option the method does not use, or a law ``ilcdob design`` cannot make
         (multi-source; exact-reference without a trial).
     """
-    from ilcdob.design.c_export import check_c_prefix
-    from ilcdob.design.delta import MAX_DELTA_SAMPLES
-    from ilcdob.design.fir import UNATTAINABLE
-    from ilcdob.design.laws import check_law
+    from ilcdob.design.export.c_export import check_c_prefix
+    from ilcdob.design.sets.delta import MAX_DELTA_SAMPLES
+    from ilcdob.design.methods.fir import UNATTAINABLE
+    from ilcdob.design.law.laws import check_law
     from ilcdob.design.methods import method_named
-    from ilcdob.design.norm_optimal import check_norm_optimal_size
+    from ilcdob.design.methods.norm_optimal import check_norm_optimal_size
 
     if o.c_prefix is not None:
         check_c_prefix(o.c_prefix)
@@ -840,7 +840,7 @@ def _checked_design_options(o: DesignOptions) -> tuple[Any, DesignOptions]:
     if law == "multi-source":
         raise SpecError("`--law multi-source`: it learns from the trials of every earlier system at once, and "
                         "`ilcdob design` makes one pair's filters from one trial of --from; use `ilcdob reproduce "
-                        "--law multi-source` for a learning chain, or ilcdob.design.multi_source.multi_source_learning "
+                        "--law multi-source` for a learning chain, or ilcdob.design.law.multi_source.multi_source_learning "
                         "with every trial")
     if law == "exact-reference" and not o.trial:
         raise SpecError("`--law exact-reference`: the law needs the reference trajectory of the trial; give --trial "
@@ -866,7 +866,7 @@ def _design_trial(o: DesignOptions, chosen: Any, flt: Fleet) -> Any:
     SpecError
         ``o.n`` other than the trial's length, or a trial too long for the norm-optimal law.
     """
-    from ilcdob.design.norm_optimal import check_norm_optimal_size
+    from ilcdob.design.methods.norm_optimal import check_norm_optimal_size
     from ilcdob.identification.loaders import load_csv
 
     if not o.trial:
@@ -896,8 +896,8 @@ def _design_trial(o: DesignOptions, chosen: Any, flt: Fleet) -> Any:
 def _pair_design(flt: Fleet, source: str, target: str, chosen: Any, o: DesignOptions, data: Any) -> Any:
     """The pair's design (:func:`ilcdob.design.pair.design_pair`), its learning band fixed to the trial's when
     ``data`` is a trial and the band is chosen from one (``bandwidth="auto"``)."""
-    from ilcdob.design.fir import FIROptions
-    from ilcdob.design.laws import law_for
+    from ilcdob.design.methods.fir import FIROptions
+    from ilcdob.design.law.laws import law_for
     from ilcdob.design.methods import MethodSettings
     from ilcdob.design.pair import design_pair, design_with_band, fleet_delta_sets
 
@@ -924,7 +924,7 @@ def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet,
     """The design folder's files besides filters.json, C code and README.md: lifted.npz, learning_signal.csv,
     reference_terms.csv and bode.png, as the design has them. With a trial (``data``), also sets
     ``filters["trial"]``, the learning signal's summary (:func:`_learn_from_trial`)."""
-    from ilcdob.design.figure import pair_bode_figure
+    from ilcdob.design.checks.figure import pair_bode_figure
     from ilcdob.signals import FlightData
 
     others: dict[str, Any] = {}
@@ -1113,7 +1113,7 @@ def _check_trial_values(path: str | Path, signals: dict[str, tuple[np.ndarray, s
 
 def _check_noise_samples(trial: str | Path, n: int) -> None:
     """Refuse a trial too short for ``--bandwidth auto`` to estimate its noise floor, naming the file."""
-    from ilcdob.design.band import NOISE_SAMPLES
+    from ilcdob.design.filters.band import NOISE_SAMPLES
 
     if n < NOISE_SAMPLES:
         raise SignalError(f"{trial}: {n} samples; `--bandwidth auto` chooses the learning band from the trial's "
@@ -1155,11 +1155,11 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         A folder written by ``ilcdob design`` (closed-form or fir: filters with L1/L2). Checked
         against its ``manifest.json`` (an edited, added or missing file is refused, naming it;
         a folder without one is used and labelled "provenance unknown") and its ``filters.json``
-        type-checked (:func:`ilcdob.design.c_export.check_filters`).
+        type-checked (:func:`ilcdob.design.export.c_export.check_filters`).
     method : str
         Design method without ``design``: closed-form or fir (other than the default: refused with ``design``).
     bandwidth : "auto", float or None
-        The learning band without ``design`` (:mod:`ilcdob.design.band`; other than "auto": refused with
+        The learning band without ``design`` (:mod:`ilcdob.design.filters.band`; other than "auto": refused with
         ``design``).
     on_limit : {"clip", "refuse"}
         A signal beyond the limit: clip it (with a warning) or refuse it (no folder written).
@@ -1170,7 +1170,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     axis : {"x", "y", "z"}, optional
         The axis learned (default x; with ``design``: checked against its filters.json).
     fir_unattainable : {"no-harm", "refuse"}, optional
-        ``method="fir"`` without ``design``: :attr:`ilcdob.design.fir.FIROptions.unattainable` (refused with
+        ``method="fir"`` without ``design``: :attr:`ilcdob.design.methods.fir.FIROptions.unattainable` (refused with
         ``design`` or another method).
 
     Returns
@@ -1226,7 +1226,7 @@ def _filters_of_folder(design: str | Path, source: str | None, target: str | Non
     ManifestError
         A file of the folder was edited, added or is missing.
     """
-    from ilcdob.design.c_export import check_filters
+    from ilcdob.design.export.c_export import check_filters
 
     path = Path(design) / "filters.json"
     manifest = verify_manifest(design)  # an edited or added file is refused, naming it
@@ -1264,7 +1264,7 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
     if source is None or target is None:
         raise SpecError("`--from` and `--to`: name the system learned from and the one that learns "
                         "(or give --design FOLDER)")
-    from ilcdob.design.fir import UNATTAINABLE, FIROptions
+    from ilcdob.design.methods.fir import UNATTAINABLE, FIROptions
     from ilcdob.design.methods import MethodSettings, method_named
     from ilcdob.design.pair import design_pair, design_with_band
 
@@ -1304,7 +1304,7 @@ def _learning_signal(filters: dict[str, Any], origin: str, trial: str | Path, da
         ``on_limit="refuse"`` and the signal exceeds the limit.
     """
     from ilcdob.design.law import apply_learning
-    from ilcdob.design.limit import enforce_limit
+    from ilcdob.design.law.limit import enforce_limit
     from ilcdob.specs import LimitSpec
 
     if filters.get("law", "paper") != "paper" or not ("L1" in filters and "L2" in filters or "law_maps" in filters):
@@ -1323,7 +1323,7 @@ def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: A
                     columns: TrialColumns, data: Any, d_f: np.ndarray,
                     report: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """The learn folder's content (learning_signal.csv/.bin/.h, learning.json) and the learning.json content."""
-    from ilcdob.design.c_export import default_c_prefix, signal_header
+    from ilcdob.design.export.c_export import default_c_prefix, signal_header
     from ilcdob.signals import FlightData
 
     n = d_f.size
@@ -1359,7 +1359,7 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     """Will learning help? Per pair and frequency the exact worst-case error ratio of the law as
     applied (closed-form filters with each pair's learning band) over the Delta set's disc, the
     ratio for a stated plant, and the paper's first-order condition (paper Sec. III), optionally
-    as JSON (:mod:`ilcdob.design.theorem`).
+    as JSON (:mod:`ilcdob.design.checks.theorem`).
 
     Parameters
     ----------
@@ -1373,11 +1373,11 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
         Multiplicative uncertainty bound for every system (default: identified covariance).
     scale : float
         Scale of the identified standard deviations (> 0; 1 with ``bound``, which replaces them:
-        :func:`ilcdob.design.delta.check_scale`).
+        :func:`ilcdob.design.sets.delta.check_scale`).
     samples : int
         Sampled plants per Delta set.
     bandwidth : "auto", float or None
-        The learning band of every pair's law (:mod:`ilcdob.design.band`; "auto": chosen from
+        The learning band of every pair's law (:mod:`ilcdob.design.filters.band`; "auto": chosen from
         the fleet's sensor noise, limits and the same Delta sets).
     argv : sequence of str, optional
         Command line, recorded in the file.
@@ -1389,7 +1389,7 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     list of PairCheck
     """
     from ilcdob.design.pair import fleet_delta_sets, pair_band
-    from ilcdob.design.theorem import EXACT_TOL, learning_pairs, theorem_check
+    from ilcdob.design.checks.theorem import EXACT_TOL, learning_pairs, theorem_check
 
     if out is not None:
         check_output_path(out, folder=False, inputs={"--fleet": fleet})

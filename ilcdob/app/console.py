@@ -276,7 +276,7 @@ def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     import math
 
-    from ilcdob.design.theorem import EXACT_TOL, format_theorem_table
+    from ilcdob.design.checks.theorem import EXACT_TOL, format_theorem_table
 
     order = [s.strip() for s in a.order.split(",")] if a.order else None
     checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=_given(a.scale, 1.0),
@@ -318,10 +318,10 @@ def _robust_set_rho(rho: float | None, methods: list[str]) -> None:
 
 
 def _compare(a: argparse.Namespace, argv: list[str], con: Console) -> int:
-    from ilcdob.design.delta import check_scale
-    from ilcdob.design.fir import FIROptions
+    from ilcdob.design.sets.delta import check_scale
+    from ilcdob.design.methods.fir import FIROptions
     from ilcdob.design.methods import DEFAULT_METHODS
-    from ilcdob.design.robust import RobustOptions
+    from ilcdob.design.methods.robust import RobustOptions
     from ilcdob.validation.compare import CompareOptions
     from ilcdob.validation.scenarios import SCENARIOS
 

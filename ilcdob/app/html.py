@@ -15,7 +15,7 @@ Inputs, detected by file name in each folder
     ``{"plant": "linear" | "nonlinear" | "rotorpy", "law": LAW, "fleet": PATH, "sample_time": s, "iterations": n,
     "scenarios": [{"id", "title", "order": [names], "systems": {name: {"rmse_no_dob",
     "rmse_dob", "rmse_learning": [n], "rmse_dhat_dob", "rmse_dhat_learning": [n]}}}]}``,
-    RMSE in m and m/s^2 (``law``: the learning law of :mod:`ilcdob.design.laws`, shown with
+    RMSE in m and m/s^2 (``law``: the learning law of :mod:`ilcdob.design.law.laws`, shown with
     the results; absent in files written before laws existed), with the figures written beside it (``rmse_bars.png``,
     ``error_s<N>.png``, ``disturbance_s<N>.png``, ``bode_loops.png``, ``bode_learning.png``,
     ``bode_te.png``, ``identified_models.png``). Sections: the fleet and its identified
@@ -86,7 +86,7 @@ __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTab
 
 #: Sampled plants per Delta set of the Theorem check written by :func:`report_files` (as ``ilcdob check``
 #: draws them, seed 0). The check reads each set's bound, which does not depend on the samples, so
-#: :func:`report_files` draws none (:func:`ilcdob.design.theorem.bound_delta_sets`).
+#: :func:`report_files` draws none (:func:`ilcdob.design.checks.theorem.bound_delta_sets`).
 THEOREM_SAMPLES = 8
 
 #: File name -> the command that writes it.
@@ -913,7 +913,7 @@ def _same_learning(data: dict) -> str:
 def _plant_section(res: JsonInput) -> str:
     data = res.data
     folder = res.folder
-    from ilcdob.design.laws import LAW_DESCRIPTIONS
+    from ilcdob.design.law.laws import LAW_DESCRIPTIONS
 
     law = data.get("law")
     law_html = (f"learning law <strong>{html_text(str(law))}</strong>"
@@ -946,13 +946,13 @@ def _theorem_data(fleet: Fleet, orders: list[list[str]]) -> tuple[dict[str, Any]
     (for :func:`_theorem_figure`; None: no check).
 
     The check reads each source's Delta set through its bound only (``source="bound"``), so the
-    sets are the bounds (:func:`ilcdob.design.theorem.bound_delta_sets`, one per system for every
+    sets are the bounds (:func:`ilcdob.design.checks.theorem.bound_delta_sets`, one per system for every
     order) and no sampled plant is built: the results are those of the sets of
     :data:`THEOREM_SAMPLES` samples drawn with seed 0 that ``theorem.json`` names (and
     ``ilcdob check`` draws).
     """
     from ilcdob.design.pair import pair_band
-    from ilcdob.design.theorem import bound_delta_sets, format_theorem_table, learning_pairs, theorem_check
+    from ilcdob.design.checks.theorem import bound_delta_sets, format_theorem_table, learning_pairs, theorem_check
 
     missing = [s.name for s in fleet.systems if s.identification is None]
     if missing:
@@ -975,7 +975,7 @@ def _theorem_figure(first: list[Any]) -> Any:
     """``theorem.png``: the paper's condition per source of the first order's checks."""
     from matplotlib.figure import Figure
 
-    from ilcdob.design.figure import TITLE_Y, minor_log_grid
+    from ilcdob.design.checks.figure import TITLE_Y, minor_log_grid
 
     fig = Figure(figsize=(4.0 * len(first), 3.2))
     for ax, c in zip(fig.subplots(1, len(first), squeeze=False)[0], first):
@@ -1020,7 +1020,7 @@ def _theorem_html(folder: Path, data: dict[str, Any] | None) -> str:
              f"bound of the identification ({html_text(data['samples'])} sampled plants per Delta set, seed "
              f"{html_text(data['seed'])}), "
              "for the law as flown (the Theorem's filters through the learning band F, "
-             "<code>ilcdob.design.band</code>); it holds where that stays within 1.01 at every frequency. Beside it, "
+             "<code>ilcdob.design.filters.band</code>); it holds where that stays within 1.01 at every frequency. Beside it, "
              "the paper's first-order condition |Delta_(j-1)| &lt; |1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III; "
              "margin = rhs / |Delta|, &gt; 1: holds), which is neither sufficient nor necessary; "
              "docs/theory.md section 2 explains both.</p>"]

@@ -29,7 +29,7 @@ __all__ = ["Flag", "Command", "COMMANDS", "GLOBAL_FLAGS", "MAX_STARTS", "MAX_LM_
 MAX_STARTS = 20
 #: Most Levenberg-Marquardt iterations per start of ``identify``.
 MAX_LM_ITERATIONS = 10_000
-#: Choices of ``design``, ``compare`` and ``learn --fir-unattainable``: ``ilcdob.design.fir.UNATTAINABLE`` (not
+#: Choices of ``design``, ``compare`` and ``learn --fir-unattainable``: ``ilcdob.design.methods.fir.UNATTAINABLE`` (not
 #: imported here, so that ``--help`` stays fast; a test keeps the two equal).
 FIR_UNATTAINABLE = ("no-harm", "refuse")
 

@@ -85,7 +85,7 @@ class Provenance:
     fleet_sha256 : str or None
         SHA-256 of the fleet file's text as the command read it (None: no fleet involved).
     law : str or None
-        Learning law of the run (:mod:`ilcdob.design.laws`), when the command has one.
+        Learning law of the run (:mod:`ilcdob.design.law.laws`), when the command has one.
     version : str
         ilcdob version.
     run_id : str

@@ -17,7 +17,7 @@ The designs only know the models: closed-form and norm-optimal are built from th
 models, FIR from the nominal models and 8 samples of the identified uncertainty (its robust
 ``|Te1|`` constraint), robust from the nominal pair plus ``robust_models`` paired samples
 (its SOCP is solved per trial), robust-set from the nominal models and the Delta set's bound
-(:mod:`ilcdob.design.robust_set`; its rho is ``rho``, which must then lie in (0, 1]). These design samples are
+(:mod:`ilcdob.design.methods.robust_set`; its rho is ``rho``, which must then lie in (0, 1]). These design samples are
 drawn once from ``(seed, design)`` at scale 1 (the identified uncertainty, which is what a
 designer knows) and are never the true plants of a sample. Every design is built once per
 worker and pair and reused for all its samples and scenarios; only the robust SOCP is

@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from ilcdob.design.delta import MAX_DELTA_SAMPLES, check_scale
-from ilcdob.design.laws import DEFAULT_LAW, check_law
+from ilcdob.design.sets.delta import MAX_DELTA_SAMPLES, check_scale
+from ilcdob.design.law.laws import DEFAULT_LAW, check_law
 from ilcdob.design.methods import DEFAULT_METHODS, METHODS
-from ilcdob.design.robust_set import DELTA_SETS
+from ilcdob.design.methods.robust_set import DELTA_SETS
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
 
@@ -67,25 +67,25 @@ class CampaignOptions:
         Fly only the first ``duration`` seconds of each scenario (s, > 0; default: all).
     robust_models : int
         Delta samples per system in the robust SOCP besides the nominal pair (0 to
-        :data:`~ilcdob.design.delta.MAX_DELTA_SAMPLES`); its cost per trial grows about linearly
+        :data:`~ilcdob.design.sets.delta.MAX_DELTA_SAMPLES`); its cost per trial grows about linearly
         with ``1 + robust_models``.
     rho : float
         Robust design's guaranteed improvement factor on its models (> 0); robust-set's on every
         plant of its Delta set, so in (0, 1] when robust-set is among the methods.
     law : {"paper", "exact-reference"}
-        Learning law applied around every design (:mod:`ilcdob.design.laws`); ``multi-source``
+        Learning law applied around every design (:mod:`ilcdob.design.law.laws`); ``multi-source``
         is refused (one pair from one DOB-only trial per scenario, where it is the paper's law).
         The default is left out of the settings hash, so campaigns started before the law
         existed resume.
     delta_set : {"structured", "disc", "auto"}
-        The Delta set robust-set designs guarantee over (:attr:`ilcdob.design.robust_set.RobustSetOptions.delta_set`;
+        The Delta set robust-set designs guarantee over (:attr:`ilcdob.design.methods.robust_set.RobustSetOptions.delta_set`;
         default: the family the true plants are drawn from). In the settings hash only when
         robust-set is flown over another set than the disc (so campaigns from before the option resume).
     margin : float
         ``m`` in [0, 1): a sampled true plant (and a design sample) is redrawn when its disturbance
-        map exceeds ``1/m`` times its model's at some frequency (:func:`ilcdob.design.delta.delta_set`),
+        map exceeds ``1/m`` times its model's at some frequency (:func:`ilcdob.design.sets.delta.delta_set`),
         and robust-set designs over the structured family guarantee over the same plants
-        (:attr:`~ilcdob.design.robust_set.RobustSetOptions.margin`; the disc keeps its own margin).
+        (:attr:`~ilcdob.design.methods.robust_set.RobustSetOptions.margin`; the disc keeps its own margin).
         Default 0.5: within 6 dB of the model. 0 keeps every stable plant, as campaigns did before
         the option; it is then left out of the settings hash (they resume) unless robust-set flies
         over the structured family, whose design it changes.

@@ -12,11 +12,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ilcdob.design.delta import DeltaSet, delta_set
-from ilcdob.design.laws import DEFAULT_LAW
+from ilcdob.design.sets.delta import DeltaSet, delta_set
+from ilcdob.design.law.laws import DEFAULT_LAW
 from ilcdob.design.methods import METHODS, MethodSettings
 from ilcdob.design.pair import PairDesign, design_pair, with_law
-from ilcdob.design.robust_set import RobustSetOptions
+from ilcdob.design.methods.robust_set import RobustSetOptions
 from ilcdob.errors import IlcdobError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem

@@ -182,7 +182,7 @@ class CampaignResult:
         sids = list(self.options.scenarios)
         from matplotlib.figure import Figure  # matplotlib only when the figure is made
 
-        from ilcdob.design.figure import TITLE_Y
+        from ilcdob.design.checks.figure import TITLE_Y
 
         fig = Figure(figsize=(1.9 * len(methods) + 2.5, 4.2))
         ax = fig.subplots()

@@ -18,7 +18,7 @@ each system's own noise)::
 and system j's learning signal is the Theorem's ``L1`` acting on it: since
 ``L1_j = -(1 - Q_j) Gd_hat_{j-1}^{-1}``, ``d_f,j = (1 - Q_j){d_hat}`` (the Theorem's L1, paper
 Sec. III, factored). With one source this is exactly the closed form. This is the
-``multi-source`` learning law of :mod:`ilcdob.design.laws` (``reproduce(law="multi-source")``).
+``multi-source`` learning law of :mod:`ilcdob.design.law.laws` (``reproduce(law="multi-source")``).
 The weighting is applied on the FFT grid of the zero-padded trial (the weights are smooth in
 w, so wrap-around is negligible).
 """
@@ -34,8 +34,8 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
-from .closed_form import one_minus, reconstruct_disturbance, simulate_map
-from .delta import DeltaSet
+from ..maps.closed_form import one_minus, reconstruct_disturbance, simulate_map
+from ..sets.delta import DeltaSet
 
 __all__ = ["SourceTrial", "reconstruction_error_power", "joint_disturbance", "multi_source_learning"]
 

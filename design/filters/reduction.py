@@ -1,6 +1,6 @@
 """Model reduction of stable discrete SISO maps by balanced truncation.
 
-The robust design (:mod:`ilcdob.design.robust`, docs/theory.md sections 3 and 5) enters every
+The robust design (:mod:`ilcdob.design.methods.robust`, docs/theory.md sections 3 and 5) enters every
 plausible ``Gf_k`` through its state-space equations; a balanced truncation keeps the states
 well scaled and few, and its error bound ``2 sum(discarded Hankel singular values)`` is
 carried into the design's constraints, so guarantees stated for the reduced models hold for

@@ -7,8 +7,8 @@ guaranteed over the Delta set. Each is one class here with the same faces:
 
 * ``name``, as ``--method`` and ``filters.json`` spell it;
 * ``guaranteed``: robust to the Delta set by its own construction, so the learning band leaves
-  the model edge to it (:func:`~.pair.design_pair`);
-* ``needs_delta_sets``: it designs over the fleet's Delta sets (:mod:`.delta`);
+  the model edge to it (:func:`~..pair.design_pair`);
+* ``needs_delta_sets``: it designs over the fleet's Delta sets (:mod:`..sets.delta`);
 * ``compared_by_default``: comparisons and campaigns run it unless told otherwise;
 * ``per_trial``: its learning signal is solved anew for every trial (its cost grows with the
   Delta-set models it carries);
@@ -34,14 +34,15 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
 
-from .closed_form import LearningFilters, inverse_gd_filter
-from .delta import DeltaSet
-from .export import robust_set_maps, zpk_to_coefficients
-from .finite_horizon import LinearMap, causal_map, identity_map, zpk_map
-from .law import Stage
-from .law.designed import Designed
-from .law.filters import FilterPair
-from .law.stage import hstack_maps
+from ..maps.closed_form import LearningFilters, inverse_gd_filter
+from ..sets.delta import DeltaSet
+from ..filters.coefficients import zpk_to_coefficients
+from ..maps.finite_horizon import LinearMap, causal_map, identity_map, zpk_map
+from ..law import Stage
+from ..law.designed import Designed
+from ..law.filters import FilterPair
+from ..law.robust_set import robust_set_maps
+from ..law.stage import hstack_maps
 from .fir import FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_optimal_size, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
@@ -52,7 +53,7 @@ __all__ = ["DesignInputs", "MethodSettings", "MethodDesign", "Method", "ClosedFo
 
 @dataclass(frozen=True)
 class DesignInputs:
-    """What a method may use to design one pair (:func:`~.pair.design_pair` gathers it).
+    """What a method may use to design one pair (:func:`~..pair.design_pair` gathers it).
 
     Attributes
     ----------
@@ -65,7 +66,7 @@ class DesignInputs:
         The Theorem's filters of the pair, built once when first asked for.
     deltas : dict of str to DeltaSet, or None
         The Delta sets by system name (methods with ``needs_delta_sets``: the method's own, else the
-        fleet's, :func:`~.pair.fleet_delta_sets`).
+        fleet's, :func:`~..pair.fleet_delta_sets`).
     """
 
     fleet: Fleet
@@ -115,14 +116,14 @@ def _with_rho(options: Any, rho: float | None) -> Any:
 
 @dataclass(frozen=True)
 class MethodDesign:
-    """A method's result, before the band (:class:`~.pair.PairDesign` carries it on).
+    """A method's result, before the band (:class:`~..pair.PairDesign` carries it on).
 
     Attributes
     ----------
     filters : dict
         The method's ``filters.json`` content.
     core : Stage
-        Its learning filter as the law's stage (:class:`~.law.designed.Designed`: on a trial, its
+        Its learning filter as the law's stage (:class:`~..law.designed.Designed`: on a trial, its
         file entries and, where it has one, its linear map).
     lifted : dict of str to numpy.ndarray, or None
         Norm-optimal: the law's gains (and lifted matrices when asked for).
@@ -314,7 +315,7 @@ class NormOptimal(Method):
         designer = NormOptimalDesigner(tgt, n, opts)
         arrays = designer.law(src).to_arrays()
         what = ("lifted.npz: the law d_f,j = L1 e_{j-1} + L2 d_f,{j-1} as Riccati gains "
-                "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(...).apply(e, d_f))")
+                "(ilcdob.design.methods.norm_optimal.NormOptimalLaw.from_arrays(...).apply(e, d_f))")
         if self.lifted:
             arrays["L1"], arrays["L2"] = designer.lifted_matrices(src)
             what += " and as the N x N matrices L1, L2"
@@ -459,7 +460,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (ClosedForm(), FIR(), NormOptim
 
 #: The designs whose improvement is guaranteed over the Delta set by their own construction (the
 #: robust SOCP over its models, robust-set over the whole set): their learning band takes the
-#: noise edges only, the model edge is theirs (:func:`~.pair.design_pair`).
+#: noise edges only, the model edge is theirs (:func:`~..pair.design_pair`).
 GUARANTEED = tuple(name for name, m in METHODS.items() if m.guaranteed)
 
 #: The designs that comparisons and campaigns run unless told otherwise.

@@ -32,9 +32,9 @@ from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec
 
-from .band import LearningBand
-from .closed_form import LearningFilters, closed_form_filters
-from .methods import ClosedForm
+from ..filters.band import LearningBand
+from ..maps.closed_form import LearningFilters, closed_form_filters
+from ..methods import ClosedForm
 
 __all__ = ["BodeCurve", "COINCIDE_RTOL", "TE_GAIN_ERROR", "frequency_grid", "magnitude_db", "wrapped_phase",
            "coinciding", "group_label", "draw_bode", "finish_bode_axes", "mark_band", "with_gain_error",
@@ -505,7 +505,7 @@ def pair_bode_figure(fleet: Fleet, source: str, target: str, band: LearningBand 
     method : str
         The design method, stated in the figure (the filters drawn are the Theorem's).
     filters : LearningFilters, optional
-        The closed-form filters of the pair (default: :func:`~ilcdob.design.closed_form.closed_form_filters`).
+        The closed-form filters of the pair (default: :func:`~ilcdob.design.maps.closed_form.closed_form_filters`).
 
     Returns
     -------

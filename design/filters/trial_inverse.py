@@ -1,7 +1,7 @@
 """The learning-signal map of a vehicle inverted over one trial, by least squares (docs/theory.md section 6).
 
 A learning law that acts on the reconstructed disturbance with a non-causal filter ``F``
-(:mod:`.robust_set`) is, over an infinite horizon, ``e_j = (1 - F) e'_j``. On a trial of ``N``
+(:mod:`..methods.robust_set`) is, over an infinite horizon, ``e_j = (1 - F) e'_j``. On a trial of ``N``
 samples it is not: near the trial's ends ``F`` reaches past the samples that exist, and the
 worst disturbance of a whole trial can make the error larger than without learning. Asking
 instead for the *error* the learning signal should produce makes the finite trial exact.

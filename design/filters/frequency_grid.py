@@ -1,12 +1,12 @@
 """Frequency grids, fit weights and option checks shared by the FIR designs.
 
-:class:`~ilcdob.design.fir.FIROptions` (the FIR fit to the closed-form filters) and
-:class:`~ilcdob.design.robust_set.RobustSetOptions` (the robustness FIR over a Delta set) both
+:class:`~ilcdob.design.methods.fir.FIROptions` (the FIR fit to the closed-form filters) and
+:class:`~ilcdob.design.methods.robust_set.RobustSetOptions` (the robustness FIR over a Delta set) both
 design a non-causal FIR on log-spaced frequencies joined with a linear grid
 (:func:`log_linear_grid`), emphasise their fit inside a band and penalise the taps
 (:class:`FitWeighting`), and check the option fields they have in common with the same words
 (:func:`check_count`, :func:`check_advance`, :func:`check_w_min`). The export's check grid
-(:func:`~ilcdob.design.export.direct_form_grid`) is a :func:`log_linear_grid` with exact ends.
+(:func:`~ilcdob.design.filters.coefficients.direct_form_grid`) is a :func:`log_linear_grid` with exact ends.
 
 Units: frequencies in rad/s, look-aheads (advances) in samples.
 """

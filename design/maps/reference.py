@@ -12,7 +12,7 @@ reconstructed disturbance and is missing from what system j must cancel. Kept ex
 ``G_f,j^{-1} = -D_j / P_hat_j = -(1 - Q_j)/P_hat_j - (M_j + C_j)`` applied non-causally with
 the same stable inversion as ``L1``). With exact models and no noise the learning flight of
 system j has zero error, on any trajectory. This is the ``exact-reference`` learning law of
-:mod:`ilcdob.design.laws` (``law="exact-reference"`` in ``reproduce``, ``design_pair``,
+:mod:`ilcdob.design.law.laws` (``law="exact-reference"`` in ``reproduce``, ``design_pair``,
 ``compare_designs`` and campaigns).
 """
 
@@ -24,7 +24,7 @@ from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
 from .closed_form import LearningFilters, matched, simulate_map
-from .noncausal import ZPKFilter
+from ..filters.noncausal import ZPKFilter
 
 __all__ = ["reference_error", "inverse_gf_filter", "ExactReferenceLearning"]
 
@@ -72,7 +72,7 @@ def inverse_gf_filter(loop: LoopSystem) -> ZPKFilter:
     -------
     ZPKFilter
         ``G_f^{-1}``, with its gain matched to the block formula
-        (:func:`~ilcdob.design.closed_form.matched`).
+        (:func:`~ilcdob.design.maps.closed_form.matched`).
     """
     src = loop.nominal
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)

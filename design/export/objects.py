@@ -1,6 +1,6 @@
 """A design's learning filters outside ``filters.json``: python-control objects and MATLAB files.
 
-A filter of ``filters.json`` (:mod:`.export`) is ``H(z) = z^advance * S(z)``: ``S`` causal, run
+A filter of ``filters.json`` (:mod:`..filters.coefficients`) is ``H(z) = z^advance * S(z)``: ``S`` causal, run
 on the input ``advance`` samples ahead. ``advance`` is a look-ahead (non-causal, no
 python-control object holds it), so :class:`LearningFilterTF` keeps it beside the causal part:
 
@@ -17,13 +17,13 @@ python-control object holds it), so :class:`LearningFilterTF` keeps it beside th
   ``z = 1``; its product polynomials, evaluated by python-control, are off by 21 % at 0.03
   rad/s and 1.5 % at 1 rad/s (default fleet, Ts = 0.02 s), while the factors and the state-space
   series agree with the sections to 1e-11 and 2e-10. The check is the one ``filters.json``
-  applies to its own ``num``/``den`` (:data:`~ilcdob.design.export.DIRECT_FORM_RTOL` on
-  :func:`~ilcdob.design.export.direct_form_grid`);
+  applies to its own ``num``/``den`` (:data:`~ilcdob.design.filters.coefficients.DIRECT_FORM_RTOL` on
+  :func:`~ilcdob.design.filters.coefficients.direct_form_grid`);
 * :meth:`LearningFilterTF.freqresp` - ``H(e^{jw Ts})`` with ``z^advance``, from the factors.
 
 :func:`filter_tf` converts one entry of ``filters.json``, :func:`filters_tf` both filters of a
 ``filters.json`` content, :func:`load_design` those of a design folder (read through
-:func:`~ilcdob.inputs.read_json`, checked by :func:`~ilcdob.design.c_export.check_filters`),
+:func:`~ilcdob.inputs.read_json`, checked by :func:`~ilcdob.design.export.c_export.check_filters`),
 and :func:`design_to_mat` writes them, with the learning band and the airframe correction, as
 a MATLAB file (:mod:`ilcdob.matfile`; variables listed in :func:`design_to_mat`).
 """
@@ -47,7 +47,7 @@ from ilcdob.matfile import check_mat_path, write_mat
 from ilcdob.response import response
 
 from .c_export import FILTER_KEYS, check_filter_entry, check_filters
-from .export import DIRECT_FORM_RTOL, apply_coefficients, direct_form_grid, lookahead_taps
+from ..filters.coefficients import DIRECT_FORM_RTOL, apply_coefficients, direct_form_grid, lookahead_taps
 
 __all__ = ["LearningFilterTF", "filter_tf", "filters_tf", "load_design", "design_to_mat", "DESIGN_FILE"]
 
@@ -57,7 +57,7 @@ DESIGN_FILE = "filters.json"
 #: What a design without ``L1``/``L2`` learns with instead, by method.
 _NO_FILTERS = {
     "norm-optimal": "its learning is the law in lifted.npz (Riccati gains: "
-                    "ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays; the matrices L1, L2 with --lifted)",
+                    "ilcdob.design.methods.norm_optimal.NormOptimalLaw.from_arrays; the matrices L1, L2 with --lifted)",
     "robust": "its learning signal is an SOCP solved per trial (learning_signal.csv, lifted.npz)",
     "robust-set": "its closed-form filters under `closed_form` are followed by the FIR `F` and computed on a "
                   "trial as `learning` states; use ilcdob.design.pair.design_pair(..., 'robust-set')",
@@ -176,8 +176,8 @@ class LearningFilterTF:
         ------
         NumericalError
             The product's response differs from the factors' by more than
-            :data:`~ilcdob.design.export.DIRECT_FORM_RTOL` relative somewhere on
-            :func:`~ilcdob.design.export.direct_form_grid` (the message gives where): use
+            :data:`~ilcdob.design.filters.coefficients.DIRECT_FORM_RTOL` relative somewhere on
+            :func:`~ilcdob.design.filters.coefficients.direct_form_grid` (the message gives where): use
             :meth:`to_control` or :attr:`sections`.
         """
         tf = self.sections[0]
@@ -212,7 +212,7 @@ class LearningFilterTF:
         return response(self.sections, w, self.ts, self.advance)
 
     def apply(self, x: object) -> np.ndarray:
-        """Run the filter over a whole trial (:func:`~ilcdob.design.export.apply_coefficients`).
+        """Run the filter over a whole trial (:func:`~ilcdob.design.filters.coefficients.apply_coefficients`).
 
         Parameters
         ----------
@@ -241,7 +241,7 @@ def filter_tf(coeffs: Mapping[str, Any], ts: float, name: str = "L1", unit: str 
     ----------
     coeffs : mapping
         The entry (``advance``, and ``sos`` with optional ``lookahead``, or ``num``/``den``; see
-        :mod:`.export`), checked as :func:`~ilcdob.design.c_export.check_filters` checks it.
+        :mod:`..filters.coefficients`), checked as :func:`~ilcdob.design.export.c_export.check_filters` checks it.
     ts : float
         Sample time, s (``filters.json`` ``sample_time``).
     name : str
@@ -252,7 +252,7 @@ def filter_tf(coeffs: Mapping[str, Any], ts: float, name: str = "L1", unit: str 
     Returns
     -------
     LearningFilterTF
-        Its frequency response is :func:`~ilcdob.design.export.coefficients_freqresp` of ``coeffs``.
+        Its frequency response is :func:`~ilcdob.design.filters.coefficients.coefficients_freqresp` of ``coeffs``.
 
     Raises
     ------
@@ -280,7 +280,7 @@ def filter_tf(coeffs: Mapping[str, Any], ts: float, name: str = "L1", unit: str 
 
 
 def _learning_filters(filters: Mapping[str, Any], source: str) -> dict[str, Any]:
-    """``filters`` checked (:func:`~ilcdob.design.c_export.check_filters`), with both ``L1`` and ``L2``."""
+    """``filters`` checked (:func:`~ilcdob.design.export.c_export.check_filters`), with both ``L1`` and ``L2``."""
     if not isinstance(filters, Mapping) and isinstance(getattr(filters, "filters", None), Mapping):
         raise SpecError(f"{source}: got a {type(filters).__name__}; pass its `filters` (the filters.json content)")
     filters = check_filters(filters, source)
@@ -315,7 +315,7 @@ def filters_tf(filters: Mapping[str, Any], source: str = "<memory>") -> dict[str
     Raises
     ------
     SpecError
-        An entry missing or invalid (:func:`~ilcdob.design.c_export.check_filters`), or a
+        An entry missing or invalid (:func:`~ilcdob.design.export.c_export.check_filters`), or a
         method without ``L1``/``L2`` (the message says what it learns with instead).
     """
     filters = _learning_filters(filters, source)
@@ -390,7 +390,7 @@ def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: s
       ``[b0 b1 b2 1 a1 a2]``, powers of ``z^-1``; 0 x 6 when the filter is ``num``/``den``),
       ``K_lookahead`` (taps ``g_0..g_M``; empty: none), ``K_num``/``K_den`` (powers of
       ``z^-1``; empty when ``filters.json`` left them out), ``K_unit``; the filter is
-      ``K(z) = z^K_advance S(z)`` (:mod:`.export`);
+      ``K(z) = z^K_advance S(z)`` (:mod:`..filters.coefficients`);
     * the learning band ``F``: ``band_sos`` (0 x 6: none), ``band_zi``, ``band_pad`` and
       ``band_end_fit`` (samples), ``band_cutoff_rad_s`` (NaN: none), ``band_start``;
     * the airframe correction ``W``: ``W_sos`` (0 x 6: the disturbance acts at the command);
@@ -402,7 +402,7 @@ def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: s
     ----------
     filters : mapping
         The ``filters.json`` content (e.g. ``PairDesign.filters``) of a closed-form or fir design;
-        checked by :func:`~ilcdob.design.c_export.check_filters`.
+        checked by :func:`~ilcdob.design.export.c_export.check_filters`.
     path : str or os.PathLike
         The file, ending in ``.mat`` (written atomically, :func:`ilcdob.matfile.write_mat`).
     source : str

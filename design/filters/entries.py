@@ -1,6 +1,6 @@
 """The entries of ``filters.json`` checked: counts, second-order sections, filters and state space.
 
-Every stage of the learning law (:mod:`.law`) and the C code (:mod:`.c_export`) read their
+Every stage of the learning law (:mod:`..law`) and the C code (:mod:`..export.c_export`) read their
 coefficients through these checks, so a hand-edited or truncated ``filters.json`` is refused
 with a message naming the key, the value and what is valid.
 """
@@ -13,7 +13,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from .export import lookahead_taps
+from .coefficients import lookahead_taps
 
 __all__ = ["MAX_ADVANCE", "MAX_STATES", "check_count", "check_sections", "check_filter_entry", "check_state_space",
            "direct_form"]

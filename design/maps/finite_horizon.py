@@ -1,6 +1,6 @@
 """Whole-trial improvement of a learning law: the lifted ``N``-sample error map (docs/theory.md sections 2, 3, 6).
 
-The improvement guarantees of the designs are stated per frequency (:mod:`.robust_set`): for a
+The improvement guarantees of the designs are stated per frequency (:mod:`..methods.robust_set`): for a
 signal over an infinite horizon, ``||e_j|| <= rho ||e'_j||``. A trial has ``N`` samples. On it,
 with the disturbance ``d`` (the same at both vehicles) and the learning law ``L`` of
 :meth:`~ilcdob.design.pair.PairDesign.learning` (band fixed, no limit, the paper's law, one trial
@@ -32,12 +32,12 @@ law by :func:`law_map` (closed form and robust-set designs, with or without thei
 quotient is the largest eigenvalue of the pencil ``(A^T A, B^T B)`` restricted to the admissible
 disturbances, found by ARPACK (``scipy.sparse.linalg.eigsh``, Lanczos) with ``B^T B`` solved by
 conjugate gradients preconditioned with the stable inversion of ``Gd_j``
-(:func:`~ilcdob.design.closed_form.inverse_gd_filter`), which makes the pencil well conditioned
+(:func:`~ilcdob.design.maps.closed_form.inverse_gd_filter`), which makes the pencil well conditioned
 although ``B`` alone has a condition number of about ``1e5`` (``|Gd_j|`` at Nyquist).
 :func:`law_map` is checked against :meth:`~ilcdob.design.pair.PairDesign.learning` and the
 adjoints by the dot-product test (``tests/test_finite_horizon.py``).
 
-Structural result (built-in fleet, exact models, 60 s; :mod:`.robust_set`). A law whose filters
+Structural result (built-in fleet, exact models, 60 s; :mod:`..methods.robust_set`). A law whose filters
 act causally on the reconstructed disturbance keeps its per-frequency bound on every finite
 trial (causal lifted maps commute, so ``e_j = (1 - F R) e'_j`` exactly on the trial, up to the
 stable inversion's last samples): the closed form without a band has ``rho_N`` = 0.0019 / 0.012 /
@@ -68,10 +68,10 @@ from ilcdob.lifted import markov_parameters
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 
-from .band import fade_out
+from ..filters.band import fade_out
 from .closed_form import LearningFilters, inverse_gd_filter
-from .noncausal import ZPKFilter, lookahead
-from .trial_edges import trend_weights
+from ..filters.noncausal import ZPKFilter, lookahead
+from ..filters.trial_edges import trend_weights
 
 __all__ = ["LinearMap", "identity_map", "causal_map", "sos_map", "zpk_map", "fir_map",
            "trend_map", "odd_start_map", "extension_map", "crop_map", "fold_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio",
@@ -259,7 +259,7 @@ def crop_map(n_in: int, start: int, n: int) -> LinearMap:
 
 
 def fold_map(pad: int, n: int, fold: bool = True) -> LinearMap:
-    """``n + 2 pad -> n``: :func:`~.band.fold_start`.
+    """``n + 2 pad -> n``: :func:`~..filters.band.fold_start`.
 
     Parameters
     ----------
@@ -289,9 +289,9 @@ def fold_map(pad: int, n: int, fold: bool = True) -> LinearMap:
 
 
 def zpk_map(f: ZPKFilter, n: int) -> LinearMap:
-    """:meth:`ZPKFilter.apply <ilcdob.design.noncausal.ZPKFilter.apply>` over ``n`` samples as a linear map.
+    """:meth:`ZPKFilter.apply <ilcdob.design.filters.noncausal.ZPKFilter.apply>` over ``n`` samples as a linear map.
 
-    The filter as applied (:attr:`~ilcdob.design.noncausal.ZPKFilter.realised`): the trial with a
+    The filter as applied (:attr:`~ilcdob.design.filters.noncausal.ZPKFilter.realised`): the trial with a
     lead of zeros (the anti-causal part's look-ahead) and continued by the cubic of
     :func:`~ilcdob.signals.extend_smoothly` (advance + 8 + that look-ahead samples), the anti-causal
     poles run backwards, the causal part forwards, the advance cropped.
@@ -331,7 +331,7 @@ def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | 
     """``out[k] = sum_i h[i] x[k + advance - i]``, ``k < n``, with ``x = 0`` before ``t = 0`` and after its
     ``n_in`` samples (default ``n``; more: the input's continuation past the trial); with ``fold``,
     the output before ``t = 0`` added time-reversed to the first samples (:meth:`RobustSetDesign.apply
-    <ilcdob.design.robust_set.RobustSetDesign.apply>`).
+    <ilcdob.design.methods.robust_set.RobustSetDesign.apply>`).
 
     Parameters
     ----------
@@ -374,7 +374,7 @@ def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | 
 
 
 def trend_map(n: int, advance: int, fade: int) -> LinearMap:
-    """:func:`~ilcdob.design.trial_edges.end_continuation` as a linear map ``n -> n + advance``.
+    """:func:`~ilcdob.design.filters.trial_edges.end_continuation` as a linear map ``n -> n + advance``.
 
     Parameters
     ----------
@@ -439,7 +439,7 @@ def odd_start_map(n: int, m: int) -> LinearMap:
 def _method_map(method: Any, n: int) -> LinearMap:
     """The method's learning filter on a trial of ``n`` samples, the source flying without learning:
     ``L1`` of closed-form filters, else the method's own ``trial_map(n)`` (a robust-set design's,
-    :meth:`~.robust_set.RobustSetDesign.trial_map`)."""
+    :meth:`~..methods.robust_set.RobustSetDesign.trial_map`)."""
     if isinstance(method, LearningFilters):
         return zpk_map(method.L1, n)
     trial_map = getattr(method, "trial_map", None)

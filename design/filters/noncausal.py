@@ -35,7 +35,7 @@ error: it can fall short, it cannot amplify. :attr:`ZPKFilter.substituted` lists
 treated; :meth:`ZPKFilter.exact_freqresp` is the rational filter as built,
 :meth:`ZPKFilter.freqresp` and :meth:`ZPKFilter.apply` the filter as applied.
 :data:`LOOKAHEAD_MAX` = 64 samples keeps the learning signal's dependence on the made-up
-continuation after the trial (and the exported look-ahead taps, :mod:`.export`) short: 64 ms
+continuation after the trial (and the exported look-ahead taps, :mod:`.coefficients`) short: 64 ms
 at 1 ms, against 14 s for the exact inverse of the relative-degree-2 zero at -1.002.
 
 Boundary effects: the trial is taken as zero before ``t = 0``; the anti-causal part's answer

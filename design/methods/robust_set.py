@@ -2,7 +2,7 @@
 
 The learning law of the Theorem (paper Sec. III) gives system j the signal
 ``d_f,j = L1{e'_{j-1}}`` with ``e'_{j-1} = e_{j-1} + Gf_{j-1}{d_f,j-1}`` and the closed-form
-``L1 = -(1 - Q_j) Gd_{j-1}^{-1}`` built from system j-1's *model* (:mod:`.closed_form`). Here
+``L1 = -(1 - Q_j) Gd_{j-1}^{-1}`` built from system j-1's *model* (:mod:`..maps.closed_form`). Here
 a robustness filter ``F`` (a non-causal FIR) is added to it::
 
     d_f,j = F{ L1{e'_{j-1}} } = (1 - Q_j){ F{ d_hat } },    d_hat = -Gd_{j-1}^{-1}{e'_{j-1}}
@@ -11,7 +11,7 @@ a robustness filter ``F`` (a non-causal FIR) is added to it::
 so that the improvement holds for *every* true plant of system j-1 in the Delta set
 ``P_{j-1} = (1 + Delta) P_hat_{j-1}``, ``|Delta(e^{jw Ts})| <= W(w)`` (the multiplicative model
 error of the Theorem, paper Sec. III), robustly over the set rather than on samples of it. The
-ratio below is exact in Delta, where the Theorem's condition (:mod:`.theorem`) rests on a
+ratio below is exact in Delta, where the Theorem's condition (:mod:`..checks.theorem`) rests on a
 first-order expansion.
 
 Error map. With the loop maps of the paper (Sec. II; :mod:`ilcdob.loop`)
@@ -81,13 +81,13 @@ for the disc where it is used (no conservatism from the Delta dependence) and co
 the margin disc is used; the remaining gaps are: (a) between verification-grid points the bound
 is checked, not proved (spacing ``pi/(Ts n_verify)``, 0.008 rad/s by default; a structured set's
 polygon is checked at every one of them, built from the set's boundary values where they decide it,
-:func:`~.value_set.family_cones`), and the exchange
+:func:`~..sets.value_set.family_cones`), and the exchange
 stops within ``tol`` (2e-3) of the imposed rho, so ``rho_guaranteed <= rho_design + tol`` (it is
 reported; where ``F`` must vanish on a band a FIR can only come within ``tol`` of it, hence e.g.
 1.0013 for "never worse"); (b) a trial is finite: the bound is per frequency, i.e. for signals
 over an infinite horizon, and a non-causal ``F`` at the ends of a trial acts on samples it does
 not have (:meth:`RobustSetDesign.apply` says how they are treated). The whole-trial figure
-``rho_N = max_d ||e_j|| / ||e'_j||`` of the lifted ``N``-sample map (:mod:`.finite_horizon`) is
+``rho_N = max_d ||e_j|| / ||e'_j||`` of the lifted ``N``-sample map (:mod:`..maps.finite_horizon`) is
 reported beside ``rho_guaranteed`` (:attr:`RobustSetDesign.finite`, exact models). It exceeds 1
 for every zero-phase ``F`` (1.5-2.1 on the built-in fleet at |Delta| <= 0.3 and 0.5, 60 s): the
 worst disturbance sits in the trial's last half second, where ``F``'s look-ahead spreads it back
@@ -100,7 +100,7 @@ the band, against 0.05-0.07 zero-phase); (c) the guarantee concerns the disturba
 j-1's own learning signal (``d_f,j-1 != 0``, modelled by its nominal ``Gf``), the reference terms
 ``(1 - G_r) r`` and noise that differs between the two systems are outside it. The frequency-wise
 disc is a superset of any structured Delta (real gains, fixed-order high-pass errors), so the
-design is conservative for those: given a structured set (``structure``, :mod:`.value_set`: the
+design is conservative for those: given a structured set (``structure``, :mod:`..sets.value_set`: the
 fleet bound's gain/high-pass family, an identification's parameter ellipsoid) the same SOCP takes
 several cone rows per frequency, the vertices of a polygon containing that set's image, and the
 guarantee holds for every plant of the set that keeps the margin.
@@ -123,21 +123,21 @@ from ilcdob.lifted import markov_parameters
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal, check_grid
 
-from .closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus, reconstruct_disturbance,
+from ..maps.closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus, reconstruct_disturbance,
                           simulate_map)
 from .fir import FIRFilter
-from .frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
-from .noncausal import lookahead
-from .trial_edges import fir_on_trial
-from .trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
-from .value_set import BoundFamily, EllipseFamily, family_cones, worst_over_set
-from .worst_case import mask_intervals, uncertainty_cones
+from ..filters.frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
+from ..filters.noncausal import lookahead
+from ..filters.trial_edges import fir_on_trial
+from ..filters.trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
+from ..sets.value_set import BoundFamily, EllipseFamily, family_cones, worst_over_set
+from ..sets.worst_case import mask_intervals, uncertainty_cones
 
-#: A structured Delta set of the source (:mod:`.value_set`).
+#: A structured Delta set of the source (:mod:`..sets.value_set`).
 StructuredSet = BoundFamily | EllipseFamily
 
 if TYPE_CHECKING:
-    from .finite_horizon import FiniteHorizonRatio, LinearMap
+    from ..maps.finite_horizon import FiniteHorizonRatio, LinearMap
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
            "design_robust_set", "bound_on_grid", "admissible", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
@@ -148,7 +148,7 @@ DELTA_SETS = ("auto", "disc", "structured")
 #: Choices of :attr:`RobustSetOptions.trial`.
 TRIAL_LAWS = ("extended", "projected")
 #: Supporting directions of a structured set's polygon in the SOCP: a coarser polygon than the verification's
-#: (:data:`~.value_set.DIRECTIONS`), containing it, so fewer and better conditioned cones (64 per frequency
+#: (:data:`~..sets.value_set.DIRECTIONS`), containing it, so fewer and better conditioned cones (64 per frequency
 #: made Clarabel stall) and a design that the verification rarely sends back.
 _DESIGN_DIRECTIONS = 16
 _DIRECT_METHOD = "faer"  # supernodal, multithreaded: the dense tap columns make qdldl slow
@@ -237,19 +237,19 @@ class RobustSetOptions(FitWeighting):
         forces ``F = 0`` on a band a FIR can only approach it.
     finite_trial_s : float
         Length (s, >= 0) of the trial on which the whole-trial figure ``rho_N`` of the result is
-        computed with exact models (:attr:`RobustSetDesign.finite`, :mod:`.finite_horizon`); 0 skips it.
+        computed with exact models (:attr:`RobustSetDesign.finite`, :mod:`..maps.finite_horizon`); 0 skips it.
     trial : {"extended", "projected"}
         How the law treats a finite trial (:meth:`RobustSetDesign.apply`): ``"extended"`` (default)
         filters the reconstructed disturbance continued past the trial's end; ``"projected"`` asks
         the target for the error ``F`` gives its predicted error and inverts its learning map over
-        the trial by least squares (:mod:`.trial_inverse`): with exact models every disturbance of
+        the trial by least squares (:mod:`..filters.trial_inverse`): with exact models every disturbance of
         the whole trial keeps ``sqrt(2) max |1 - F|``, but the learning signal spikes at the trial's
-        ends. Trials longer than :data:`~.trial_inverse.MAX_TRIAL_SAMPLES` samples are extended
+        ends. Trials longer than :data:`~..filters.trial_inverse.MAX_TRIAL_SAMPLES` samples are extended
         (with a warning).
     delta_set : {"auto", "disc", "structured"}
         The Delta set guaranteed over when a design is made from a fleet (:func:`structured_set`):
         ``"disc"`` the frequency-wise disc ``|Delta| <= W``; ``"structured"`` the set the bound or the
-        identification stands for (:mod:`.value_set`); ``"auto"`` the identification's parameter
+        identification stands for (:mod:`..sets.value_set`); ``"auto"`` the identification's parameter
         ellipsoid when the source carries one, else the disc.
     """
 
@@ -471,7 +471,7 @@ class RobustSetDesign:
         Frequency intervals (rad/s) where the set reaches system j-1's stability boundary: there the
         guarantee covers the Deltas with ``|1 + T0 Delta| >= margin`` only (the disc: where its margin
         bound is used, :func:`uncertainty_cones`; a structured set: where some of its values are left
-        out, :mod:`.value_set`), and ``F`` is near 0 where even those allow no learning.
+        out, :mod:`..sets.value_set`), and ``F`` is near 0 where even those allow no learning.
     w, worst : numpy.ndarray
         Verification grid (rad/s) and the worst-case ratio on it.
     exchanges : int
@@ -484,7 +484,7 @@ class RobustSetDesign:
         How a finite trial is treated, :attr:`RobustSetOptions.trial`.
     finite : FiniteHorizonRatio or None
         The whole-trial figure ``rho_N = max_d ||e_j|| / ||e'_j||`` over a trial of
-        ``options.finite_trial_s`` with exact models (:mod:`.finite_horizon`), the law of
+        ``options.finite_trial_s`` with exact models (:mod:`..maps.finite_horizon`), the law of
         :meth:`apply` without a band; set by :func:`design_robust_set` (None: not computed).
         ``rho_guaranteed`` holds per frequency (an infinite horizon); ``rho_N`` is what a whole
         trial can reach for its worst disturbance, which for this zero-phase ``F`` lies at an end
@@ -510,14 +510,14 @@ class RobustSetDesign:
 
     def trial_map(self, n: int) -> "LinearMap":
         """The law on a trial of ``n`` samples, the source flying without learning, as a linear map
-        (``e'_{j-1} -> d_f,j``, :mod:`.finite_horizon`): what :meth:`apply` computes.
+        (``e'_{j-1} -> d_f,j``, :mod:`..maps.finite_horizon`): what :meth:`apply` computes.
 
         Parameters
         ----------
         n : int
             Samples of the trial.
         """
-        from .finite_horizon import LinearMap, causal_map, fir_map, odd_start_map, trend_map, zpk_map
+        from ..maps.finite_horizon import LinearMap, causal_map, fir_map, odd_start_map, trend_map, zpk_map
 
         inv = zpk_map(inverse_gd_filter(self.filters.source, model=True), n)
         a = self.F.advance
@@ -547,7 +547,7 @@ class RobustSetDesign:
         ``"projected"``: with ``y = Gd_hat_j{d_hat}`` the target's predicted error without learning
         and ``F_N`` the FIR over the trial (``y`` extended before ``t = 0`` as an odd function, zero
         after the end), ``d_f`` is the least-squares solution of ``Gf_hat_j{d_f} = -F_N{y}`` over the
-        trial (:mod:`.trial_inverse`). Over an infinite horizon it is the same law
+        trial (:mod:`..filters.trial_inverse`). Over an infinite horizon it is the same law
         (``Gf_j (1 - Q_j) = -Gd_j``); on the trial, with exact models, ``e_j = P (I - F_N) e'_j`` with
         ``P`` a projection, so ``||e_j|| <= sqrt(2) max |1 - F| ||e'_j||`` for every disturbance
         (the odd extension at most doubles the energy ``F`` sees). Measured ``rho_N`` 0.153 / 0.012 /
@@ -556,7 +556,7 @@ class RobustSetDesign:
         error exactly, ``d_f`` has spikes there (10-50 m/s^2 on 30 s of ``sin(w t)``, against 1-2
         extended), which an acceleration limit clips, and a clipped law keeps no guarantee (an
         all-pass error at |Delta| = 0.3 then made ``sin(16 t)`` 1.35 times worse). Trials longer than
-        :data:`~.trial_inverse.MAX_TRIAL_SAMPLES` are extended, with a warning.
+        :data:`~..filters.trial_inverse.MAX_TRIAL_SAMPLES` are extended, with a warning.
 
         ``"extended"`` (default): ``F`` acts on the reconstructed disturbance ``d_hat``
         (:func:`~ilcdob.design.reconstruct_disturbance`, the model's maps), a smooth signal
@@ -565,7 +565,7 @@ class RobustSetDesign:
 
         Trial ends. ``F`` looks ``F.advance`` samples (3 s for 301 taps) past every sample. Before
         the trial ``d_hat`` is zero (the vehicle at rest) and what ``F`` puts before ``t = 0`` is
-        folded onto the trial's first samples (:func:`~.band.fold_start`). After it ``d_hat``
+        folded onto the trial's first samples (:func:`~..filters.band.fold_start`). After it ``d_hat``
         continues along its trend (:func:`end_continuation`): the line fitted (Hann-weighted least
         squares) to the ``2 F.advance`` samples before its last :attr:`end_fade` ones (those the
         stable inversion built from the error continued past the end), blended into over them. A line is what the
@@ -581,7 +581,7 @@ class RobustSetDesign:
         disturbance (0.02 m/s^2 per s) up to 5.3 times worse; the trend keeps every one of these
         trials below its ``rho_guaranteed`` and 1 (``tests/test_finite_horizon.py``). A zero-phase
         ``F`` still cannot keep ``rho_guaranteed`` for every disturbance of a finite trial
-        (:attr:`finite`, :mod:`.finite_horizon`); a causal one (``advance = 0``, no continuation
+        (:attr:`finite`, :mod:`..maps.finite_horizon`); a causal one (``advance = 0``, no continuation
         needed) does, at the price of learning where the set reaches the source's stability
         boundary.
 
@@ -631,7 +631,7 @@ class RobustSetDesign:
         return True
 
     def trial_inverse(self, n: int) -> TrialInverse:
-        """The target model's ``Gf`` inverted over ``n`` samples by least squares (:mod:`.trial_inverse`).
+        """The target model's ``Gf`` inverted over ``n`` samples by least squares (:mod:`..filters.trial_inverse`).
 
         Parameters
         ----------
@@ -652,7 +652,7 @@ class RobustSetDesign:
 
         With a look-ahead (``F.advance > 0``): the samples of ``d_hat`` that the stable inversion
         built from the error continued past the trial's end (its anti-causal look-ahead to
-        ``LOOKAHEAD_TOL`` plus its advance, :mod:`.noncausal`; 24 on the built-in fleet). A causal
+        ``LOOKAHEAD_TOL`` plus its advance, :mod:`..filters.noncausal`; 24 on the built-in fleet). A causal
         ``F`` (``advance = 0``) needs nothing past the end and uses ``d_hat`` as reconstructed: 0.
         """
         if self.F.advance == 0 or self.filters is None:
@@ -687,7 +687,7 @@ class RobustSetDesign:
                                        "extended before t = 0 as an odd function (y(-1-k) = -y(k)) for F's advance "
                                        "and zero after the end; d_f = argmin ||Gf_hat_j{d_f} + F{y}||^2 + lam "
                                        "||d_f||^2 over the trial's samples (lifted maps, lam = 1e-12 x the mean "
-                                       "diagonal of Gf^T Gf, design/trial_inverse.py); longer trials are extended"}
+                                       "diagonal of Gf^T Gf, design/filters/trial_inverse.py); longer trials are extended"}
                 if self.trial == "projected" else
                 {"fade_samples": self.end_fade, "fit_samples": 2 * self.F.advance,
                                "rule": "F acts on the reconstructed disturbance d_hat, zero before the trial; with "
@@ -735,7 +735,7 @@ def _set_rows(source: LoopSystem, w: np.ndarray, w_bound: np.ndarray, bound: np.
               structure: StructuredSet | None, margin: float, directions: int = 0) -> tuple[np.ndarray, ...]:
     """Cone rows ``(index, a, b, R)`` of the Delta set on ``w`` and where values were left out for the margin:
     one disc row per frequency (:func:`uncertainty_cones`), or a structured set's polygon of ``directions``
-    supporting lines (:func:`~.value_set.family_cones`)."""
+    supporting lines (:func:`~..sets.value_set.family_cones`)."""
     if structure is not None:
         return family_cones(source, structure, w, margin, directions)
     a, b, r, _, kind = uncertainty_cones(source, w, bound_on_grid(w_bound, bound, w), margin)
@@ -819,10 +819,10 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         Systems j-1 and j (their models are used; system j's plant does not enter the ratio).
     w_bound, bound : array
         System j-1's multiplicative bound ``W`` on frequencies ``w_bound`` (rad/s), e.g.
-        ``DeltaSet.w`` and ``DeltaSet.bound`` (:mod:`.delta`); a single value is a constant bound.
+        ``DeltaSet.w`` and ``DeltaSet.bound`` (:mod:`..sets.delta`); a single value is a constant bound.
     options : RobustSetOptions, optional
     structure : BoundFamily or EllipseFamily, optional
-        A structured Delta set of system j-1 (:mod:`.value_set`) to guarantee over instead of the
+        A structured Delta set of system j-1 (:mod:`..sets.value_set`) to guarantee over instead of the
         disc ``|Delta| <= W``: the fleet bound's gain/high-pass family or an identification's
         parameter ellipsoid. ``w_bound`` and ``bound`` are then only reported.
 
@@ -860,7 +860,7 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
     design = replace(design, filters=lf)
     n_trial = int(round(o.finite_trial_s / source.ts))
     if n_trial >= 2:
-        from .finite_horizon import finite_horizon_ratio, law_map
+        from ..maps.finite_horizon import finite_horizon_ratio, law_map
 
         design = replace(design, finite=finite_horizon_ratio(law_map(design, n_trial), source.nominal, target.nominal))
     return design

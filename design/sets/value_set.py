@@ -1,6 +1,6 @@
 """Structured model errors, frequency by frequency: value sets and their worst-case cones.
 
-The robust-set design (:mod:`.robust_set`) guarantees the improvement for every multiplicative
+The robust-set design (:mod:`..methods.robust_set`) guarantees the improvement for every multiplicative
 model error of the source system, ``P = (1 + Delta) P_hat``. Over the unstructured disc
 ``|Delta(e^{jw Ts})| <= W`` it must cover every phase of ``Delta``; near the peak of the
 source's complementary sensitivity ``T0`` the disc admits plants that bring the source's loop to
@@ -38,7 +38,7 @@ sample that boundary itself:
 
 At each frequency the set of values ``Delta(jw)`` is sampled on a grid and mapped through
 ``g(Delta) = (1 + Delta)/(1 + T0 Delta)`` (the exact ratio ``Gd/Gd_hat`` of the source's true
-and nominal disturbance maps, :mod:`.robust_set`). The target's error ratio
+and nominal disturbance maps, :mod:`..methods.robust_set`). The target's error ratio
 ``|1 - F g|`` is convex in ``g``, so its maximum over any convex polygon containing the image is
 reached at a vertex of that polygon. The polygon used is the outer one of ``K`` (:data:`DIRECTIONS`)
 supporting lines: in each direction ``n_k = e^{j 2 pi k/K}`` the largest ``Re(g conj(n_k))`` over the
@@ -72,7 +72,7 @@ than ``1/margin`` times its model's: a resonance near its stability boundary) ar
 guarantee covers the plants of the set that keep that margin. On a bare :class:`ValueSet` this is done
 sample by sample, and the rows bound the kept samples' polygon only; :func:`family_cones` (what the
 robust-set design uses) also covers the kept values between a kept and a left-out sample, as above.
-(The disc design's margin is on ``|1 + T0 Delta|`` instead, :mod:`.robust_set`; on a structured set
+(The disc design's margin is on ``|1 + T0 Delta|`` instead, :mod:`..methods.robust_set`; on a structured set
 that would drop every plant with less than ``margin`` times the model's gain, harmless ones included.)
 
 The robust-set design takes a structured set as a :class:`BoundFamily` or an
@@ -290,7 +290,7 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
     true loop of system j-1 is stable and keeps the margin.
 
     Stability: with ``Delta = r h`` the true loop's return difference is the model's times ``1 + r T0 h``
-    (:mod:`.robust_set`); starting stable at ``r = 0``, its poles reach the unit circle first where
+    (:mod:`..methods.robust_set`); starting stable at ``r = 0``, its poles reach the unit circle first where
     ``1 + r T0(w) h(w) = 0``, i.e. at the real values ``r = -1/(T0 h)`` taken where ``T0 h`` is real
     (sign changes of its imaginary part, interpolated). Margin: the plant's disturbance map stays
     within ``1/m`` of the model's at every frequency, ``|g| = |1 + r h|/|1 + r T0 h| <= 1/m``: at each
@@ -301,7 +301,7 @@ def admissible_range(source: LoopSystem, tau: tuple, margin: float = 0.0,
     Nyquist and 200 log-spaced below its first); the nearest limit on each side bounds the interval
     (``-inf``/``inf`` when there is none): a stability limit less 1 % (the set's image is unbounded
     there), a margin limit that of ``0.99 m``, so that the interval holds every plant a sampler keeping
-    ``|Gd/Gd_hat| <= 1/m`` on another grid keeps (:func:`~ilcdob.design.delta.delta_set`); the values
+    ``|Gd/Gd_hat| <= 1/m`` on another grid keeps (:func:`~ilcdob.design.sets.delta.delta_set`); the values
     beyond ``1/m`` are left out of the image value by value.
 
     Parameters
@@ -664,7 +664,7 @@ def complementary_sensitivity(source: LoopSystem, w: np.ndarray) -> np.ndarray:
     """``T0 = P_hat (M + C) / (1 - Q + P_hat (M + C))`` of a system's nominal DOB loop.
 
     The Moebius map ``g(Delta) = (1 + Delta)/(1 + T0 Delta)`` of the module docstring and of
-    :mod:`.robust_set` takes a model error of the source to its error-ratio factor.
+    :mod:`..methods.robust_set` takes a model error of the source to its error-ratio factor.
 
     Parameters
     ----------

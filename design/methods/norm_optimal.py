@@ -41,7 +41,7 @@ How it is computed (measurements in docs/performance.md, "Norm-optimal ILC"):
 * :meth:`NormOptimalDesigner.law` gives the learning law of the lifted matrices,
   ``d_f,j = L1 e_{j-1} + L2 d_f,{j-1}``, without them (:class:`NormOptimalLaw`, O(N n)
   memory): ``L1 = F Gd_j Gd_{j-1}^+`` and ``L2 = L1 Gf_{j-1}``, where the Tikhonov inverse
-  ``Gd_{j-1}^+`` of :func:`~ilcdob.design.lifted_filters.regularised_inverse` is itself a
+  ``Gd_{j-1}^+`` of :func:`~ilcdob.design.maps.lifted_filters.regularised_inverse` is itself a
   regularised least-squares problem over the trial, solved by the same recursion. Its weight
   ``alpha = regularisation * sigma_max^2`` needs the largest singular value of the lifted
   ``Gd_{j-1}``: Lanczos on ``(sigma I - T'T)^{-1}`` with ``sigma`` the squared peak gain of
@@ -65,7 +65,7 @@ from ilcdob.loop import LoopSystem
 from ilcdob.native import NativeFunction
 from ilcdob.signals import as_signal
 
-from .closed_form import reconstruct_disturbance, simulate_map
+from ..maps.closed_form import reconstruct_disturbance, simulate_map
 
 __all__ = ["NormOptimalOptions", "NormOptimalDesigner", "NormOptimalLaw", "norm_optimal_learning",
            "MAX_NORM_OPTIMAL_BYTES", "LIFTED_PEAK_MATRICES", "norm_optimal_bytes", "check_norm_optimal_size"]
@@ -604,7 +604,7 @@ class NormOptimalDesigner:
 
         ``L1 = F Gd_j Gd_{j-1}^+`` (``e0 = -Gd_j d_rec``, ``d_rec = -Gd_{j-1}^+ e'``) with ``F`` the
         solution matrix and ``Gd_{j-1}^+`` the
-        regularised inverse of :func:`~ilcdob.design.lifted_filters.regularised_inverse`;
+        regularised inverse of :func:`~ilcdob.design.maps.lifted_filters.regularised_inverse`;
         ``L2 = L1 Gf_{j-1}``. Dense, O(N^3) time and about :data:`LIFTED_PEAK_MATRICES` N x N
         matrices of memory: for export and checks at moderate N (:meth:`law` is the same map
         in O(N)).
@@ -621,7 +621,7 @@ class NormOptimalDesigner:
         L1, L2 : numpy.ndarray
             N x N learning matrices.
         """
-        from .lifted_filters import regularised_inverse
+        from ..maps.lifted_filters import regularised_inverse
 
         src = source.nominal
         n = self.n

@@ -16,7 +16,7 @@ exactly the regularised least-squares (norm-optimal ILC) problem
 Scale (docs/theory.md section 5): the predicted errors are not formed with dense N x N lifted
 matrices. Each ``Gf_k`` enters through its state-space equations as sparse equality
 constraints ``x_{t+1} = A x_t + B d_t``, ``x_0 = 0``, ``y_t = C x_t + D d_t``, in a balanced
-truncation (:func:`~ilcdob.design.reduction.reduced_realisation`, SLICOT AB09AD in discrete
+truncation (:func:`~ilcdob.design.filters.reduction.reduced_realisation`, SLICOT AB09AD in discrete
 time), so the states are well scaled and few (6-7 of 11-12 at the default ``reduction_tol``).
 The truncation's error bound ``eps_k`` (``>= ||Gf_k - Gf_k,r||_inf``) is carried into the
 improvement constraint, ``||e_k,r|| + eps_k ||d_f|| <= rho ||e0_k||``, so the guarantee holds
@@ -52,8 +52,8 @@ import scipy.sparse as sp
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
-from .closed_form import reconstruct_disturbance, simulate_map
-from .reduction import reduced_realisation
+from ..maps.closed_form import reconstruct_disturbance, simulate_map
+from ..filters.reduction import reduced_realisation
 
 __all__ = ["RobustOptions", "RobustDesign", "RobustDesigner", "RobustPairDesigner", "RobustInfeasibleError",
            "RobustSolverError", "predicted_errors"]
@@ -130,7 +130,7 @@ class RobustOptions:
     reduction_tol : float
         Balanced truncation of each ``Gf_k``: states with Hankel singular value below
         ``reduction_tol`` times the largest are dropped
-        (:func:`~ilcdob.design.reduction.reduced_realisation`). The truncation error bound
+        (:func:`~ilcdob.design.filters.reduction.reduced_realisation`). The truncation error bound
         ``eps_k`` is added to the improvement constraint, which stays a guarantee for the full
         model. In [0, 0.1); default 1e-5 (6-7 of 11-12 states).
     """
@@ -321,7 +321,7 @@ class RobustDesigner:
         self.problem = cp.Problem(cp.Minimize(obj), cons)
         if not self.problem.is_dpp():
             raise RobustSolverError("robust design: the cvxpy problem is not DPP, so it would be recompiled at "
-                                    "every solve; this is a bug in ilcdob.design.robust, please report it")
+                                    "every solve; this is a bug in ilcdob.design.methods.robust, please report it")
         # normalised d = d_f * gain / s: lam and mu scale by 1/gain^2 (s cancels)
         self._lam_s.value = self.options.lam / self._gain**2
         self._mu_s.value = self.options.mu / self._gain**2

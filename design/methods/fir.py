@@ -1,6 +1,6 @@
 """Implementable learning filters: fixed-order non-causal FIRs, a convex fit under robust convergence.
 
-The closed-form filters of the Theorem (docs/theory.md section 2, :mod:`ilcdob.design.closed_form`)
+The closed-form filters of the Theorem (docs/theory.md section 2, :mod:`ilcdob.design.maps.closed_form`)
 are rational, improper and partly anti-causal. Here each of them is replaced by a FIR with a
 fixed non-causal advance ``a`` (samples)::
 
@@ -84,9 +84,9 @@ from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.response import fir_matrix, fir_response
 from ilcdob.signals import as_signal, extend_smoothly
 
-from .closed_form import LearningFilters, closed_form_filters
-from .delta import DeltaSet
-from .frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
+from ..maps.closed_form import LearningFilters, closed_form_filters
+from ..sets.delta import DeltaSet
+from ..filters.frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
 
 __all__ = ["FIROptions", "FIRFilter", "FIRFit", "FIRDesign", "FIRDesignError", "FIRSolverError",
            "FIRGuaranteeWarning", "SOLVERS", "UNATTAINABLE", "POINTS_PER_RIPPLE", "CHECK_REFINE", "attainable_te1",
@@ -308,7 +308,7 @@ class FIRFilter:
         return full[start:start + n]
 
     def to_dict(self) -> dict:
-        """The filter in the coefficient form of ``filters.json`` (:mod:`.export`).
+        """The filter in the coefficient form of ``filters.json`` (:mod:`..filters.coefficients`).
 
         ``num`` lists the coefficients of ``z^0, z^-1, ...`` (highest power first), so
         ``output(k) = sum_i num[i] * input(k + advance - i)``.

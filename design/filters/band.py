@@ -17,7 +17,7 @@ at both ends::
     d_f,j = fold( F{ W{ learn( F{H{gamma e_{j-1}}}, F{H{d_f,{j-1}}} ) } } )
 
 ``learn`` is the method's learning filter (the Theorem's ``L1{.} + L2{.}`` for the closed
-form), ``W`` the optional airframe correction (:mod:`ilcdob.design.flown`), ``H`` the
+form), ``W`` the optional airframe correction (:mod:`ilcdob.design.maps.flown`), ``H`` the
 extension of the trial by ``pad`` samples at each end (zeros before ``t = 0``, where the
 vehicle is at rest; after the end the line fitted to the last :data:`END_FIT_S` seconds) and
 ``fold`` keeps the trial's samples and adds to its first ``pad`` samples, time-reversed, the
@@ -40,7 +40,7 @@ ratio at 4 rad/s, which the band-off law has too) and 5e-4. With a 3 rad/s band 
 the 6 rad/s trials from 0.998 to at most 1.0002 (10 of 1500 above 1). Fading the learning
 signal in over ``pad / 2`` or ``pad`` instead cost 0.08-0.11 on slow sinusoids and left 54-94
 of 1200 trials worse; fading it out at the end changed nothing (the line continuation serves
-the end). The whole-trial figure of the band's law (:mod:`.finite_horizon`) still exceeds 1
+the end). The whole-trial figure of the band's law (:mod:`..maps.finite_horizon`) still exceeds 1
 (1.96 at 10 rad/s, the worst disturbance at the start): a zero-phase filter cannot keep a
 per-frequency bound for every disturbance of a finite trial.
 

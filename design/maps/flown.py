@@ -51,7 +51,7 @@ hummingbird) and 0.88 (hummingbird -> crazyflie) of the DOB-only error with the 
 
 :func:`model_attitude` gives a model's ``A_hat`` in discrete time, with which a command-side
 estimate is expressed as the airframe acceleration it stands for. The learning law itself,
-with its robustness filter and trial horizon, is :mod:`ilcdob.design.band`.
+with its robustness filter and trial horizon, is :mod:`ilcdob.design.filters.band`.
 """
 
 from __future__ import annotations

@@ -1,19 +1,19 @@
 """C99 code running exported learning filters, and the files of a design folder.
 
-:func:`c_code` turns the ``L1``/``L2`` filters of ``filters.json`` (:mod:`.export`) into a
+:func:`c_code` turns the ``L1``/``L2`` filters of ``filters.json`` (:mod:`..filters.coefficients`) into a
 header and a source file with, for each filter (PREFIX: by default ``ilcdob_<from>_<to>``,
 see :func:`default_c_prefix`), ::
 
     void PREFIX_l1_apply(const double *u, double *y, size_t n);
 
-filtering one recorded trial exactly as :func:`~ilcdob.design.export.apply_coefficients`
+filtering one recorded trial exactly as :func:`~ilcdob.design.filters.coefficients.apply_coefficients`
 does: the input is taken as zero before the trial, continued past its end by the
 least-squares cubic through its last 16 samples
 (:func:`~ilcdob.signals.extend_smoothly`), run through the look-ahead pre-stage when the
 filter has one (``lookahead``, ``v(j) = sum_m g_m u(j + m)``, the sum in descending ``m``:
 the smallest taps first), then through the second-order sections (or, for a FIR, the
 direct form) in the operation order of ``scipy.signal.sosfilt`` (``lfilter``), and read so
-that the whole filter looks ``advance`` samples ahead (:mod:`.export`). The loop runs over ``i = 0 .. n + advance - 1``:
+that the whole filter looks ``advance`` samples ahead (:mod:`..filters.coefficients`). The loop runs over ``i = 0 .. n + advance - 1``:
 ``v(i - M)`` from the inputs ``u(i - M) .. u(i)``, one step of the sections, and, from
 ``i = advance`` on, the output ``y(i - advance)``; as ``advance >= M`` that output
 overwrites no input a later step reads (``y`` may be ``u``: in place). The C code allocates
@@ -48,15 +48,15 @@ Without a band it is ``W{L1{e} + L2{d_f_prev}}``. The caller provides ``work``,
 ``df_prev``. It returns 0, or ``PREFIX_LEARN_EMPTY`` (n = 0) or ``PREFIX_LEARN_NULL`` (a
 NULL pointer) without writing anything.
 
-A robust-set design (:mod:`.robust_set`, ``filters.json`` keys ``law_maps``, ``F`` and
+A robust-set design (:mod:`..methods.robust_set`, ``filters.json`` keys ``law_maps``, ``F`` and
 ``trial_ends``) has no ``L1``/``L2`` of its own: its ``learn`` runs, in their place, the law of
-:meth:`~ilcdob.design.robust_set.RobustSetDesign.apply` ::
+:meth:`~ilcdob.design.methods.robust_set.RobustSetDesign.apply` ::
 
     R{e, d_f} = (1 - Q_j){Fr{d_hat}},   d_hat = -Ginv{e + Gf{d_f}}
 
 with ``Gf`` and ``1 - Q_j`` run as state space from rest, ``Ginv = Gd_hat_{j-1}^{-1}`` as the
 apply function ``PREFIX_ginv_apply`` above, ``d_hat`` continued past the trial's end along its
-Hann-weighted trend (:func:`~ilcdob.design.trial_edges.end_continuation`) and the FIR ``Fr``'s
+Hann-weighted trend (:func:`~ilcdob.design.filters.trial_edges.end_continuation`) and the FIR ``Fr``'s
 output before ``t = 0`` folded onto the first samples; band, ``W`` and fold around it as above.
 Its scratch is ``3 (n + 2 pad) + advance(Fr)`` doubles, and it uses ``cos`` (``-lm``).
 
@@ -87,14 +87,14 @@ from ilcdob.fleet import AXES
 from ilcdob.names import c_comment, c_identifier
 from ilcdob.signals import as_signal
 
-from .c_text import DOUBLE, FLOAT, CType, array_c
-from .entries import MAX_ADVANCE, check_filter_entry, check_sections, direct_form
-from .export import apply_coefficients, apply_lookahead, lookahead_taps
-from .law import LawContext, LearningLaw
-from .law.stage import OUTPUT_PLACE
-from .law.airframe import AirframePath
-from .law.band import band_spec, check_cutoff
-from .law.robust_set import RobustSetMaps
+from ..filters.c_text import DOUBLE, FLOAT, CType, array_c
+from ..filters.entries import MAX_ADVANCE, check_filter_entry, check_sections, direct_form
+from ..filters.coefficients import apply_coefficients, apply_lookahead, lookahead_taps
+from ..law import LawContext, LearningLaw
+from ..law.stage import OUTPUT_PLACE
+from ..law.airframe import AirframePath
+from ..law.band import band_spec, check_cutoff
+from ..law.robust_set import RobustSetMaps
 
 __all__ = ["CCode", "c_code", "check_filters", "check_filter_entry", "MAX_ADVANCE", "default_c_prefix",
            "check_c_prefix", "reference_trial", "emulate_c_filter", "float_error", "design_readme", "design_files", "signal_header",
@@ -283,7 +283,7 @@ def float_error(coeffs: dict[str, Any], ts: float) -> float:
     float
         ``max |y_float - y_double| / max |y_double|``, the float arithmetic emulated by
         :func:`emulate_c_filter` and the double result by
-        :func:`~ilcdob.design.export.apply_coefficients`.
+        :func:`~ilcdob.design.filters.coefficients.apply_coefficients`.
     """
     x = reference_trial(ts)
     ref = apply_coefficients(coeffs, x)
@@ -519,7 +519,7 @@ class _Learning:
 
 
 def _learning_parts(filters: dict[str, Any]) -> _Learning:
-    """The band and airframe correction of ``filters.json`` as the law's stages read them (:mod:`.law`).
+    """The band and airframe correction of ``filters.json`` as the law's stages read them (:mod:`..law`).
 
     Raises
     ------
@@ -645,7 +645,7 @@ static void {p}sections(const double (*sos)[6], size_t ns, double (*z)[2], doubl
 
 def _learn_c(prefix: str, law: LearningLaw) -> str:
     """``<prefix>learn`` (double only) and what it calls: each stage's tables, helpers and step in chain order
-    (stages placed after :data:`~.law.stage.OUTPUT_PLACE` run on ``df_next``)."""
+    (stages placed after :data:`~..law.stage.OUTPUT_PLACE` run on ``df_next``)."""
     macro = prefix.upper()
     parts = [s.c_parts(prefix) for s in law.stages]
     after = [p.step for s, p in zip(law.stages, parts) if s.place > OUTPUT_PLACE]
@@ -753,7 +753,7 @@ def _law_comment(macro: str, lp: _Learning, robust: list[str] | None = None) -> 
 
 
 def _law_macros(filters: dict[str, Any], macro: str, lp: _Learning) -> tuple[str, str]:
-    """The header's band macros, then the stages' macros, and the stages' notes (:class:`~.law.stage.CParts`)."""
+    """The header's band macros, then the stages' macros, and the stages' notes (:class:`~..law.stage.CParts`)."""
     parts = [s.c_parts(macro.lower()) for s in LearningLaw.from_dict(filters).stages]
     if lp.sos is not None:
         macros = (f"#define {macro}BAND_CUTOFF {lp.cutoff!r} /* rad/s, corner of the learning band F */\n"
@@ -876,7 +876,7 @@ def c_code(filters: dict[str, Any], prefix: str | None = None, float_variant: bo
     apply_text = f"""\
  * The filters alone: {prefix}l1_apply and {prefix}l2_apply each filter one whole
  * recorded trial of n samples (n >= 1; n = 0 does nothing)
- * exactly as ilcdob.design.export.apply_coefficients does: the filter looks
+ * exactly as ilcdob.design.filters.coefficients.apply_coefficients does: the filter looks
  * {macro}L1_ADVANCE (L2: {macro}L2_ADVANCE) samples ahead, the input is taken as zero
  * before the trial and continued past its end by the least-squares cubic through its last
  * 16 samples. A filter with anti-causal poles (|p| > 1) first runs the input through a
@@ -930,7 +930,7 @@ def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: Robu
     guarantee = filters.get("rho_guaranteed")
     robust = [
         "  R{e, d_f} = (1 - Q){Fr{d_hat}},  d_hat = -Ginv{e + Gf{d_f}}: the robust-set law",
-        "     (ilcdob.design.robust_set.RobustSetDesign.apply); Gf = Gf_hat and Ginv = Gd_hat^-1",
+        "     (ilcdob.design.methods.robust_set.RobustSetDesign.apply); Gf = Gf_hat and Ginv = Gd_hat^-1",
         f"     of {src}'s model (Ginv: {prefix}ginv_apply below, non-causal), Q of {tgt}; Fr the",
         f"     robustness FIR of {macro}F_TAPS taps looking {macro}F_ADVANCE samples ahead; d_hat is",
         "     continued past the end along its trend (the Hann-weighted least-squares line through",
@@ -941,7 +941,7 @@ def _robust_c_code(filters: dict[str, Any], prefix: str, lp: _Learning, rp: Robu
     work = f"3 * (n + 2 * {lp.pad}) + {rp.advance}"
     apply_text = f"""\
  * {prefix}ginv_apply runs Ginv alone over a whole trial of n samples (y may be u), as
- * ilcdob.design.export.apply_coefficients does: it looks {macro}GINV_ADVANCE samples ahead, the
+ * ilcdob.design.filters.coefficients.apply_coefficients does: it looks {macro}GINV_ADVANCE samples ahead, the
  * input taken as zero before the trial and continued past its end by the least-squares
  * cubic through its last 16 samples. Uses cos() of the C math library (link with -lm).
  * Compile with -ffp-contract=off to reproduce the Python arithmetic operation by operation;
@@ -988,7 +988,7 @@ _FILE_TEXT = {
                  "the band and the look-ahead of each filter",
     "filters.c": "their implementation (no allocation; compile it with your firmware or ground tool)",
     "lifted.npz": "numpy arrays: for norm-optimal its law d_f,j = L1 e_j-1 + L2 d_f,j-1 as Riccati gains "
-                  "(ilcdob.design.norm_optimal.NormOptimalLaw.from_arrays(numpy.load(...)).apply(e, d_f)) and, "
+                  "(ilcdob.design.methods.norm_optimal.NormOptimalLaw.from_arrays(numpy.load(...)).apply(e, d_f)) and, "
                   "with --lifted, the N x N matrices L1, L2; for robust the learning signal d_f, the predicted "
                   "improvement ratios and errors",
     "learning_signal.csv": "the learning signal d_f,j (m/s^2) computed from the given trial of the previous "
@@ -1081,7 +1081,7 @@ def _robust_readme(filters: dict[str, Any], prefix: str) -> list[str]:
                f"({filters.get('guaranteed_over', 'see filters.json')})." if isinstance(guarantee, (int, float))
                else ""),
             "", f"`{prefix}ginv_apply` runs Ginv alone (it looks ahead {ginv['advance']} samples; the trial is "
-            "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does). The code uses "
+            "continued past its end by a cubic, as `ilcdob.design.filters.coefficients.apply_coefficients` does). The code uses "
             "`cos()` of the C math library (link with `-lm`)."]
 
 
@@ -1142,13 +1142,13 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
         else:
             lines += [f"The filters alone are `{p}l1_apply` and `{p}l2_apply` (they look ahead "
                       f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
-                      "continued past its end by a cubic, as `ilcdob.design.export.apply_coefficients` does)"
+                      "continued past its end by a cubic, as `ilcdob.design.filters.coefficients.apply_coefficients` does)"
                       + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
                          or lp.w_sos is not None else "; their sum is what `learn` returns."),
                       "", *_structure_readme(filters)]
             lines += _inversion_readme(filters)
         if filters.get("law") == "exact-reference":
-            lines += ["", f"Learning law exact-reference (`ilcdob.design.laws`): pass `e - e_ref_source` instead "
+            lines += ["", f"Learning law exact-reference (`ilcdob.design.law.laws`): pass `e - e_ref_source` instead "
                       f"of `e` to `{p}learn` and add `correction` to `d_next`, both from `reference_terms.csv` "
                       "(they depend on the reference trajectory: run `ilcdob design --law exact-reference` again "
                       "for another trajectory). `learning_signal.csv` already includes both."]

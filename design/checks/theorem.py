@@ -16,7 +16,7 @@ the built-in fleet's UAV3 and makes the error 1.09 times worse than the DOB alon
 slow-PID vehicle fails it at 0.65-1.01 rad/s and still learns to a ratio of 0.51
 (tests/test_check_exact.py).
 
-**The exact worst case** (:mod:`.robust_set`, module docstring). Per frequency, system j's
+**The exact worst case** (:mod:`..methods.robust_set`, module docstring). Per frequency, system j's
 error with learning over its error with the DOB alone is, for any plant of system j::
 
     T(w) = e_j / e'_j = 1 - F(w) (1 + Delta) / (1 + T0 Delta),    T0 = P_hat (M + C) / D_hat
@@ -30,13 +30,13 @@ expansion; it is unbounded (``inf``) where ``W |T0| >= 1``: there the disc conta
 When the fleet file states a system's plant and its model, its Delta is known and
 ``|T(w)|`` is evaluated for it (:func:`exact_ratio_for_delta`).
 
-What it covers, as :mod:`.robust_set`'s guarantee: every Delta (any phase) with
+What it covers, as :mod:`..methods.robust_set`'s guarantee: every Delta (any phase) with
 ``|Delta(e^{jw Ts})| <= W(w)``, hence conservative for a structured set (real gains, fixed-order
 high-pass errors); the disturbance part of the error over trials long against the filters'
 memory (Parseval); not the source's own learning signal (modelled with its nominal ``Gf``),
 reference terms or noise that differs between the vehicles.
 
-**The law as applied.** The law a vehicle flies passes the learning band (:mod:`ilcdob.design.band`),
+**The law as applied.** The law a vehicle flies passes the learning band (:mod:`ilcdob.design.filters.band`),
 a real gain ``F_band`` in [0, 1]; a designed filter given by its response relative to the closed
 form multiplies it. The exact figures use ``F = F_band F_design``. The first-order figure of the
 band, ``1 - F + F |Delta| / (|1 + P C|/2)`` (:attr:`PairCheck.filtered_ratio`), is kept for
@@ -60,9 +60,9 @@ import numpy as np
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
-from .band import AMPLIFICATION_TOL, LearningBand
-from .delta import DeltaSet, delta_bound
-from .worst_case import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
+from ..filters.band import AMPLIFICATION_TOL, LearningBand
+from ..sets.delta import DeltaSet, delta_bound
+from ..sets.worst_case import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
 
 __all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", "learning_pairs",
            "exact_worst_ratio", "exact_ratio_for_delta", "bound_delta_sets", "EXACT_TOL", "REFINE"]
@@ -70,7 +70,7 @@ __all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", 
 _SOURCES = ("bound", "samples")
 
 #: The exact worst case of the law as applied may exceed 1 by this much at a frequency before the
-#: verdict fails (the learning band's own tolerance, :data:`~ilcdob.design.band.AMPLIFICATION_TOL`).
+#: verdict fails (the learning band's own tolerance, :data:`~ilcdob.design.filters.band.AMPLIFICATION_TOL`).
 EXACT_TOL = AMPLIFICATION_TOL
 #: The exact figures are evaluated on the Delta set's grid with this many log-spaced steps between
 #: two of its points (200 points to Nyquist become ~1600: steps of about 0.5 % in frequency).
@@ -501,8 +501,8 @@ def bound_delta_sets(fleet, names: list[str] | tuple[str, ...] | None = None) ->
 
     :func:`theorem_check` with ``source="bound"`` and the learning band's model edge
     (:func:`ilcdob.design.pair.pair_band`) read a Delta set's ``w`` and ``bound`` and nothing
-    else. Those are :func:`~ilcdob.design.delta.delta_bound` of the system, the same arrays
-    :func:`~ilcdob.design.delta.delta_set` (and :func:`~ilcdob.design.pair.fleet_delta_sets`)
+    else. Those are :func:`~ilcdob.design.sets.delta.delta_bound` of the system, the same arrays
+    :func:`~ilcdob.design.sets.delta.delta_set` (and :func:`~ilcdob.design.pair.fleet_delta_sets`)
     attach to its samples for any sample count, seed or order of the systems, so a check on
     these sets is the check on the sampled sets, without building a closed loop per sampled
     plant. The sets have no loops (``loops == ()``): :meth:`DeltaSet.deltas` and
@@ -571,7 +571,7 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
         The learning band of each pair's law (missing pairs: unfiltered).
     filters : dict of (source, target) to callable, optional
         ``F(w)`` (rad/s -> complex response) of a designed filter the pair's law applies
-        relative to the closed form (e.g. :meth:`~ilcdob.design.robust_set.RobustSetDesign.response`);
+        relative to the closed form (e.g. :meth:`~ilcdob.design.methods.robust_set.RobustSetDesign.response`);
         it multiplies the band in the exact figures (missing pairs: the closed form, ``F = 1``).
 
     Returns

@@ -17,7 +17,7 @@ error to the learning signal is designed. Three laws:
     move (hover); on moving references the reference term leaks into the reconstructed
     disturbance and system j's own reference term is not cancelled.
 ``exact-reference``
-    The same filters with the reference term kept (:mod:`ilcdob.design.reference`)::
+    The same filters with the reference term kept (:mod:`ilcdob.design.maps.reference`)::
 
         d_f,j = L1_j{e_{j-1} - e_ref,{j-1}} + L2_j{d_f,{j-1}} + Gf_hat_j^{-1}{e_ref,j},
         e_ref,i = r - G_r,i{r} + G_f,i{a_ref}     (model maps; a_ref only with feed-forward)
@@ -30,7 +30,7 @@ error to the learning signal is designed. Three laws:
     two reference terms are added the same way.
 ``multi-source``
     System j learns from the latest trial of *every* system that has flown so far
-    (:mod:`ilcdob.design.multi_source`): each trial gives a reconstruction of the common
+    (:mod:`ilcdob.design.law.multi_source`): each trial gives a reconstruction of the common
     disturbance through its system's model, the reconstructions are averaged per frequency
     with weights from each model's Delta set (inverse mean-square reconstruction error; equal
     weights for systems without a Delta set), and ``d_f,j = (1 - Q_j){d_hat}``. With one
@@ -51,7 +51,7 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 
-from .reference import inverse_gf_filter, reference_error
+from ..maps.reference import inverse_gf_filter, reference_error
 
 __all__ = ["LAWS", "DEFAULT_LAW", "LAW_DESCRIPTIONS", "check_law", "ExactReference", "law_for",
            "ReferenceTerms", "reference_terms"]

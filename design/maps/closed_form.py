@@ -42,7 +42,7 @@ The gain is matched to the block formula and the zero-pole form checked against 
 
 One integrator (the PID's) remains: the loop rejects constant disturbances, so the error
 carries their derivative only. The ZOH sampling zero of P_hat outside the unit circle
-becomes an anti-causal pole (stable inversion, :mod:`ilcdob.design.noncausal`).
+becomes an anti-causal pole (stable inversion, :mod:`ilcdob.design.filters.noncausal`).
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ from ilcdob.errors import NumericalError, SpecError
 from ilcdob.loop import LoopSystem, delta_poles, freqresp
 from ilcdob.signals import as_signal
 
-from .noncausal import ZPKFilter
+from ..filters.noncausal import ZPKFilter
 
 __all__ = ["LearningFilters", "closed_form_filters", "simulate_map", "inverse_gd_filter",
            "reconstruct_disturbance", "one_minus", "one_minus_zeros", "matched", "MATCH_RTOL"]
@@ -277,7 +277,7 @@ class LearningFilters:
         (:meth:`ilcdob.discretize.DiscreteBlock.response`) as a difference of the blocks, e.g.
         ``1/P - 1/P_hat = (P_hat - P)/(P P_hat)``, which is exactly 0 where a true block is the
         model's. ``L1`` is the Theorem's filter as applied: ``L1*`` times the factors of the poles
-        inverted with zero phase error (:attr:`~ilcdob.design.noncausal.ZPKFilter.substituted`),
+        inverted with zero phase error (:attr:`~ilcdob.design.filters.noncausal.ZPKFilter.substituted`),
         whose excess over 1 is evaluated without cancellation. The zero-pole form's rounding away
         from ``L1*`` (below :data:`MATCH_RTOL`, checked when it is built, :func:`matched`) is not
         part of the design and is left out: on the built-in fleet it is about 4e-14 ``|L1|`` at

@@ -6,8 +6,8 @@ With ``T0`` the complementary sensitivity of system j-1's nominal DOB loop and `
 response on the grid, learning leaves system j the ratio ``|T| = |1 - F (1 + Delta)/(1 + T0 Delta)|``.
 For every ``Delta`` of the disc ``|Delta| <= W`` (or the part of it that keeps the loop's stability
 margin) the Moebius image of the disc bounds it: :func:`uncertainty_cones` gives the disc data,
-:func:`worst_case_ratio` the bound. The robust-set design (:mod:`.robust_set`) constrains it, the
-Theorem's exact check (:mod:`.theorem`) evaluates it.
+:func:`worst_case_ratio` the bound. The robust-set design (:mod:`..methods.robust_set`) constrains it, the
+Theorem's exact check (:mod:`..checks.theorem`) evaluates it.
 """
 
 from __future__ import annotations

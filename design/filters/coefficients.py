@@ -1,9 +1,9 @@
-"""Export of learning filters: coefficient form and application from coefficients.
+"""The coefficient form of a learning filter (``filters.json``) and its application.
 
 A filter is written as ``H(z) = z^advance * N(z^-1) / D(z^-1)``: ``output(k)`` uses the input
 up to ``input(k + advance)``, i.e. run ``N/D`` causally on the input shifted ``advance`` samples
-ahead. A non-causal zero-pole filter (:class:`~ilcdob.design.noncausal.ZPKFilter`) is
-converted as it is applied (:attr:`~ilcdob.design.noncausal.ZPKFilter.realised`: poles that it
+ahead. A non-causal zero-pole filter (:class:`~ilcdob.design.filters.noncausal.ZPKFilter`) is
+converted as it is applied (:attr:`~ilcdob.design.filters.noncausal.ZPKFilter.realised`: poles that it
 inverts with zero phase error replaced by their substitute, stated under ``inversion``,
 docs/theory.md section 2), exactly except for its anti-causal poles ``1/(z - p)``, ``|p| > 1``,
 whose product is expanded into the series ::
@@ -36,7 +36,7 @@ causal poles than zeros gets pure-delay sections (``[0, 1, 0, 1, 0, 0]``,
 ``[0, 0, 1, 1, 0, 0]``) so that ``advance - M`` is never negative. The sections are ordered by
 :func:`order_sections` so that no intermediate signal outgrows the output (the pre-stage's
 output ``v`` is ``1/|S|`` times the output, :func:`section_growth`). :func:`apply_coefficients`
-and the C code of :mod:`.c_export` run this form, the pre-stage's sum in descending ``m``.
+and the C code of :mod:`..export.c_export` run this form, the pre-stage's sum in descending ``m``.
 
 The closed-form filters have a dozen poles and zeros clustered between 0.8 and 1 (the loops'
 slow modes and the PID integrator at z = 1); multiplied out into one direct-form pair
@@ -46,7 +46,7 @@ lose the low-frequency response in double precision. ``num``/``den`` are therefo
 only when their frequency response agrees with the canonical form's (pre-stage and sections)
 to :data:`DIRECT_FORM_RTOL` relative on the band of :func:`direct_form_grid` (four decades
 below Nyquist up to Nyquist); otherwise they are left out and ``num_den_omitted`` says by
-how much they disagree and where. A FIR (``den = [1]``, :mod:`.fir`) has no sections: its
+how much they disagree and where. A FIR (``den = [1]``, :mod:`..methods.fir`) has no sections: its
 direct form is exact and canonical. :func:`coefficients_freqresp` evaluates any of these forms.
 """
 
@@ -62,7 +62,6 @@ from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal, extend_smoothly
 from ilcdob.statespace import simulate
 
-from .closed_form import LearningFilters, inverse_gd_filter, one_minus
 from .noncausal import LOOKAHEAD_MAX, ZPKFilter, lookahead
 
 if TYPE_CHECKING:
@@ -70,7 +69,7 @@ if TYPE_CHECKING:
 
 __all__ = ["zpk_to_coefficients", "inversion_note", "order_sections", "section_growth", "order_grid",
            "apply_coefficients", "apply_lookahead", "lookahead_taps", "coefficients_freqresp",
-           "state_space_to_dict", "apply_state_space", "robust_set_maps", "direct_form_grid", "direct_form_disagreement",
+           "state_space_to_dict", "apply_state_space", "direct_form_grid", "direct_form_disagreement",
            "DIRECT_FORM_RTOL"]
 
 #: Largest relative disagreement of ``num``/``den`` with ``sos`` for ``num``/``den`` to be written.
@@ -236,7 +235,7 @@ def inversion_note(f: ZPKFilter) -> dict[str, Any]:
     Parameters
     ----------
     f : ZPKFilter
-        A filter with :attr:`~ilcdob.design.noncausal.ZPKFilter.substituted` poles.
+        A filter with :attr:`~ilcdob.design.filters.noncausal.ZPKFilter.substituted` poles.
 
     Returns
     -------
@@ -503,7 +502,7 @@ def apply_state_space(ss: dict[str, Any], x: object) -> np.ndarray:
     """Run a state-space entry of ``filters.json`` causally over a trial, from rest.
 
     ``s(k + 1) = A s(k) + B u(k)``, ``y(k) = C s(k) + D u(k)``, ``s(0) = 0``, by the compiled kernel
-    :func:`ilcdob.statespace.simulate` (as :func:`~.closed_form.simulate_map` runs the design's maps).
+    :func:`ilcdob.statespace.simulate` (as :func:`~..maps.closed_form.simulate_map` runs the design's maps).
 
     Parameters
     ----------
@@ -523,27 +522,3 @@ def apply_state_space(ss: dict[str, Any], x: object) -> np.ndarray:
     a = np.asarray(ss["A"], float)
     b, c = (np.asarray(ss[k], float).reshape(-1) for k in ("B", "C"))
     return simulate(a.reshape(b.size, b.size), b, c, float(ss["D"]), x).reshape(-1)
-
-
-def robust_set_maps(lf: LearningFilters) -> dict[str, Any]:
-    """The maps a robust-set design's learning law runs on a trial (``filters.json`` key ``law_maps``).
-
-    Parameters
-    ----------
-    lf : LearningFilters
-        The closed-form filters of the design (:attr:`~.robust_set.RobustSetDesign.filters`), whose
-        loops give the maps.
-
-    Returns
-    -------
-    dict
-        ``source_gf``: ``Gf_hat_{j-1}`` of the source's model (state space, from rest);
-        ``inverse_gd``: ``Gd_hat_{j-1}^{-1}`` in coefficient form (:func:`zpk_to_coefficients`, a
-        non-causal filter); ``one_minus_q``: ``1 - Q_j`` of the target (state space); ``rule``.
-    """
-    return {"source_gf": state_space_to_dict(lf.source.nominal.G_f),
-            "inverse_gd": zpk_to_coefficients(inverse_gd_filter(lf.source, model=True)),
-            "one_minus_q": state_space_to_dict(one_minus(lf.target.Q)),
-            "rule": "on a trial (e, d_f_prev): e' = e + source_gf{d_f_prev} (state space from rest), d_hat = "
-                    "-inverse_gd{e'} (coefficient form, continued past the end by the cubic), F on d_hat as "
-                    "`trial_ends` says, then one_minus_q (state space from rest)"}
