@@ -41,9 +41,10 @@ from threadpoolctl import threadpool_limits
 
 import ilcdob
 from ilcdob.design import closed_form_filters
-from ilcdob.design.methods.fir import (CHECK_REFINE, FIRGuaranteeWarning, FIROptions, _fir_matrix, _quadrature, _realify,
+from ilcdob.design.methods.fir import (CHECK_REFINE, FIRGuaranteeWarning, FIROptions, _quadrature, _realify,
                                 design_fir, fit_fir)
 from ilcdob.design.pair import fleet_delta_sets
+from ilcdob.response import fir_matrix
 from ilcdob.fleet import fleet_from_dict
 from ilcdob.loop import freqresp
 
@@ -86,7 +87,7 @@ def problem(fleet: ilcdob.Fleet, src: str, tgt: str, kind: str, options: FIROpti
 def objective(h: np.ndarray, target: np.ndarray, w: np.ndarray, ts: float, o: FIROptions) -> float:
     """The weighted least-squares objective of the module docstring of :mod:`ilcdob.design.methods.fir`."""
     wt = np.sqrt(o.weights(w) * _quadrature(w)) / np.abs(target)
-    res = (_fir_matrix(w, o.n_taps, o.advance, ts) @ h - target) * wt
+    res = (fir_matrix(w, o.n_taps, o.advance, ts) @ h - target) * wt
     s = float(np.max(np.abs(target)))
     return float(np.sum(np.abs(res) ** 2) + max(o.ridge, 1e-14) * np.sum((h / s) ** 2))
 
@@ -97,7 +98,7 @@ def legacy_ipopt(target, w, ts, o: FIROptions, c, g, bound) -> tuple[np.ndarray,
 
     t0 = time.perf_counter()  # like fit_fir's time: set-up included
     n, adv = o.n_taps, o.advance
-    e_mat = _fir_matrix(w, n, adv, ts)
+    e_mat = fir_matrix(w, n, adv, ts)
     mag = np.abs(target)
     wt = np.sqrt(o.weights(w) * _quadrature(w)) / mag
     s = float(np.max(mag))
@@ -147,7 +148,7 @@ def compare_solvers(repeat: int) -> list[dict]:
                 if best is None or dt < best[2]:
                     best = (h, status, dt)
             h, status, dt = best
-            te = np.abs(c - g * (_fir_matrix(w, o.n_taps, o.advance, ts) @ h)[None, :])
+            te = np.abs(c - g * (fir_matrix(w, o.n_taps, o.advance, ts) @ h)[None, :])
             rows.append({"problem": label, "solver": name, "status": status, "time_s": dt,
                          "objective": objective(h, target, w, ts, o), "viol": float(np.max(te / bound - 1))})
     return rows

@@ -50,7 +50,7 @@ import numpy as np
 
 import ilcdob
 from ilcdob.design import simulate_map
-from ilcdob.design import norm_optimal
+from ilcdob.design.methods import norm_optimal
 from ilcdob.design.methods.norm_optimal import NormOptimalDesigner, NormOptimalOptions
 from ilcdob.errors import NativeBuildError
 from ilcdob.lifted import lifted_operator, markov_parameters

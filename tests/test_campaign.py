@@ -246,7 +246,7 @@ def test_runs_through_a_scheduler_file_with_the_workers_threads_limited(fleet, t
     from distributed import LocalCluster
     from threadpoolctl import threadpool_info
 
-    from ilcdob.design import robust, robust_set
+    from ilcdob.design.methods import robust, robust_set
 
     path = tmp_path / "scheduler.json"
     blas_before = [i["num_threads"] for i in threadpool_info()]

@@ -210,3 +210,30 @@ def test_every_package_folder_is_installed() -> None:
             if rel == folder or folder in rel.parents:
                 found.add(".".join([name, *rel.relative_to(folder).parts]))
     assert found - listed == set(), f"package folders not in pyproject.toml: {found - listed}"
+
+
+def test_every_ilcdob_import_resolves() -> None:
+    """Every ``from ilcdob... import name`` in the repository's Python files (lazy ones, benchmarks and
+    examples included) names a module or an attribute that exists: a moved module breaks an import that
+    only runs in a worker process or a benchmark."""
+    import importlib
+
+    bad = []
+    for path in sorted(p for p in ROOT.rglob("*.py") if not {".git", "build"} & set(p.parts)):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                    and (node.module == "ilcdob" or node.module.startswith("ilcdob."))):
+                continue
+            try:
+                module = importlib.import_module(node.module)
+            except ImportError as exc:
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: {exc}")
+                continue
+            for alias in node.names:
+                if alias.name == "*" or hasattr(module, alias.name):
+                    continue
+                try:
+                    importlib.import_module(f"{node.module}.{alias.name}")
+                except ImportError:
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.module} has no {alias.name}")
+    assert bad == []

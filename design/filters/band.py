@@ -28,21 +28,13 @@ learning signal the law computed before ``t = 0`` (:func:`fold_start`). With
 
 Trial ends. ``F`` is zero-phase, so it spreads the learning signal up to about ``pad`` samples
 before ``t = 0``, where no vehicle can fly it. Cropping that part leaves the learned error
-without the pre-trial half of a symmetric response. Measured on the built-in fleet (closed
-form, 60 s trials of ``sin(w t)``, ``w`` = 1-30 rad/s, and the winds of scenarios 1, 3, 4;
-all-pass and random ``|Delta| <= 0.3`` of the source), with a 10 rad/s band: ``sin(30 t)``
-(above the band, where learning should leave the error alone) gave a whole-trial ratio
-``||e_j|| / ||e'_j||`` of 1.06 with exact models, and 248 of 1200 trials with model errors were
-worse than no learning (up to 1.42), the excess in the first 10 s; a constant disturbance
-0.09. Folding the pre-trial part onto the trial's first samples keeps its integral (what the
-loops, slow next to ``F``, respond to): 0.28, 6 of 1500 (the closed form's own model-error
-ratio at 4 rad/s, which the band-off law has too) and 5e-4. With a 3 rad/s band it moves
-the 6 rad/s trials from 0.998 to at most 1.0002 (10 of 1500 above 1). Fading the learning
-signal in over ``pad / 2`` or ``pad`` instead cost 0.08-0.11 on slow sinusoids and left 54-94
-of 1200 trials worse; fading it out at the end changed nothing (the line continuation serves
-the end). The whole-trial figure of the band's law (:mod:`..maps.finite_horizon`) still exceeds 1
-(1.96 at 10 rad/s, the worst disturbance at the start): a zero-phase filter cannot keep a
-per-frequency bound for every disturbance of a finite trial.
+without the pre-trial half of a symmetric response; folding it onto the trial's first samples
+(:func:`fold_start`) keeps its integral, what the loops, slow next to ``F``, respond to. Fading the
+learning signal in instead did worse on slow sinusoids, and fading it out at the end changed
+nothing (the line continuation serves the end). The whole-trial figure of the band's law
+(:mod:`..maps.finite_horizon`) can still exceed 1: a zero-phase filter cannot keep a per-frequency
+bound for every disturbance of a finite trial (docs/theory.md section 6, "Trial ends"; measured:
+docs/performance.md, "Measured figures behind the design's choices").
 
 The corner ``w_c`` (:func:`choose_band`) is the smallest of three edges, each from what is
 known:

@@ -73,29 +73,30 @@ __all__ = ["NormOptimalOptions", "NormOptimalDesigner", "NormOptimalLaw", "norm_
 #: Memory one norm-optimal design may take, bytes (what two 20,000-sample lifted matrices took).
 MAX_NORM_OPTIMAL_BYTES = 6.4e9
 
-#: Peak memory of :meth:`NormOptimalDesigner.lifted_matrices`, in N x N float64 matrices (measured
-#: with tracemalloc: 7.1 to 7.3 at N = 500 to 1500; two of them are kept).
+#: Peak memory of :meth:`NormOptimalDesigner.lifted_matrices`, in N x N float64 matrices, a bound above
+#: the tracemalloc peak; two of them are kept (measured: docs/performance.md, "Measured figures behind
+#: the design's choices").
 LIFTED_PEAK_MATRICES = 8
 
 #: Peak memory of the compact design per sample, in float64 numbers: ``_COMPACT_ROWS`` rows of
 #: ``order + 2`` (the gains and pivot of a recursion: the design's, the inverse's, the shifted
 #: problem of :func:`_top_eigenvalue` and a copy while one is reordered) plus ``_COMPACT_SIGNALS``
-#: signals. 64 at order 11; tracemalloc measured 41 (``design_pair``, N = 50,000 and 100,000).
+#: signals. 64 at order 11, a bound above the tracemalloc peak (measured: docs/performance.md,
+#: "Measured figures behind the design's choices").
 _COMPACT_ROWS = 4
 _COMPACT_SIGNALS = 12
 
 #: Samples per call of each compiled recursion (its SX function is unrolled over them), chosen by
-#: measurement (N = 300,000, UAV2, CPU): the gains run fastest in short functions (0.43 s with 4
-#: samples, 0.44 s with 2, 0.58-0.65 s with 8 to 32), the passes, which read and write a row per
-#: sample, in longer ones (0.27-0.28 s with 8 or 16, 0.34 s with 4, 0.46 s with 2). The results
-#: do not depend on it, bit for bit.
+#: measurement: the gains run fastest in short functions, the passes, which read and write a row per
+#: sample, in longer ones (measured: docs/performance.md, "Measured figures behind the design's
+#: choices"). The results do not depend on it, bit for bit.
 _UNROLL = {"gains": 4, "backward": 16, "forward": 16, "simulate": 16}
 
 #: Trials of at least this many samples build a recursion's native library (:mod:`ilcdob.native`)
-#: when none is on disk; shorter ones use a built one or the virtual machine. A build takes 0.1 to
-#: 0.4 s of compiler time per recursion for the built-in fleet, up to 3.4 s at 109 states (once per
-#: machine and sparsity pattern); below this length the virtual machine's gains and passes take
-#: under 0.06 s (UAV2).
+#: when none is on disk; shorter ones use a built one or the virtual machine. A build costs compiler
+#: time once per machine and sparsity pattern, which only long trials repay: shorter ones run fast
+#: enough in the virtual machine (measured: docs/performance.md, "Measured figures behind the design's
+#: choices").
 _NATIVE_MIN_SAMPLES = 20_000
 
 #: Calls per ``mapaccum`` block, largest first (a trial is run in blocks of these sizes).
@@ -191,9 +192,9 @@ def _base(kind: str, pattern: _Pattern, unroll: int) -> Any:
     * ``gains``: state ``[Y0, Y1, G, M11, M12, M22, Re, dG, dRe]`` of the Chandrasekhar recursion,
       run backward in time; outputs ``[K_t; Re_t]`` (the gain and the pivot ``R + B'P_{t+1}B``).
       ``G = S + A'P_{t+1}B`` and ``Re`` are sums of one increment per sample: summed plainly they
-      drift (1.9e-11 relative over 300,000 samples, measured against 80-bit arithmetic; the Riccati
-      form does not, its gains stay within 2e-16), so they are summed with compensation
-      (``TwoSum``; ``dG``, ``dRe`` hold the rounding errors), which brings them back to 1e-16.
+      drift (the Riccati form corrects itself, this one does not), so they are summed with
+      compensation (``TwoSum``; ``dG``, ``dRe`` hold the rounding errors; measured: docs/performance.md,
+      "Measured figures behind the design's choices").
       The symbolic 1 keeps CasADi from simplifying ``(a + b) - a`` to ``b``.
     * ``backward``: state ``p`` (affine term of the value function); inputs ``[K_t; Re_t; q_t;
       r_t]`` with the linear cost ``2 (q_t Cz' z + r_t u)``; output ``kff_t``.

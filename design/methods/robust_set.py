@@ -550,18 +550,16 @@ class RobustSetDesign:
         trial (:mod:`..filters.trial_inverse`). Over an infinite horizon it is the same law
         (``Gf_j (1 - Q_j) = -Gd_j``); on the trial, with exact models, ``e_j = P (I - F_N) e'_j`` with
         ``P`` a projection, so ``||e_j|| <= sqrt(2) max |1 - F| ||e'_j||`` for every disturbance
-        (the odd extension at most doubles the energy ``F`` sees). Measured ``rho_N`` 0.153 / 0.012 /
-        0.070 on the built-in cycle at |Delta| <= 0.3 (``max |1 - F|`` 0.153 / 0 / 0.070), against
-        1.74 / 2.06 / 1.63 extended. The price: to give the trial's first and last samples their
-        error exactly, ``d_f`` has spikes there (10-50 m/s^2 on 30 s of ``sin(w t)``, against 1-2
-        extended), which an acceleration limit clips, and a clipped law keeps no guarantee (an
-        all-pass error at |Delta| = 0.3 then made ``sin(16 t)`` 1.35 times worse). Trials longer than
+        (the odd extension at most doubles the energy ``F`` sees). The price: to give the trial's first
+        and last samples their error exactly, ``d_f`` has spikes there, far larger than the extended
+        law's, which an acceleration limit clips, and a clipped law keeps no guarantee (measured:
+        docs/performance.md, "Measured figures behind the design's choices"). Trials longer than
         :data:`~..filters.trial_inverse.MAX_TRIAL_SAMPLES` are extended, with a warning.
 
         ``"extended"`` (default): ``F`` acts on the reconstructed disturbance ``d_hat``
-        (:func:`~ilcdob.design.reconstruct_disturbance`, the model's maps), a smooth signal
-        (measured on scenarios 1 and 4, 30 s, |Delta| <= 0.5 design: ratio 0.32 / 0.69 this way,
-        against 0.48 / 1.34 with ``F`` after ``L1`` and 3.9 / 7.1 with ``F`` before ``L1``).
+        (:func:`~ilcdob.design.reconstruct_disturbance`, the model's maps), a smooth signal; this left
+        smaller error ratios than ``F`` after or before ``L1`` (measured: docs/performance.md, "Measured
+        figures behind the design's choices").
 
         Trial ends. ``F`` looks ``F.advance`` samples (3 s for 301 taps) past every sample. Before
         the trial ``d_hat`` is zero (the vehicle at rest) and what ``F`` puts before ``t = 0`` is
@@ -571,19 +569,14 @@ class RobustSetDesign:
         stable inversion built from the error continued past the end), blended into over them. A line is what the
         loops cannot see (``Gd`` has a double zero at ``z = 1``: constant and ramp disturbances
         leave only a start transient in the error), so continuing it costs nothing where learning
-        has least to gain, and averaging over ``2 F.advance`` samples leaves oscillations out.
-        Measured on the built-in fleet, 60 s trials of ``sin(w t)``, ``w`` = 1-30 rad/s, and the
-        winds of scenarios 1, 3, 4, 100 admissible errors of the source per pair (all-pass at the
-        bound, every phase, and random): the previous continuation (``d_hat`` held at its last
-        value) made trials up to 5.6 times worse than no learning with exact models and 7.4
-        (|Delta| <= 0.3) / 152 (|Delta| <= 0.5) under all-pass errors, the excess in the last 3 s;
-        zeros after the end, faded over the unreliable samples, fixed those but made a ramp
-        disturbance (0.02 m/s^2 per s) up to 5.3 times worse; the trend keeps every one of these
-        trials below its ``rho_guaranteed`` and 1 (``tests/test_finite_horizon.py``). A zero-phase
-        ``F`` still cannot keep ``rho_guaranteed`` for every disturbance of a finite trial
-        (:attr:`finite`, :mod:`..maps.finite_horizon`); a causal one (``advance = 0``, no continuation
-        needed) does, at the price of learning where the set reaches the source's stability
-        boundary.
+        has least to gain, and averaging over ``2 F.advance`` samples leaves oscillations out. Holding
+        ``d_hat`` at its last value made trials much worse than no learning near the end, and zeros
+        after the end made a ramp disturbance worse; the trend keeps the trials checked below their
+        ``rho_guaranteed`` and 1 (``tests/test_finite_horizon.py``; measured: docs/performance.md,
+        "Measured figures behind the design's choices"). A zero-phase ``F`` still cannot keep
+        ``rho_guaranteed`` for every disturbance of a finite trial (:attr:`finite`,
+        :mod:`..maps.finite_horizon`); a causal one (``advance = 0``, no continuation needed) does, at
+        the price of learning where the set reaches the source's stability boundary.
 
         Parameters
         ----------

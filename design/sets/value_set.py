@@ -51,9 +51,9 @@ bulge of a grid piece (:func:`_bulge`, on a grid twice as fine: each piece runs 
 through an odd one to the next): the piece's distance from its chord in the ``Delta``-plane (measured
 at the odd point; exact for the lines of ``r``, straight, and for an ellipse's ring), carried through
 ``g`` with the exact distance of the chord's image, a circular arc, from the images' chord and the
-largest ``|g'|`` near it. Measured in the ``g``-plane instead, a piece near the pole, whose image moves
-fast and unevenly along it, was under-estimated (by up to 21 for high-pass errors at 0.99 of their
-stability limit). Each vertex ``g_v`` is therefore one cone row ``(a, b, R) = (1, g_v, eps)`` of the
+largest ``|g'|`` near it. Taken in the ``g``-plane instead, the bulge of a piece near the pole, whose image
+moves fast and unevenly along it, was under-estimated (measured: docs/performance.md, "Measured figures
+behind the design's choices"). Each vertex ``g_v`` is therefore one cone row ``(a, b, R) = (1, g_v, eps)`` of the
 form the robust-set design already solves (``(|a - b F| + R |F|)/a <= rho``).
 
 Where every value of the set keeps the margin, its boundary decides the polygon

@@ -54,7 +54,7 @@ def limit_library_threads(threads: int = LIBRARY_THREADS) -> dict[str, int]:
     """
     from threadpoolctl import threadpool_limits
 
-    from ilcdob.design import robust, robust_set
+    from ilcdob.design.methods import robust, robust_set
 
     _THREADPOOL_LIMITS[:] = [threadpool_limits(limits=threads)]
     robust.CLARABEL_THREADS = robust_set.CLARABEL_THREADS = threads
@@ -63,14 +63,14 @@ def limit_library_threads(threads: int = LIBRARY_THREADS) -> dict[str, int]:
 
 def _library_threads() -> tuple[list[Any], int, int]:
     """The process's thread limits now: threadpoolctl's, Clarabel's in robust and robust_set."""
-    from ilcdob.design import robust, robust_set
+    from ilcdob.design.methods import robust, robust_set
 
     return list(_THREADPOOL_LIMITS), robust.CLARABEL_THREADS, robust_set.CLARABEL_THREADS
 
 
 def _restore_library_threads(before: tuple[list[Any], int, int]) -> None:
     """Put back the limits :func:`_library_threads` returned."""
-    from ilcdob.design import robust, robust_set
+    from ilcdob.design.methods import robust, robust_set
 
     for limits in _THREADPOOL_LIMITS:
         limits.restore_original_limits()
