@@ -130,8 +130,11 @@ def test_killed_library_campaign_resumes_to_an_uninterrupted_run(fleet, tmp_path
 
 
 def test_files_are_the_report_content(fleet):
-    """``CampaignResult.files()``: campaign.json (standard JSON), campaign.txt, campaign_ratios.png."""
+    """``CampaignResult.files(figures)``: campaign.json (standard JSON), campaign.txt and the figures the
+    application composes (campaign_ratios.png)."""
     from matplotlib.figure import Figure
+
+    from ilcdob.validation.figures import campaign_figure
 
     settings = campaign_settings(fleet, SMALL)
     rec = {"sample": 0, "settings": settings["id"], "rejected": 0, "time_s": 1.0, "cpu_s": 1.0,
@@ -139,7 +142,8 @@ def test_files_are_the_report_content(fleet):
                                "ratios": {"closed-form": 0.02}, "errors": {}}}}
     records = {0: rec, 1: {**rec, "sample": 1}}
     result = campaign_statistics(records, SMALL, settings)  # wall time unknown: NaN
-    files = result.files()
+    assert list(result.files()) == ["campaign.json", "campaign.txt"]
+    files = result.files({"campaign_ratios.png": campaign_figure(result)})
     assert list(files) == ["campaign.json", "campaign.txt", "campaign_ratios.png"]
     data = files["campaign.json"]
     assert data["wall_time_s"] is None and data["methods"]["closed-form"]["median"] == pytest.approx(0.02)

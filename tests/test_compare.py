@@ -13,6 +13,7 @@ from ilcdob.app.cli import main
 from ilcdob.design.methods.robust import RobustOptions
 from ilcdob.errors import SpecError
 from ilcdob.validation.compare import CompareOptions, compare_designs
+from ilcdob.validation.figures import comparison_figure
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +40,8 @@ def test_progress_reports_every_design_and_every_case(identified_run):
 
 
 def test_files_are_the_report_content(identified):
-    files = identified.files(rho=0.95)
+    assert list(identified.files()) == ["compare.json", "compare.txt"]
+    files = identified.files({"compare_ratios.png": comparison_figure(identified, 0.95)})
     assert list(files) == ["compare.json", "compare.txt", "compare_ratios.png"]
     assert files["compare.json"] == identified.to_dict()
     json.dumps(files["compare.json"], allow_nan=False)  # standard JSON

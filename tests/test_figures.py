@@ -22,7 +22,7 @@ from ilcdob.design.filters.band import LearningBand
 from ilcdob.design.checks.figure import COINCIDE_RTOL, pair_bode_figure
 from ilcdob.fleet import fleet_from_dict
 from ilcdob.validation.compare import Comparison, MethodComparison
-from ilcdob.validation.figures import ITERATIONS_RTOL, reproduction_figures
+from ilcdob.validation.figures import ITERATIONS_RTOL, comparison_figure, reproduction_figures
 from ilcdob.validation.reproduce import reproduce
 
 ITERATIONS = 2
@@ -151,7 +151,7 @@ def _comparison(failed: bool) -> Comparison:
 
 
 def test_compare_figure_names_failed_designs_and_keeps_its_legend_off_the_data():
-    fig = _comparison(failed=True).figure(rho=0.13)
+    fig = comparison_figure(_comparison(failed=True), rho=0.13)
     (ax,) = fig.axes
     assert [t.get_text() for t in ax.get_xticklabels()] == ["closed-form", "fir\n(design failed)"]
     assert len(ax.collections) == 2  # the Delta samples and the nominal point of the one design made
@@ -159,7 +159,7 @@ def test_compare_figure_names_failed_designs_and_keeps_its_legend_off_the_data()
     (lg,) = legends
     assert _overlap(lg, axes[0]) == 0 and lg.x1 <= fig.bbox.width + 0.5
     assert "robust rho = 0.13" in [t.get_text() for t in ax.get_legend().get_texts()]
-    fig = _comparison(failed=False).figure()
+    fig = comparison_figure(_comparison(failed=False))
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["closed-form"]
 
 

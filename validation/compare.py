@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Callable, Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -48,9 +48,6 @@ from ilcdob.display import html_table
 from .reproduce import json_document
 from .scenarios import scenario
 from .simulate import rmse, simulate_flight
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
 
 __all__ = ["CompareOptions", "MethodComparison", "Comparison", "PairScenario", "CaseResult", "pair_scenario",
            "evaluate_case", "compare_designs"]
@@ -241,61 +238,22 @@ class Comparison:
                        f"{100 * m.improved_share:>9.0f}%{m.design_time_s:>10.2f}  {m.order}\n" for m in self.methods)
         return head + cols + rows
 
-    def figure(self, rho: float | None = None) -> Figure:
-        """``compare_ratios.png``: the ratio of every case per design (log scale).
-
-        A design that failed has its place on the axis, labelled "design failed", and no points.
-
-        Parameters
-        ----------
-        rho : float, optional
-            The robust design's guaranteed factor, drawn as a line when given.
-        """
-        from matplotlib.figure import Figure  # matplotlib only when the figure is made
-
-        from ilcdob.design.checks.figure import TITLE_Y
-
-        fig = Figure(figsize=(8, 3.8), layout="constrained")
-        ax = fig.subplots()
-        first = True
-        for i, m in enumerate(self.methods):
-            if m.error is not None:
-                continue
-            ax.scatter(np.full(len(m.ratios) - 1, i) + np.linspace(-0.15, 0.15, len(m.ratios) - 1), m.ratios[1:],
-                       s=14, color="0.4", label="Delta samples" if first else None)
-            ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if first else None)
-            first = False
-        ax.axhline(1.0, color="k", lw=0.8, ls="--", label="no improvement (ratio 1)")
-        if rho is not None:
-            ax.axhline(rho, color="C0", lw=0.8, ls=":", label=f"robust rho = {rho:g}")
-        ax.set_xticks(range(len(self.methods)),
-                      [m.method + ("\n(design failed)" if m.error is not None else "") for m in self.methods])
-        ax.set_xlim(-0.5, len(self.methods) - 0.5)
-        ax.set_yscale("log")
-        ax.set_ylabel("||e_j|| / ||e'_j||")
-        ax.set_title(f"Scenario {self.scenario}: {self.target} learning from {self.source} (law {self.law})",
-                     fontsize=10, y=TITLE_Y)
-        ax.grid(True, axis="y", which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
-        return fig
-
-    def files(self, rho: float | None = None) -> dict[str, object]:
+    def files(self, figures: Mapping[str, object] | None = None) -> dict[str, object]:
         """The report of the comparison: file name -> content.
 
         Parameters
         ----------
-        rho : float, optional
-            The robust design's guaranteed factor, drawn in the figure when given.
+        figures : mapping, optional
+            The figures the application composes (``compare_ratios.png``:
+            :func:`~ilcdob.validation.figures.comparison_figure`), added as they are.
 
         Returns
         -------
         dict of str to object
             ``compare.json`` (JSON document, :meth:`to_dict` with non-finite numbers as null),
-            ``compare.txt`` (:meth:`table`) and ``compare_ratios.png`` (a
-            ``matplotlib.figure.Figure`` for PNG at 110 dpi, :meth:`figure`).
+            ``compare.txt`` (:meth:`table`), then ``figures``.
         """
-        return {"compare.json": json_document(self.to_dict()), "compare.txt": self.table(),
-                "compare_ratios.png": self.figure(rho)}
+        return {"compare.json": json_document(self.to_dict()), "compare.txt": self.table(), **(figures or {})}
 
 
 def _parse_methods(methods: Sequence[str]) -> list[str]:

@@ -17,7 +17,9 @@ legend entry naming them all. In the time series, learning iterations that coinc
 legend and the figure say so in words (a member that differs on a few samples, as at a trial's
 end, is drawn there too).
 
-:func:`reproduction_figures` returns them by file name; nothing here writes a file (the
+and, for the other results, ``compare_ratios.png`` (:func:`comparison_figure`) and
+``campaign_ratios.png`` (:func:`campaign_figure`). The application composes them into each result's
+report (``files(figures)``). :func:`reproduction_figures` returns them by file name; nothing here writes a file (the
 figures are laid out for PNG at 110 dpi, :data:`FIGURE_DPI`).
 
 Rendering. Drawing the figures as PNG costs more than building them and, for the linear plant,
@@ -40,6 +42,7 @@ forks, so that the workers share their pages instead of copying them.
 from __future__ import annotations
 
 import io
+import math
 import os
 import sys
 import textwrap
@@ -53,6 +56,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ilcdob.design import LearningFilters
+from ilcdob.design.methods import METHODS
 from ilcdob.design.checks.figure import (TE_GAIN_ERROR, TITLE_Y, BodeCurve, draw_bode, finish_bode_axes, frequency_grid,
                                   loop_maps, magnitude_db, minor_log_grid, with_gain_error)
 from ilcdob.errors import SpecError
@@ -61,11 +65,13 @@ from ilcdob.loop import freqresp
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
 if TYPE_CHECKING:
+    from .campaign.statistics import CampaignResult
+    from .compare import Comparison
     from .reproduce import ReproductionResult
 
 __all__ = ["reproduction_figures", "scenario_figures", "fleet_figures", "frequency_grid", "identified_bounds",
            "TE_GAIN_ERROR", "FIGURE_DPI", "PNG_COMPRESS_LEVEL", "ITERATIONS_RTOL", "ITERATIONS_APART", "PendingFigure",
-           "FigureRenderer", "figure_png", "render_figures", "render_workers"]
+           "FigureRenderer", "figure_png", "render_figures", "render_workers", "comparison_figure", "campaign_figure"]
 
 #: Resolution the figures are made for (dots per inch of the PNG files).
 FIGURE_DPI = 110
@@ -872,3 +878,83 @@ def _render_worker(content: Mapping[str, object], names: list[str], counter, con
             conn.close()
         finally:
             os._exit(0)
+
+
+def comparison_figure(cmp: Comparison, rho: float | None = None) -> Figure:
+    """``compare_ratios.png``: the ratio of every case per design (log scale).
+
+    A design that failed has its place on the axis, labelled "design failed", and no points.
+
+    Parameters
+    ----------
+    cmp : Comparison
+        The comparison (:func:`~ilcdob.validation.compare.compare_designs`).
+    rho : float, optional
+        The robust design's guaranteed factor, drawn as a line when given.
+    """
+    fig = Figure(figsize=(8, 3.8), layout="constrained")
+    ax = fig.subplots()
+    first = True
+    for i, m in enumerate(cmp.methods):
+        if m.error is not None:
+            continue
+        ax.scatter(np.full(len(m.ratios) - 1, i) + np.linspace(-0.15, 0.15, len(m.ratios) - 1), m.ratios[1:],
+                   s=14, color="0.4", label="Delta samples" if first else None)
+        ax.scatter([i], [m.ratio_nominal], marker="D", color="C3", label="nominal" if first else None)
+        first = False
+    ax.axhline(1.0, color="k", lw=0.8, ls="--", label="no improvement (ratio 1)")
+    if rho is not None:
+        ax.axhline(rho, color="C0", lw=0.8, ls=":", label=f"robust rho = {rho:g}")
+    ax.set_xticks(range(len(cmp.methods)),
+                  [m.method + ("\n(design failed)" if m.error is not None else "") for m in cmp.methods])
+    ax.set_xlim(-0.5, len(cmp.methods) - 0.5)
+    ax.set_yscale("log")
+    ax.set_ylabel("||e_j|| / ||e'_j||")
+    ax.set_title(f"Scenario {cmp.scenario}: {cmp.target} learning from {cmp.source} (law {cmp.law})",
+                 fontsize=10, y=TITLE_Y)
+    ax.grid(True, axis="y", which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    return fig
+
+
+def campaign_figure(result: CampaignResult) -> Figure:
+    """``campaign_ratios.png``: the ratio distribution per method and scenario (log scale).
+
+    Parameters
+    ----------
+    result : CampaignResult
+        The campaign (:func:`~ilcdob.validation.campaign.run.run_campaign`).
+    """
+    methods = list(result.options.methods)
+    sids = list(result.options.scenarios)
+    fig = Figure(figsize=(1.9 * len(methods) + 2.5, 4.2))
+    ax = fig.subplots()
+    width = 0.8 / len(sids)
+    floor = np.inf
+    for k, sid in enumerate(sids):
+        pos = np.arange(len(methods)) - 0.4 + width * (k + 0.5)
+        data = [np.array([r for r in result.ratios[sid][m] if r is not None], float) for m in methods]
+        for p, d in zip(pos, data):
+            if d.size:
+                floor = min(floor, float(d.min()))
+                ax.boxplot(d, positions=[p], widths=0.8 * width, whis=(0, 100), showfliers=False,
+                           patch_artist=True, boxprops={"facecolor": f"C{k}", "alpha": 0.5},
+                           medianprops={"color": "k"})
+                jitter = np.random.default_rng(k).uniform(-0.3, 0.3, d.size) * width
+                ax.scatter(p + jitter, d, s=3, color=f"C{k}", alpha=0.6, zorder=3)
+        a, b = result.pairs[sid]
+        ax.plot([], [], "s", color=f"C{k}", alpha=0.6, label=f"scenario {sid} ({a} -> {b})")
+    ax.axhline(1.0, color="k", lw=0.8, ls="--", label="no improvement")
+    if any("--rho" in METHODS[m].cli_options for m in methods):  # a design asked for rho
+        ax.axhline(result.options.rho, color="C3", lw=0.8, ls=":", label=f"rho = {result.options.rho:g} (asked for)")
+    ax.set_xticks(range(len(methods)), [f"{m}\n{100 * result.methods[m].share_improved:.0f}% improved"
+                                        for m in methods])
+    ax.set_yscale("log")
+    if math.isfinite(floor):
+        ax.set_ylim(bottom=0.5 * floor)
+    ax.set_ylabel("||e_j|| / ||e'_j||")
+    ax.set_title(f"{result.options.samples} samples, true plants from {result.uncertainty} (box: quartiles, "
+                 "whiskers: range)", fontsize=9, y=TITLE_Y)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.set_layout_engine("tight")
+    return fig

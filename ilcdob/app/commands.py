@@ -1449,7 +1449,10 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
     flt, digest = output.check_and_load(fleet)  # no folder (out None): the fleet alone
     cmp = compare_designs(flt, scenario, list(methods or DEFAULT_METHODS), options, progress=progress)
     if out is not None:
-        output.write(cmp.files(rho=options.robust.rho if options.robust else None), digest=digest, law=options.law)
+        from ilcdob.validation.figures import comparison_figure
+
+        figure = comparison_figure(cmp, options.robust.rho if options.robust else None)
+        output.write(cmp.files({"compare_ratios.png": figure}), digest=digest, law=options.law)
     return cmp
 
 
@@ -1565,7 +1568,10 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     except BaseException:
         before.restore(SAMPLES_FILE)
         raise
-    replace(output, out=out).write(result.files(), digest=digest, law=options.law, keep=STORE_FILES)
+    from ilcdob.validation.figures import campaign_figure
+
+    replace(output, out=out).write(result.files({"campaign_ratios.png": campaign_figure(result)}), digest=digest,
+                                   law=options.law, keep=STORE_FILES)
     return result
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -13,9 +13,6 @@ from ilcdob.display import fmt, html_table
 from ..reproduce import json_document
 from .cluster import LIBRARY_THREADS
 from .options import CampaignError, CampaignOptions
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
 
 __all__ = ["CPU_S", "MethodStatistics", "CampaignResult", "campaign_statistics"]
 
@@ -176,60 +173,23 @@ class CampaignResult:
             out += block(f"scenario {sid} ({self.pairs[sid][0]} -> {self.pairs[sid][1]})", per)
         return out
 
-    def figure(self) -> Figure:
-        """``campaign_ratios.png``: the ratio distribution per method and scenario (log scale)."""
-        methods = list(self.options.methods)
-        sids = list(self.options.scenarios)
-        from matplotlib.figure import Figure  # matplotlib only when the figure is made
-
-        from ilcdob.design.checks.figure import TITLE_Y
-
-        fig = Figure(figsize=(1.9 * len(methods) + 2.5, 4.2))
-        ax = fig.subplots()
-        width = 0.8 / len(sids)
-        floor = np.inf
-        for k, sid in enumerate(sids):
-            pos = np.arange(len(methods)) - 0.4 + width * (k + 0.5)
-            data = [np.array([r for r in self.ratios[sid][m] if r is not None], float) for m in methods]
-            for p, d in zip(pos, data):
-                if d.size:
-                    floor = min(floor, float(d.min()))
-                    ax.boxplot(d, positions=[p], widths=0.8 * width, whis=(0, 100), showfliers=False,
-                               patch_artist=True, boxprops={"facecolor": f"C{k}", "alpha": 0.5},
-                               medianprops={"color": "k"})
-                    jitter = np.random.default_rng(k).uniform(-0.3, 0.3, d.size) * width
-                    ax.scatter(p + jitter, d, s=3, color=f"C{k}", alpha=0.6, zorder=3)
-            a, b = self.pairs[sid]
-            ax.plot([], [], "s", color=f"C{k}", alpha=0.6, label=f"scenario {sid} ({a} -> {b})")
-        ax.axhline(1.0, color="k", lw=0.8, ls="--", label="no improvement")
-        if "robust" in methods:
-            ax.axhline(self.options.rho, color="C3", lw=0.8, ls=":", label=f"robust rho = {self.options.rho:g}")
-        ax.set_xticks(range(len(methods)), [f"{m}\n{100 * self.methods[m].share_improved:.0f}% improved"
-                                            for m in methods])
-        ax.set_yscale("log")
-        if math.isfinite(floor):
-            ax.set_ylim(bottom=0.5 * floor)
-        ax.set_ylabel("||e_j|| / ||e'_j||")
-        ax.set_title(f"{self.options.samples} samples, true plants from {self.uncertainty} (box: quartiles, "
-                     "whiskers: range)", fontsize=9, y=TITLE_Y)
-        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-        fig.set_layout_engine("tight")
-        return fig
-
-    def files(self) -> dict[str, object]:
+    def files(self, figures: Mapping[str, object] | None = None) -> dict[str, object]:
         """The report of the campaign: file name -> content.
+
+        Parameters
+        ----------
+        figures : mapping, optional
+            The figures the application composes (``campaign_ratios.png``:
+            :func:`~ilcdob.validation.figures.campaign_figure`), added as they are.
 
         Returns
         -------
         dict of str to object
             ``campaign.json`` (JSON document, :meth:`to_dict` with non-finite numbers as null),
-            ``campaign.txt`` (:meth:`table`) and ``campaign_ratios.png`` (a
-            ``matplotlib.figure.Figure`` for PNG at 110 dpi, :meth:`figure`). The sample store
-            and the settings file beside them are kept by
-            :func:`~ilcdob.validation.campaign.run.run_campaign`.
+            ``campaign.txt`` (:meth:`table`), then ``figures``. The sample store and the settings
+            file beside them are kept by :func:`~ilcdob.validation.campaign.run.run_campaign`.
         """
-        return {"campaign.json": json_document(self.to_dict()), "campaign.txt": self.table(),
-                "campaign_ratios.png": self.figure()}
+        return {"campaign.json": json_document(self.to_dict()), "campaign.txt": self.table(), **(figures or {})}
 
 
 def campaign_statistics(records: Mapping[int, Mapping[str, Any]], options: CampaignOptions,
