@@ -279,3 +279,25 @@ def test_fir_design_repr_is_one_line_of_the_facts():
         assert needle in text, (needle, text)
     l1 = repr(design.L1)
     assert "\n" not in l1 and len(l1) < 200 and "40 taps" in l1 and "advance 6" in l1 and "0.02 s" in l1, l1
+
+
+def test_every_filter_form_shows_one_face():
+    """ZPK, FIR and the file's coefficient form satisfy the one filter protocol, and the closed form's L1
+    as ZPK and as its file's view agree on the unit circle and on a trial (1e-9 of the peak: the look-ahead
+    series is truncated at 1e-12, the sections run in double precision)."""
+    from ilcdob.design.filters.filter import Filter
+    from ilcdob.design.methods.fir import FIRFilter
+
+    fleet = ilcdob.default_fleet()
+    zpk = closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2")).L1
+    view = filter_tf(design_pair(fleet, "UAV1", "UAV2", band=None).filters["L1"], fleet.sample_time)
+    fir = FIRFilter(np.array([0.25, 0.5, 0.25]), 1, fleet.sample_time)
+    assert all(isinstance(f, Filter) for f in (zpk, view, fir))
+    assert zpk.ts == view.ts
+    w = np.logspace(-1, np.log10(np.pi / fleet.sample_time) - 0.01, 200)
+    a, b = zpk.freqresp(w), view.freqresp(w)
+    assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(a))
+    x = np.sin(0.7 * np.arange(1500) * fleet.sample_time) + 0.2 * np.sin(9.0 * np.arange(1500) * fleet.sample_time)
+    ya, yb = zpk.apply(x), view.apply(x)
+    assert np.max(np.abs(ya - yb)) <= 1e-9 * np.max(np.abs(ya))
+    assert not isinstance(np.zeros(3), Filter)
