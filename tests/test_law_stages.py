@@ -214,3 +214,51 @@ def test_every_registered_stage_kind_has_a_case():
     d = _design("built-in", "robust-set", 0.05, "command", "paper")
     seen.add(file_core(d.filters).kind)
     assert seen == set(STAGE_KINDS), f"stage kinds without a case: {sorted(set(STAGE_KINDS) - seen)}"
+
+
+def test_a_new_stage_is_one_class_in_one_place(monkeypatch, tmp_path):
+    """A stage kind nobody in the library knows (an output trim, written here and registered) flies in every
+    face without one line elsewhere: the file's law reads it, its linear map composes and the C ``learn``
+    runs it (1e-9 of the peak)."""
+    from ilcdob.design.law.stage import CParts, Stage
+    from ilcdob.design.maps.finite_horizon import LinearMap
+
+    class Trim(Stage):
+        kind, place, keys = "trim", 75, ("trim",)
+
+        def __init__(self, factor: float):
+            self.factor = factor
+
+        @classmethod
+        def from_dict(cls, filters, ctx):
+            return cls(float(filters["trim"])) if "trim" in filters else None
+
+        def to_dict(self):
+            return {"trim": self.factor}
+
+        def apply(self, x, n, notes):
+            return (self.factor * x[0],)
+
+        def linear_map(self, m, k, n):
+            return LinearMap(m, m, lambda v: self.factor * v, lambda v: self.factor * v, "trim")
+
+        def c_parts(self, prefix):
+            return CParts(step=f"    for (k = 0; k < n; ++k)\n        df_next[k] *= {self.factor!r};\n",
+                          readme="`learn` trims `d_next`.")
+
+    monkeypatch.setitem(STAGE_KINDS, Trim.kind, Trim)
+    d = _design("built-in", "closed-form", 0.05, "command", "paper")
+    e, df = _trial(d.filters["sample_time"], PAIRS["built-in"][3])
+    plain = LearningLaw.from_dict(d.filters).apply(e, df)
+    filters = {**d.filters, "trim": 0.5}
+    law = LearningLaw.from_dict(filters)
+    assert "trim" in [s.kind for s in law.stages]
+    y = law.apply(e, df)
+    peak = np.max(np.abs(y))
+    assert np.max(np.abs(y - 0.5 * plain)) <= TOL * peak
+    assert np.max(np.abs(law.linear_map(e.size)(np.concatenate([e, df])) - y)) <= TOL * peak
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    got = _run_learn(_build_learn(cc, tmp_path, filters), e, df)
+    assert np.max(np.abs(got - y)) <= TOL * peak
