@@ -117,6 +117,52 @@ def test_unknown_rotorpy_parameters_are_refused():
     """A parameter rotorpy's set does not have would be ignored by rotorpy: refused, naming it."""
     from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
 
-    with pytest.raises(SpecError, match=r"\['k_drag'\] are not parameters of rotorpy's 'px4' set"):
+    with pytest.raises(SpecError, match=r"\['k_drag'\] are not parameters of the 'px4' airframe"):
         RotorpyVehicle("px4", params={"k_drag": 1e-4})
     assert RotorpyVehicle("px4", params={"k_d": 1e-4, "kp_att": 300.0}).params["k_d"] == 1e-4
+
+
+def test_a_labs_own_airframe_flies_as_itself():
+    """A complete parameter set of one's own (here a 1.4 kg quad: rotorpy's hummingbird set rescaled, a set
+    rotorpy does not ship) flies under its own name; an incomplete or misspelt set is refused, naming the keys."""
+    import numpy as np
+
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, _shipped
+
+    base = _shipped("hummingbird")
+    ours = {**base, "mass": 1.4, "Ixx": 0.012, "Iyy": 0.012, "Izz": 0.022,  # arms 1.5 times longer (25 cm)
+            "rotor_pos": {k: 1.5 * np.asarray(v) for k, v in base["rotor_pos"].items()}}
+    vehicle = RotorpyVehicle("lab-quad", 0.01, airframe=ours)
+    assert vehicle.name == "lab-quad" and vehicle.mass == 1.4
+    for _ in range(20):  # hovering: the command 0 keeps it at its start
+        vehicle.step(np.zeros(3))
+    assert np.max(np.abs(vehicle.position())) < 1e-3
+    assert RotorpyVehicle("heavier", airframe="px4", params={"mass": 1.2}).mass == 1.2
+    with pytest.raises(SpecError, match=r"lacks \['mass'\]"):
+        RotorpyVehicle("lab-quad", airframe={k: v for k, v in ours.items() if k != "mass"})
+    with pytest.raises(SpecError, match=r"\['masss'\] are not rotorpy parameters"):
+        RotorpyVehicle("lab-quad", airframe={**ours, "masss": 1.0})
+    with pytest.raises(SpecError, match="give the airframe's parameter set"):
+        RotorpyVehicle("lab-quad")
+
+
+def test_every_path_starts_where_the_vehicle_is():
+    """The diamond's path starts at y = -1 m; flown from a vehicle's start it begins there (no 1 m step at
+    t = 0, which asked 42.5 m/s^2 of every vehicle), every path keeps its shape, unlearned axes hold 0."""
+    import numpy as np
+
+    from ilcdob.validation.scenarios import scenario
+    from ilcdob.validation.vehicle_chain import vehicle_reference
+
+    for sid in (1, 2, 3, 4):
+        sc = scenario(sid)
+        t = sc.time(0.01)
+        path, path_acc = sc.trajectory(t)
+        pos, acc = vehicle_reference(sc, t, ["x", "y"])
+        assert np.all(pos[0] == 0.0) and np.all(pos[:, 2] == 0.0), sid
+        np.testing.assert_allclose(pos[:, :2], path[:, :2] - path[0, :2], rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(acc[:, :2], path_acc[:, :2])
+        assert np.max(np.abs(np.diff(pos[:, 1]))) < 0.05, sid  # no step: at most 5 cm per 10 ms sample
+    assert scenario(4).trajectory(np.zeros(1))[0][0, 1] == -1.0  # the path as the paper states it
+    pos, acc = vehicle_reference(scenario(4), scenario(4).time(0.01), ["x"])
+    assert np.all(pos[:, 1:] == 0.0) and np.all(acc[:, 1:] == 0.0)

@@ -50,7 +50,7 @@ from .scenarios import Scenario, check_order
 from .simulate import Flight
 
 __all__ = ["STRUCTURES", "VehicleFit", "VehicleExperiments", "ChirpExperiments", "identify_vehicles",
-           "fly_baselines", "fly_learning", "run_vehicle_axes", "run_vehicle_laws", "run_vehicle_scenario",
+           "fly_baselines", "fly_learning", "vehicle_reference", "run_vehicle_axes", "run_vehicle_laws", "run_vehicle_scenario",
            "rough_loop", "dryden_gust", "MakeVehicle", "FlyTrial", "LawPath"]
 
 #: Candidate structures of an axis's plant, fewest free parameters first: the paper's two integrators and a pole
@@ -406,6 +406,35 @@ def fly_learning(order: Sequence[str], iterations: int, base: Mapping[str, tuple
     return learning_chain(list(order), iterations, base[order[0]][1], step)
 
 
+def vehicle_reference(sc: Scenario, t: np.ndarray, axes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The reference a vehicle flies in a scenario: the path from where the vehicle starts.
+
+    A vehicle starts each trial hovering at rest at the path's altitude, its position measured from there
+    (:mod:`ilcdob.vehicles.interface`), so the path is shifted to start at 0 on x and y (the diamond's y
+    starts at -1 m: unshifted, every flight would begin with a 1 m step) and z holds the start.
+
+    Parameters
+    ----------
+    sc : Scenario
+    t : numpy.ndarray
+        Sample times, s.
+    axes : list of str
+        The axes learned; the others hold the start (reference 0), as in the paper's x-only flights.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        Position (m) and acceleration (m/s^2), ``len(t) x 3``.
+    """
+    pos, acc = sc.trajectory(t)
+    pos[:, 2] = 0.0
+    pos[:, :2] -= pos[0, :2]
+    for i, ax in enumerate(AXES):
+        if ax not in axes:
+            pos[:, i] = acc[:, i] = 0.0
+    return pos, acc
+
+
 #: A learning law flown by :func:`run_vehicle_laws`: (law, path), ``law`` of :mod:`ilcdob.design.law.laws`
 #: (paper or exact-reference), ``path`` where it assumes the disturbance acts (:mod:`ilcdob.design.maps.flown`).
 LawPath = tuple[str, str]
@@ -431,7 +460,8 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
         in the scenario flies with seed ``1000 sc.id + 10 k`` plus its position in the fleet (sensor noise:
         the laws' learning flights meet the same noise).
     sc : Scenario
-        Reference (x, and y of the lateral paths; z holds the start), disturbance and learning order.
+        Reference (x, and y of the lateral paths, both from the start: the path is flown from where the vehicle
+        starts; z holds the start), disturbance and learning order.
     iterations : int
         Learning flights per vehicle and law (>= 1).
     laws : list of (str, str)
@@ -465,11 +495,7 @@ def run_vehicle_axes(fleets: Mapping[str, Fleet], make: MakeVehicle, sc: Scenari
                             f"path of {DISTURBANCE_PATHS}")
     ts = first.sample_time
     t = sc.time(ts)
-    pos, acc = sc.trajectory(t)
-    pos[:, 2] = 0.0  # positions are measured from the start, which hovers at the path's altitude
-    for i, ax in enumerate(AXES):
-        if ax not in fleets:  # as the paper's x-only flights: axes not learned hold the start
-            pos[:, i] = acc[:, i] = 0.0
+    pos, acc = vehicle_reference(sc, t, list(fleets))
     order = sc.order(first.names) if order is None else check_order(first.names, order)
 
     def along_x(scale: float) -> Callable:

@@ -17,6 +17,12 @@ Two disturbances, as in the paper and beyond it:
   (``state["wind"]``, held over each step), so one wind gives vehicles of different mass and
   drag different accelerations.
 
+A lab's own airframe flies as itself: ``RotorpyVehicle("ours", airframe={...})`` with a complete
+rotorpy parameter set (the keys of rotorpy's shipped sets: mass, inertia, arm geometry, rotor and
+motor constants, drag coefficients, motor limits and the SE3 controller's gains), or
+``airframe="hummingbird"`` with ``params`` changing some of its values. ``name`` is what the
+vehicle is called in results.
+
 The vehicle starts each trial hovering at rest at ``altitude``; :meth:`RotorpyVehicle.position`
 is measured from there. rotorpy draws its motor noise from NumPy's global generator on every
 step (also when the noise is zero), so trials are repeatable but not independent of it.
@@ -25,7 +31,7 @@ step (also when the noise is zero), so trials are repeatable but not independent
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -39,6 +45,37 @@ __all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES"]
 ROTORPY_VEHICLES = {"crazyflie": "crazyflie_params", "crazyfliebrushless": "crazyfliebrushless_params",
                     "hummingbird": "hummingbird_params", "px4": "px4_sihsim_quadx_params"}
 _G = 9.81
+
+
+#: Keys rotorpy's SE3 controller reads beside a shipped set's (its attitude gains).
+_SE3_GAINS = {"kp_att", "kd_att"}
+
+
+def _shipped(name: str) -> dict:
+    """rotorpy's parameter set ``name`` (a key of :data:`ROTORPY_VEHICLES`)."""
+    return dict(importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params)
+
+
+def _airframe(airframe: object) -> dict:
+    """The parameter set of a shipped name or of a lab's own complete mapping (checked against the shipped keys)."""
+    if isinstance(airframe, str):
+        if airframe not in ROTORPY_VEHICLES:
+            raise SpecError(f"`airframe`: got {airframe!r}, expected one of {sorted(ROTORPY_VEHICLES)} or a "
+                            "complete rotorpy parameter set")
+        return _shipped(airframe)
+    if not isinstance(airframe, Mapping):
+        raise SpecError(f"`airframe`: got {type(airframe).__name__}, expected a shipped set's name or a mapping "
+                        "of rotorpy parameters")
+    required = set.intersection(*(set(_shipped(n)) for n in ROTORPY_VEHICLES))
+    missing = sorted(required - set(airframe))
+    if missing:
+        raise SpecError(f"`airframe`: the parameter set lacks {missing} (a complete rotorpy set has "
+                        f"{sorted(required)}; start from a shipped one, e.g. airframe='hummingbird' with `params`)")
+    known = set.union(*(set(_shipped(n)) for n in ROTORPY_VEHICLES)) | _SE3_GAINS
+    unknown = sorted(set(airframe) - known)
+    if unknown:
+        raise SpecError(f"`airframe`: {unknown} are not rotorpy parameters (known: {sorted(known)})")
+    return dict(airframe)
 
 
 def _rotorpy():
@@ -57,7 +94,7 @@ class RotorpyVehicle:
     Parameters
     ----------
     name : str
-        A key of :data:`ROTORPY_VEHICLES`.
+        What the vehicle is called; without ``airframe``, a key of :data:`ROTORPY_VEHICLES`.
     ts : float
         Outer-loop sample time, s (> 0): each :meth:`step` integrates this long.
     altitude : float
@@ -71,15 +108,27 @@ class RotorpyVehicle:
     seed : int
         Seed of the sensor noise.
     params : dict, optional
-        Changes to rotorpy's parameter set (e.g. ``{"mass": 0.6}``).
+        Changes to the airframe's parameter set (e.g. ``{"mass": 0.6}``).
+    airframe : str or mapping, optional
+        The parameter set: a key of :data:`ROTORPY_VEHICLES`, or a lab's own complete set (every key of
+        rotorpy's shipped sets; module docstring). Default: ``name``'s shipped set.
+
+    Raises
+    ------
+    SpecError
+        An unknown name or airframe, a parameter set missing keys (named) or with keys rotorpy does not
+        read, a bad sample time, noise or disturbance.
     """
 
     def __init__(self, name: str, ts: float = 0.01, *, altitude: float = 1.0,
                  command_disturbance: Callable[[float], np.ndarray] | None = None,
                  wind: Callable[[float], np.ndarray] | None = None, noise_std: float = 0.0, seed: int = 0,
-                 params: dict | None = None):
-        if name not in ROTORPY_VEHICLES:
-            raise SpecError(f"`name`: got {name!r}, expected one of {sorted(ROTORPY_VEHICLES)}")
+                 params: dict | None = None, airframe: str | Mapping[str, object] | None = None):
+        if not isinstance(name, str) or not name:
+            raise SpecError(f"`name`: got {name!r}, expected the vehicle's name")
+        if airframe is None and name not in ROTORPY_VEHICLES:
+            raise SpecError(f"`name`: got {name!r}, expected one of {sorted(ROTORPY_VEHICLES)} (or give the "
+                            "airframe's parameter set as `airframe`)")
         if not (np.isfinite(ts) and ts > 0):
             raise SpecError(f"`ts`: got {ts!r}, expected a sample time > 0 s")
         if not (np.isfinite(noise_std) and noise_std >= 0):
@@ -88,10 +137,10 @@ class RotorpyVehicle:
             if fn is not None and not callable(fn):
                 raise SpecError(f"`{what}`: got {type(fn).__name__}, expected a callable of time (s) returning (3,)")
         multirotor, se3 = _rotorpy()
-        base = importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params
-        unknown = sorted(set(params or {}) - set(base) - {"kp_att", "kd_att"})  # SE3Control reads these two too
+        base = _airframe(name if airframe is None else airframe)
+        unknown = sorted(set(params or {}) - set(base) - _SE3_GAINS)
         if unknown:
-            raise SpecError(f"`params`: {unknown} are not parameters of rotorpy's {name!r} set (it has "
+            raise SpecError(f"`params`: {unknown} are not parameters of the {name!r} airframe (it has "
                             f"{sorted(base)})")
         self.params = {**base, **(params or {})}
         self.name, self.ts, self.altitude = name, float(ts), float(altitude)
