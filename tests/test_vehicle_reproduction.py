@@ -127,9 +127,9 @@ def test_a_labs_own_airframe_flies_as_itself():
     rotorpy does not ship) flies under its own name; an incomplete or misspelt set is refused, naming the keys."""
     import numpy as np
 
-    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, _shipped
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, shipped_airframe
 
-    base = _shipped("hummingbird")
+    base = shipped_airframe("hummingbird")
     ours = {**base, "mass": 1.4, "Ixx": 0.012, "Iyy": 0.012, "Izz": 0.022,  # arms 1.5 times longer (25 cm)
             "rotor_pos": {k: 1.5 * np.asarray(v) for k, v in base["rotor_pos"].items()}}
     vehicle = RotorpyVehicle("lab-quad", 0.01, airframe=ours)

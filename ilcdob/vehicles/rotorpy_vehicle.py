@@ -23,6 +23,12 @@ motor constants, drag coefficients, motor limits and the SE3 controller's gains)
 ``airframe="hummingbird"`` with ``params`` changing some of its values. ``name`` is what the
 vehicle is called in results.
 
+Flown on its own controller: :meth:`RotorpyVehicle.track` gives rotorpy's SE3 controller a full-state
+setpoint (position, velocity and acceleration feed-forward), which it tracks with its own position
+gains (``position_gains``; rotorpy's defaults ``kp = (6.5, 6.5, 15)``, ``kd = (4, 4, 9)``): the
+vehicle of :class:`~ilcdob.vehicles.closed_loop.ClosedLoopVehicle`, learning through one of those
+setpoint channels with no ilcdob controller in the loop.
+
 The vehicle starts each trial hovering at rest at ``altitude``; :meth:`RotorpyVehicle.position`
 is measured from there. rotorpy draws its motor noise from NumPy's global generator on every
 step (also when the noise is zero), so trials are repeatable but not independent of it.
@@ -30,6 +36,7 @@ step (also when the noise is zero), so trials are repeatable but not independent
 
 from __future__ import annotations
 
+import copy
 import importlib
 from typing import Callable, Mapping
 
@@ -37,7 +44,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES"]
+__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe"]
 
 #: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.044, 0.5
 #: and 1.0 kg, arm 4.3, 4.3, 17 and 24 cm; their drag differs in kind (rotor drag only; rotor drag and translational
@@ -51,9 +58,20 @@ _G = 9.81
 _SE3_GAINS = {"kp_att", "kd_att"}
 
 
-def _shipped(name: str) -> dict:
-    """rotorpy's parameter set ``name`` (a key of :data:`ROTORPY_VEHICLES`)."""
-    return dict(importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params)
+def shipped_airframe(name: str) -> dict:
+    """A copy of rotorpy's parameter set ``name``: the start of a lab's own airframe (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`ROTORPY_VEHICLES`.
+
+    Returns
+    -------
+    dict
+        rotorpy's ``quad_params`` of that vehicle (SI units, as rotorpy documents them).
+    """
+    return copy.deepcopy(importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params)
 
 
 def _airframe(airframe: object) -> dict:
@@ -62,20 +80,20 @@ def _airframe(airframe: object) -> dict:
         if airframe not in ROTORPY_VEHICLES:
             raise SpecError(f"`airframe`: got {airframe!r}, expected one of {sorted(ROTORPY_VEHICLES)} or a "
                             "complete rotorpy parameter set")
-        return _shipped(airframe)
+        return shipped_airframe(airframe)
     if not isinstance(airframe, Mapping):
         raise SpecError(f"`airframe`: got {type(airframe).__name__}, expected a shipped set's name or a mapping "
                         "of rotorpy parameters")
-    required = set.intersection(*(set(_shipped(n)) for n in ROTORPY_VEHICLES))
+    required = set.intersection(*(set(shipped_airframe(n)) for n in ROTORPY_VEHICLES))
     missing = sorted(required - set(airframe))
     if missing:
         raise SpecError(f"`airframe`: the parameter set lacks {missing} (a complete rotorpy set has "
                         f"{sorted(required)}; start from a shipped one, e.g. airframe='hummingbird' with `params`)")
-    known = set.union(*(set(_shipped(n)) for n in ROTORPY_VEHICLES)) | _SE3_GAINS
+    known = set.union(*(set(shipped_airframe(n)) for n in ROTORPY_VEHICLES)) | _SE3_GAINS
     unknown = sorted(set(airframe) - known)
     if unknown:
         raise SpecError(f"`airframe`: {unknown} are not rotorpy parameters (known: {sorted(known)})")
-    return dict(airframe)
+    return copy.deepcopy(dict(airframe))
 
 
 def _rotorpy():
@@ -112,6 +130,9 @@ class RotorpyVehicle:
     airframe : str or mapping, optional
         The parameter set: a key of :data:`ROTORPY_VEHICLES`, or a lab's own complete set (every key of
         rotorpy's shipped sets; module docstring). Default: ``name``'s shipped set.
+    position_gains : (array_like, array_like), optional
+        ``(kp, kd)`` of rotorpy's SE3 position loop per axis (1/s^2, 1/s; > 0), used by :meth:`track`
+        (default: rotorpy's).
 
     Raises
     ------
@@ -123,7 +144,8 @@ class RotorpyVehicle:
     def __init__(self, name: str, ts: float = 0.01, *, altitude: float = 1.0,
                  command_disturbance: Callable[[float], np.ndarray] | None = None,
                  wind: Callable[[float], np.ndarray] | None = None, noise_std: float = 0.0, seed: int = 0,
-                 params: dict | None = None, airframe: str | Mapping[str, object] | None = None):
+                 params: dict | None = None, airframe: str | Mapping[str, object] | None = None,
+                 position_gains: tuple[object, object] | None = None):
         if not isinstance(name, str) or not name:
             raise SpecError(f"`name`: got {name!r}, expected the vehicle's name")
         if airframe is None and name not in ROTORPY_VEHICLES:
@@ -149,6 +171,11 @@ class RotorpyVehicle:
         self._model = multirotor(self.params, initial_state=self._hover(), control_abstraction="cmd_motor_speeds",
                                  aero=True)
         self._inner = se3(self.params)
+        if position_gains is not None:
+            kp, kd = (np.broadcast_to(np.asarray(g, float), (3,)).copy() for g in position_gains)
+            if not (np.all(np.isfinite(kp)) and np.all(np.isfinite(kd)) and np.all(kp > 0) and np.all(kd > 0)):
+                raise SpecError(f"`position_gains`: got {position_gains!r}, expected (kp, kd) > 0 per axis")
+            self._inner.kp_pos, self._inner.kd_pos = kp, kd  # SE3Control's public gains
         self.reset()
 
     @property
@@ -181,6 +208,41 @@ class RotorpyVehicle:
             raise SpecError(f"`{what}`: at t = {self.t:g} s it returned {v!r}, expected 3 finite values")
         return v
 
+    def _advance(self, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
+        """One ``ts`` of the SE3 controller tracking the flat output ``(x, v, a)`` (world frame, absolute)."""
+        s = self.state
+        s["wind"] = self._vector(self.wind, "wind")
+        flat = {"x": x, "x_dot": v, "x_ddot": a + self._vector(self.command_disturbance, "command_disturbance"),
+                "x_dddot": np.zeros(3), "x_ddddot": np.zeros(3), "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
+        self.state = self._model.step(s, self._inner.update(self.t, s, flat), self.ts)
+        self.t += self.ts
+
+    def track(self, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray) -> None:
+        """Fly ``ts`` on rotorpy's own SE3 controller towards a full-state setpoint (module docstring).
+
+        Parameters
+        ----------
+        position : array_like
+            ``(3,)``, m, relative to the start (as :meth:`position` measures).
+        velocity : array_like
+            ``(3,)``, m/s, its velocity feed-forward.
+        acceleration : array_like
+            ``(3,)``, m/s^2, its acceleration feed-forward (gravity excluded); the command disturbance
+            is added to it, which is adding it to the controller's command.
+
+        Raises
+        ------
+        SpecError
+            A setpoint that is not three finite numbers per row.
+        """
+        rows = []
+        for what, value in (("position", position), ("velocity", velocity), ("acceleration", acceleration)):
+            v = np.asarray(value, float).reshape(-1)
+            if v.shape != (3,) or not np.all(np.isfinite(v)):
+                raise SpecError(f"`{what}`: got {value!r}, expected 3 finite values")
+            rows.append(v)
+        self._advance(rows[0] + np.array([0.0, 0.0, self.altitude]), rows[1], rows[2])
+
     def step(self, command: np.ndarray) -> np.ndarray:
         """Hold the acceleration ``command`` (``(3,)``, m/s^2) plus the command disturbance for ``ts``.
 
@@ -198,10 +260,5 @@ class RotorpyVehicle:
         a = np.asarray(command, float).reshape(-1)
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             raise SpecError(f"`command`: got {command!r}, expected 3 finite accelerations (m/s^2)")
-        s = self.state
-        s["wind"] = self._vector(self.wind, "wind")
-        flat = {"x": s["x"], "x_dot": s["v"], "x_ddot": a + self._vector(self.command_disturbance, "command_disturbance"),
-                "x_dddot": np.zeros(3), "x_ddddot": np.zeros(3), "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
-        self.state = self._model.step(s, self._inner.update(self.t, s, flat), self.ts)
-        self.t += self.ts
+        self._advance(self.state["x"], self.state["v"], a)  # its own position: the SE3 loop feeds a forward
         return a

@@ -1,0 +1,165 @@
+"""Identifying a vehicle's learning channel: the map from a signal added to its setpoint to its position, with
+the vehicle on its own controller (:mod:`ilcdob.vehicles.closed_loop`).
+
+Per vehicle, axis and channel two closed-loop flights hover at the start with a chirp added to the channel
+(an estimation flight sweeping up from 0.05 Hz to 2 Hz, a held-out one sweeping down, each with its own
+sensor noise): no ilcdob controller is in the loop, the vehicle's own holds it. Each candidate structure
+of :data:`CHANNEL_STRUCTURES` is fitted with :func:`~ilcdob.identification.tfest.tfest` (output error,
+closed-loop data: the chirp is the only input the fit sees, and the loop's response to the noise is what
+the held-out flight scores) and the one with the best held-out fit is chosen, one with fewer parameters
+winning unless a larger one fits 1 point better. The fit is the channel map ``G_ch`` (channel -> position):
+on the acceleration channel it is also the map of an acceleration disturbance on the airframe, on the
+position channel the loop's complementary sensitivity.
+
+Units: s, m, and the channel's unit (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+from ilcdob.fleet import AXES
+from ilcdob.signals import FlightData, check_grid
+from ilcdob.specs import PlantSpec
+from ilcdob.uncertainty import ModelStructure
+from ilcdob.vehicles.closed_loop import CHANNEL_UNITS, ClosedLoopVehicle, check_channel, fly_closed_loop
+
+__all__ = ["CHANNEL_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel", "channel_flight",
+           "MakeClosedLoop"]
+
+#: Candidate structures of a channel map, fewest free parameters first: the vehicle's loop holds its position,
+#: so no integrator; a second-order position loop (2 poles), with its attitude lag (3), with the zero its
+#: derivative or feed-forward path puts in (1 zero), and one pole and zero more (4 poles, 2 zeros).
+CHANNEL_STRUCTURES = (ModelStructure(n_poles=2), ModelStructure(n_poles=3), ModelStructure(n_poles=3, n_zeros=1),
+                      ModelStructure(n_poles=4, n_zeros=1), ModelStructure(n_poles=4, n_zeros=2))
+#: Chirp amplitude per channel (m, m/s, m/s^2): a few centimetres of motion for a multirotor's loop.
+CHIRP_AMPLITUDE = {"position": 0.1, "velocity": 0.2, "acceleration": 1.0}
+#: ``make(name, seed) -> ClosedLoopVehicle``: a fresh vehicle at rest, ``seed`` its sensor noise's.
+MakeClosedLoop = Callable[[str, int], ClosedLoopVehicle]
+
+_F_LOW, _F_HIGH = 0.05, 2.0  # chirp band, Hz: a multirotor position loop closes below 1 Hz
+
+
+@dataclass(frozen=True)
+class ChannelFit:
+    """The identified channel map of one vehicle's axis.
+
+    Attributes
+    ----------
+    name, axis, channel : str
+        The vehicle, the axis (``"x"``, ``"y"``, ``"z"``) and the channel.
+    structure : ModelStructure
+        The structure chosen (module docstring).
+    plant : PlantSpec
+        Its fit, channel unit -> m (continuous time, a delay in s).
+    fit_estimation, fit_validation : float
+        Fit (%) of the chosen structure on the estimation and the held-out flight.
+    fits : dict of str to float
+        Held-out fit (%) of every candidate, by ``"<poles>p<zeros>z"``.
+    """
+
+    name: str
+    axis: str
+    channel: str
+    structure: ModelStructure
+    plant: PlantSpec
+    fit_estimation: float
+    fit_validation: float
+    fits: dict[str, float]
+
+
+def _label(st: ModelStructure) -> str:
+    return f"{st.n_poles}p{st.n_zeros}z"
+
+
+def channel_flight(make: MakeClosedLoop, name: str, ts: float, channel: str, axis: str, seed: int,
+                   duration: float, up: bool = True) -> FlightData:
+    """One identification flight (module docstring): hover, a chirp on ``channel`` of ``axis``.
+
+    Parameters
+    ----------
+    make : callable
+        :data:`MakeClosedLoop`.
+    name : str
+        The vehicle.
+    ts : float
+        Setpoint period, s (the vehicle's).
+    channel : {"position", "velocity", "acceleration"}
+    axis : {"x", "y", "z"}
+    seed : int
+        Its sensor noise's seed.
+    duration : float
+        Length, s (a whole number of ``ts``).
+    up : bool
+        Sweep up from 0.05 Hz to 2 Hz (else down).
+
+    Returns
+    -------
+    FlightData
+        Signals ``u`` (the chirp, the channel's unit) and ``y`` (measured position on ``axis``, m).
+    """
+    check_channel(channel)
+    if axis not in AXES:
+        raise SpecError(f"`axis`: got {axis!r}, expected one of {list(AXES)}")
+    check_grid(duration, ts, f"the channel flight of {name}")
+    n = int(round(duration / ts))
+    t = np.arange(n) * ts
+    f0, f1 = (_F_LOW, _F_HIGH) if up else (_F_HIGH, _F_LOW)
+    u = CHIRP_AMPLITUDE[channel] * np.sin(2 * np.pi * (f0 * t + (f1 - f0) * t ** 2 / (2 * duration)))
+    u *= np.clip(t / 1.0, 0.0, 1.0)  # faded in over 1 s: the trial starts hovering at rest
+    vehicle = make(name, seed)
+    if abs(vehicle.ts - ts) > 1e-12 * ts:
+        raise SpecError(f"`ts`: {ts} s, but vehicle {name!r} steps {vehicle.ts} s")
+    trial = fly_closed_loop(vehicle, np.zeros((n, 3)), learning={axis: u}, channel=channel)
+    return FlightData(t, {"u": u, "y": trial.y_meas[:, AXES.index(axis)]},
+                      {"u": CHANNEL_UNITS[channel], "y": "m"}, source=f"{name} {axis} {channel} chirp")
+
+
+def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, axis: str = "x",
+                     duration: float = 30.0, structures: Sequence[ModelStructure] = CHANNEL_STRUCTURES
+                     ) -> ChannelFit:
+    """Identify the channel map of one vehicle's axis (module docstring).
+
+    Parameters
+    ----------
+    make : callable
+        :data:`MakeClosedLoop`.
+    name : str
+        The vehicle.
+    ts : float
+        Setpoint period, s.
+    channel : {"position", "velocity", "acceleration"}
+    axis : {"x", "y", "z"}
+    duration : float
+        Length of each of the two flights, s.
+    structures : sequence of ModelStructure
+        Candidates, fewest parameters first.
+
+    Returns
+    -------
+    ChannelFit
+
+    Raises
+    ------
+    SpecError
+        A bad channel, axis, duration or sample time; no candidate.
+    """
+    from ilcdob.identification.tfest import tfest
+
+    if not structures:
+        raise SpecError("`structures`: got none, expected at least one candidate structure")
+    est = channel_flight(make, name, ts, channel, axis, 0, duration, up=True)
+    val = channel_flight(make, name, ts, channel, axis, 1, duration, up=False)
+    results = []
+    for st in structures:
+        fit = tfest(est, "u", "y", st, validation=val)
+        results.append((fit.fit_validation, st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay),
+                        fit.fit_estimation))
+    best = max(r[0] for r in results)
+    chosen = next(r for r in results if r[0] >= best - 1.0)  # fewest parameters within 1 point
+    return ChannelFit(name, axis, channel, chosen[1], chosen[2], chosen[3], chosen[0],
+                      {_label(r[1]): r[0] for r in results})
