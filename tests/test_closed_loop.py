@@ -82,9 +82,9 @@ def test_bad_closed_loop_inputs_name_what_is_wrong():
         fly_closed_loop(vehicle, np.zeros((10, 3)), channel="thrust")
     with pytest.raises(SpecError, match="`vehicle`"):
         fly_closed_loop(object(), np.zeros((10, 3)))
-    with pytest.raises(SpecError, match=r"`learning\['x'\]`: got 5 values, expected 10"):
+    with pytest.raises(SpecError, match=r"`learning\['x'\]`: got 5 samples, expected 10"):
         fly_closed_loop(vehicle, np.zeros((10, 3)), learning={"x": np.zeros(5)})
-    with pytest.raises(SpecError, match="axes \\['w'\\]"):
+    with pytest.raises(SpecError, match="unknown axes \\['w'\\]"):
         fly_closed_loop(vehicle, np.zeros((10, 3)), learning={"w": np.zeros(10)})
     with pytest.raises(SpecError, match="at least 2"):
         fly_closed_loop(vehicle, np.zeros((1, 3)))

@@ -27,7 +27,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ilcdob.errors import SpecError
-from ilcdob.fleet import AXES
+
+from .interface import per_axis
 
 __all__ = ["CHANNELS", "CHANNEL_UNITS", "ClosedLoopVehicle", "ClosedLoopTrial", "fly_closed_loop", "check_channel"]
 
@@ -124,31 +125,6 @@ class ClosedLoopTrial:
         return self.reference - self.y_meas
 
 
-def _rows(value: object, n: int, name: str) -> np.ndarray:
-    """``N x 3`` from None (zeros), an array or a per-axis mapping (missing axes: zero)."""
-    out = np.zeros((n, 3))
-    if value is None:
-        return out
-    if isinstance(value, dict):
-        unknown = sorted(set(value) - set(AXES))
-        if unknown:
-            raise SpecError(f"`{name}`: axes {unknown} are not among {list(AXES)}")
-        for ax, v in value.items():
-            out[:, AXES.index(ax)] = _column(v, n, f"{name}[{ax!r}]")
-        return out
-    arr = np.asarray(value, float)
-    if arr.shape != (n, 3) or not np.all(np.isfinite(arr)):
-        raise SpecError(f"`{name}`: got shape {arr.shape}, expected {n} x 3 finite values (or a mapping per axis)")
-    return arr.copy()
-
-
-def _column(value: object, n: int, name: str) -> np.ndarray:
-    arr = np.asarray(value, float).reshape(-1)
-    if arr.size != n or not np.all(np.isfinite(arr)):
-        raise SpecError(f"`{name}`: got {arr.size} values, expected {n} finite ones")
-    return arr
-
-
 def fly_closed_loop(vehicle: ClosedLoopVehicle, reference: object, *, velocity: object = None,
                     acceleration: object = None, learning: object = None, channel: str = "acceleration",
                     n: int | None = None) -> ClosedLoopTrial:
@@ -195,9 +171,9 @@ def fly_closed_loop(vehicle: ClosedLoopVehicle, reference: object, *, velocity: 
             n = np.asarray(reference).shape[0] if np.ndim(reference) else 0
     if n < 2:
         raise SpecError(f"`reference`: {n} sample(s), expected a trial of at least 2")
-    r = _rows(reference, n, "reference")
-    setpoint = [r, _rows(velocity, n, "velocity"), _rows(acceleration, n, "acceleration")]
-    d_f = _rows(learning, n, "learning")
+    r = per_axis(reference, n, "reference")
+    setpoint = [r, per_axis(velocity, n, "velocity"), per_axis(acceleration, n, "acceleration")]
+    d_f = per_axis(learning, n, "learning")
     setpoint[row] = setpoint[row] + d_f
     vehicle.reset()
     y = np.zeros((n, 3))

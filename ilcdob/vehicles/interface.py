@@ -117,8 +117,28 @@ class VehicleTrial:
         return float(np.sqrt(np.mean(self.e_meas[:, axis] ** 2)))
 
 
-def _per_axis(value: object, n: int, name: str) -> np.ndarray:
-    """``value`` as an ``n x 3`` array: None (zeros), ``(n, 3)``, or a mapping axis name -> ``(n,)``."""
+def per_axis(value: object, n: int, name: str) -> np.ndarray:
+    """``value`` as an ``n x 3`` array, one column per axis (x, y, z).
+
+    Parameters
+    ----------
+    value : None, array_like or mapping
+        None (zeros), ``(n, 3)``, or a mapping axis name -> ``(n,)`` (missing axes: zeros).
+    n : int
+        Samples.
+    name : str
+        The input's name, for messages.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``n x 3``, finite.
+
+    Raises
+    ------
+    SpecError
+        Unknown axes, other lengths or shapes, NaN or inf.
+    """
     if value is None:
         return np.zeros((n, 3))
     if isinstance(value, Mapping):
@@ -217,9 +237,9 @@ def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem | PIDSpec], ref
             n = sizes.pop()
         else:
             n = np.asarray(reference).shape[0]
-    r = _per_axis(reference, n, "reference")
-    d_f = _per_axis(learning, n, "learning")
-    a_ff = _per_axis(feedforward, n, "feedforward")
+    r = per_axis(reference, n, "reference")
+    d_f = per_axis(learning, n, "learning")
+    a_ff = per_axis(feedforward, n, "feedforward")
     if not dob and np.any(d_f):
         raise SpecError("`learning`: a learning signal needs the DOB (dob=True)")
     ctl = [_PIDAlone(loops[ax], vehicle.ts, ax) if isinstance(loops[ax], PIDSpec) else
