@@ -42,7 +42,7 @@ from threadpoolctl import threadpool_limits
 import ilcdob
 from ilcdob.design import closed_form_filters
 from ilcdob.design.methods.fir import (CHECK_REFINE, FIRGuaranteeWarning, FIROptions, _quadrature, _realify,
-                                design_fir, fit_fir)
+                                       design_fir, fit_fir)
 from ilcdob.design.pair import fleet_delta_sets
 from ilcdob.response import fir_matrix
 from ilcdob.fleet import fleet_from_dict

@@ -46,7 +46,8 @@ from ilcdob.design.sets.value_set import EllipseFamily, ValueSet
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Before: only what the formulation did differently (design/methods/robust_set.py and design/sets/value_set.py as they were).
+# Before: only what the formulation did differently (design/methods/robust_set.py and design/sets/value_set.py as
+# they were).
 # ``before`` runs today's ``_design_filter`` (and SOCP, verification, polygon and image, unchanged since) with these
 # four pieces swapped in: the set's rows from every value of its grid (its values by ``einsum``), the sagitta as the
 # distance to the chord of the images, the 60 worst violations per exchange round, and ``F`` on the verification

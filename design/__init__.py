@@ -4,7 +4,7 @@ that makes every law fly on noisy trials (:mod:`.filters.band`), the acceleratio
 (:mod:`.law.limit`) and the airframe correction for wind on the rigid body (:mod:`.maps.flown`)."""
 
 from .maps.closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, reconstruct_disturbance,
-                          simulate_map)
+                               simulate_map)
 from .sets.delta import DeltaSet, delta_set
 from .filters.band import LearningBand, choose_band
 from .law.limit import LearningLimitError, LearningLimitWarning

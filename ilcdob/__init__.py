@@ -55,7 +55,8 @@ _EXPORTS = {
     "ModelStructure": "uncertainty",
     "design_pair": "design.pair",
     # designs and models as python-control objects and MATLAB files
-    **dict.fromkeys(("LearningFilterTF", "filter_tf", "filters_tf", "load_design", "design_to_mat"), "design.export.objects"),
+    **dict.fromkeys(("LearningFilterTF", "filter_tf", "filters_tf", "load_design", "design_to_mat"),
+                    "design.export.objects"),
     "model_to_mat": "matfile",
 }
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from ilcdob.design.filters.band import (AMPLIFICATION_TOL, END_FIT_S, NOISE_SHARE, OFF_FRACTION, LearningBand, check_bandwidth,
-                                choose_band, estimate_noise, learning_horizon)
+from ilcdob.design.filters.band import (AMPLIFICATION_TOL, END_FIT_S, NOISE_SHARE, OFF_FRACTION, LearningBand,
+                                        check_bandwidth,
+                                        choose_band, estimate_noise, learning_horizon)
 from ilcdob.design.law import LawContext, LearningLaw
 from ilcdob.design.law.designed import Designed
 from ilcdob.design.pair import design_pair, pair_band

@@ -15,8 +15,8 @@ from ilcdob.app.output import OutputFolder, Provenance
 from ilcdob.design.export.c_export import c_code, check_c_prefix, default_c_prefix, design_files, reference_trial
 from ilcdob.design.law import apply_learning
 from ilcdob.design.filters.coefficients import (DIRECT_FORM_RTOL, apply_coefficients, apply_lookahead,
-                                  coefficients_freqresp, direct_form_disagreement, section_growth,
-                                  zpk_to_coefficients)
+                                                coefficients_freqresp, direct_form_disagreement, section_growth,
+                                                zpk_to_coefficients)
 from ilcdob.design.filters.noncausal import ZPKFilter, lookahead
 from ilcdob.design.pair import design_pair
 from ilcdob.design.law.limit import LearningLimitWarning

@@ -18,7 +18,7 @@ import pytest
 from ilcdob.design.filters.band import fade_out, fold_start
 from ilcdob.design.sets.delta import delta_set
 from ilcdob.design.maps.finite_horizon import (PairTrials, causal_map, error_maps, finite_horizon_ratio,
-                                          invisible_disturbances, law_map)
+                                               invisible_disturbances, law_map)
 from ilcdob.design.methods import RobustSet
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.design.methods.robust_set import RobustSetOptions, admissible, design_robust_set

@@ -18,7 +18,7 @@ import pytest
 from ilcdob import SpecError
 from ilcdob.design import closed_form_filters, delta_set
 from ilcdob.design.methods.fir import (FIRDesignError, FIRFilter, FIRGuaranteeWarning, FIROptions, attainable_te1,
-                               design_fir, fit_fir)
+                                       design_fir, fit_fir)
 from ilcdob.design.pair import fleet_delta_sets
 from ilcdob.validation.simulate import rmse, simulate_flight
 

@@ -82,7 +82,8 @@ def test_files_add_the_fleet_file_of_the_models(short_run):
     files = short_run.files()
     assert list(files)[-2:] == ["identified_fleet.toml", "results.json"]  # results.json stays last
     assert files["identified_fleet.toml"] == short_run.identified_toml
-    assert "README.md" in files and "ilcdob.design.filters.band" in files["README.md"] and "ilcdob.design.maps.flown" in files["README.md"]
+    assert "README.md" in files and "ilcdob.design.filters.band" in files["README.md"]
+    assert "ilcdob.design.maps.flown" in files["README.md"]
 
 
 def test_learning_flights_keep_the_true_and_measured_signals_apart(short_run):

@@ -10,13 +10,13 @@ import pytest
 from ilcdob.app.cli import main
 from ilcdob.design import closed_form_filters, simulate_map
 from ilcdob.design.methods.norm_optimal import (
-    NormOptimalDesigner,
-    NormOptimalLaw,
-    NormOptimalOptions,
-    check_norm_optimal_size,
-    norm_optimal_bytes,
-    norm_optimal_learning,
-)
+                                                NormOptimalDesigner,
+                                                NormOptimalLaw,
+                                                NormOptimalOptions,
+                                                check_norm_optimal_size,
+                                                norm_optimal_bytes,
+                                                norm_optimal_learning,
+                                                )
 from ilcdob.design.methods import NormOptimal
 from ilcdob.design.pair import design_pair
 from ilcdob.errors import SpecError

@@ -13,13 +13,13 @@ from ilcdob.discretize import discretize_plant
 from ilcdob.errors import SignalError, SpecError
 from ilcdob.signals import FlightData
 from ilcdob.vehicles.quadrotor import (
-    QuadrotorParams,
-    equivalent_tau,
-    fit_first_order,
-    fly,
-    linear_equivalent_tau,
-    table_i_vehicles,
-)
+                                       QuadrotorParams,
+                                       equivalent_tau,
+                                       fit_first_order,
+                                       fly,
+                                       linear_equivalent_tau,
+                                       table_i_vehicles,
+                                       )
 from ilcdob.identification.results import fit_percent
 from ilcdob.specs import PIDSpec, PlantSpec
 

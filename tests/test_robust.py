@@ -10,7 +10,7 @@ import pytest
 import ilcdob
 from ilcdob.design import closed_form_filters, delta_set, simulate_map
 from ilcdob.design.methods.robust import (RobustDesigner, RobustInfeasibleError, RobustOptions, RobustPairDesigner,
-                                  predicted_errors)
+                                          predicted_errors)
 from ilcdob.loop import build_loop
 from ilcdob.specs import PlantSpec
 from ilcdob.errors import SignalError, SpecError

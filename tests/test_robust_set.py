@@ -19,7 +19,8 @@ from ilcdob.design.maps.closed_form import closed_form_filters
 from ilcdob.design.sets.delta import delta_set
 from ilcdob.design.methods import RobustSet
 from ilcdob.design.pair import design_pair, fleet_delta_sets
-from ilcdob.design.methods.robust_set import RobustSetInfeasibleError, RobustSetOptions, bound_on_grid, design_robust_set
+from ilcdob.design.methods.robust_set import (RobustSetInfeasibleError, RobustSetOptions, bound_on_grid,
+                                              design_robust_set)
 from ilcdob.design.sets.worst_case import ratio_for_delta, uncertainty_cones, worst_case_ratio
 from ilcdob.errors import IlcdobError, SpecError
 from ilcdob.loop import build_loop, freqresp

@@ -16,7 +16,7 @@ import pytest
 
 import ilcdob
 from ilcdob.design.sets.value_set import (TAU_RANGE, BoundFamily, EllipseFamily, _highpass, admissible_range,
-                                     complementary_sensitivity, family_cones, worst_over_set)
+                                          complementary_sensitivity, family_cones, worst_over_set)
 
 FLEET = ilcdob.default_fleet()
 

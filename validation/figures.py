@@ -58,7 +58,7 @@ from matplotlib.figure import Figure
 from ilcdob.design import LearningFilters
 from ilcdob.design.methods import METHODS
 from ilcdob.design.checks.figure import (TE_GAIN_ERROR, TITLE_Y, BodeCurve, draw_bode, finish_bode_axes, frequency_grid,
-                                  loop_maps, magnitude_db, minor_log_grid, with_gain_error)
+                                         loop_maps, magnitude_db, minor_log_grid, with_gain_error)
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import freqresp

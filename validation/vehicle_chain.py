@@ -50,7 +50,8 @@ from .scenarios import Scenario, check_order
 from .simulate import Flight
 
 __all__ = ["STRUCTURES", "VehicleFit", "VehicleExperiments", "ChirpExperiments", "identify_vehicles",
-           "fly_baselines", "fly_learning", "vehicle_reference", "run_vehicle_axes", "run_vehicle_laws", "run_vehicle_scenario",
+           "fly_baselines", "fly_learning", "vehicle_reference", "run_vehicle_axes", "run_vehicle_laws",
+           "run_vehicle_scenario",
            "rough_loop", "dryden_gust", "MakeVehicle", "FlyTrial", "LawPath"]
 
 #: Candidate structures of an axis's plant, fewest free parameters first: the paper's two integrators and a pole

@@ -13,7 +13,8 @@ least-squares cubic through its last 16 samples
 filter has one (``lookahead``, ``v(j) = sum_m g_m u(j + m)``, the sum in descending ``m``:
 the smallest taps first), then through the second-order sections (or, for a FIR, the
 direct form) in the operation order of ``scipy.signal.sosfilt`` (``lfilter``), and read so
-that the whole filter looks ``advance`` samples ahead (:mod:`..filters.coefficients`). The loop runs over ``i = 0 .. n + advance - 1``:
+that the whole filter looks ``advance`` samples ahead (:mod:`..filters.coefficients`). The loop runs over
+``i = 0 .. n + advance - 1``:
 ``v(i - M)`` from the inputs ``u(i - M) .. u(i)``, one step of the sections, and, from
 ``i = advance`` on, the output ``y(i - advance)``; as ``advance >= M`` that output
 overwrites no input a later step reads (``y`` may be ``u``: in place). The C code allocates
@@ -1081,7 +1082,8 @@ def _robust_readme(filters: dict[str, Any], prefix: str) -> list[str]:
                f"({filters.get('guaranteed_over', 'see filters.json')})." if isinstance(guarantee, (int, float))
                else ""),
             "", f"`{prefix}ginv_apply` runs Ginv alone (it looks ahead {ginv['advance']} samples; the trial is "
-            "continued past its end by a cubic, as `ilcdob.design.filters.coefficients.apply_coefficients` does). The code uses "
+            "continued past its end by a cubic, as `ilcdob.design.filters.coefficients.apply_coefficients` does). "
+            "The code uses "
             "`cos()` of the C math library (link with `-lm`)."]
 
 
@@ -1142,7 +1144,8 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
         else:
             lines += [f"The filters alone are `{p}l1_apply` and `{p}l2_apply` (they look ahead "
                       f"{filters['L1']['advance']} (L1) and {filters['L2']['advance']} (L2) samples; the trial is "
-                      "continued past its end by a cubic, as `ilcdob.design.filters.coefficients.apply_coefficients` does)"
+                      "continued past its end by a cubic, as "
+                      "`ilcdob.design.filters.coefficients.apply_coefficients` does)"
                       + ("; with the band or W their sum is not the learning signal." if lp.sos is not None
                          or lp.w_sos is not None else "; their sum is what `learn` returns."),
                       "", *_structure_readme(filters)]

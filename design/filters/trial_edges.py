@@ -24,7 +24,8 @@ def trend_weights(n: int) -> np.ndarray:
 
 
 def end_continuation(d_hat: np.ndarray, advance: int, fade: int) -> np.ndarray:
-    """``d_hat`` continued ``advance`` samples past the trial along its trend (:meth:`~..methods.robust_set.RobustSetDesign.apply`).
+    """``d_hat`` continued ``advance`` samples past the trial along its trend
+    (:meth:`~..methods.robust_set.RobustSetDesign.apply`).
 
     The line fitted by least squares, weighted by :func:`trend_weights` (a Hann window), to the
     ``2 advance`` samples before the last ``fade`` ones (fewer when the trial is shorter; a constant
@@ -63,7 +64,8 @@ def end_continuation(d_hat: np.ndarray, advance: int, fade: int) -> np.ndarray:
 
 
 def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> np.ndarray:
-    """The robustness FIR over a trial of the reconstructed disturbance (:meth:`~..methods.robust_set.RobustSetDesign.apply`, extended).
+    """The robustness FIR over a trial of the reconstructed disturbance
+    (:meth:`~..methods.robust_set.RobustSetDesign.apply`, extended).
 
     ``d_hat`` is continued past the trial along its trend (:func:`end_continuation`), taken as zero
     before it, and filtered by ``output(k) = sum_i h[i] d_hat(k + advance - i)``; the output before

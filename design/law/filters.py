@@ -52,7 +52,8 @@ def coefficients_map(coeffs: dict[str, Any], m: int) -> LinearMap:
 
 @register
 class FilterPair(Stage):
-    """``L1{e} + L2{d_f}`` from the coefficient entries ``L1`` and ``L2`` (:func:`~..filters.coefficients.apply_coefficients`).
+    """``L1{e} + L2{d_f}`` from the coefficient entries ``L1`` and ``L2``
+    (:func:`~..filters.coefficients.apply_coefficients`).
 
     Parameters
     ----------

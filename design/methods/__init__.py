@@ -34,10 +34,10 @@ from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
 
-from ..maps.closed_form import LearningFilters, inverse_gd_filter
-from ..sets.delta import DeltaSet
 from ..filters.coefficients import zpk_to_coefficients
+from ..maps.closed_form import LearningFilters, inverse_gd_filter
 from ..maps.finite_horizon import LinearMap, causal_map, identity_map, zpk_map
+from ..sets.delta import DeltaSet
 from ..law import Stage
 from ..law.designed import Designed
 from ..law.filters import FilterPair
@@ -48,8 +48,9 @@ from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_op
 from .robust import RobustOptions, RobustPairDesigner
 from .robust_set import RobustSetOptions, design_robust_set, structured_set
 
-__all__ = ["DesignInputs", "MethodSettings", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust", "RobustSet",
-           "METHODS", "DEFAULT_METHOD", "DEFAULT_METHODS", "GUARANTEED", "method_named"]
+__all__ = ["DesignInputs", "MethodSettings", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust",
+           "RobustSet", "METHODS", "DEFAULT_METHOD", "DEFAULT_METHODS", "GUARANTEED", "method_named"]
+
 
 @dataclass(frozen=True)
 class DesignInputs:

@@ -123,8 +123,8 @@ from ilcdob.lifted import markov_parameters
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal, check_grid
 
-from ..maps.closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus, reconstruct_disturbance,
-                          simulate_map)
+from ..maps.closed_form import (LearningFilters, closed_form_filters, inverse_gd_filter, one_minus,
+                                reconstruct_disturbance, simulate_map)
 from .fir import FIRFilter
 from ..filters.frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
 from ..filters.noncausal import lookahead
@@ -680,7 +680,8 @@ class RobustSetDesign:
                                        "extended before t = 0 as an odd function (y(-1-k) = -y(k)) for F's advance "
                                        "and zero after the end; d_f = argmin ||Gf_hat_j{d_f} + F{y}||^2 + lam "
                                        "||d_f||^2 over the trial's samples (lifted maps, lam = 1e-12 x the mean "
-                                       "diagonal of Gf^T Gf, design/filters/trial_inverse.py); longer trials are extended"}
+                                       "diagonal of Gf^T Gf, design/filters/trial_inverse.py); longer trials are "
+                                       "extended"}
                 if self.trial == "projected" else
                 {"fade_samples": self.end_fade, "fit_samples": 2 * self.F.advance,
                                "rule": "F acts on the reconstructed disturbance d_hat, zero before the trial; with "

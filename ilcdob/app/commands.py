@@ -750,7 +750,8 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                      fir_unattainable: str | None = None, lifted: bool = False) -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
-    Written, as a unit: ``filters.json``, the C code (``filters.h``/``.c``, :func:`ilcdob.design.export.c_export.design_files`),
+    Written, as a unit: ``filters.json``, the C code (``filters.h``/``.c``,
+    :func:`ilcdob.design.export.c_export.design_files`),
     ``README.md``, ``bode.png`` and, as the design has them, ``lifted.npz``, ``learning_signal.csv`` (with
     ``trial``) and ``reference_terms.csv`` (the exact-reference law).
 
@@ -840,7 +841,8 @@ def _checked_design_options(o: DesignOptions) -> tuple[Any, DesignOptions]:
     if law == "multi-source":
         raise SpecError("`--law multi-source`: it learns from the trials of every earlier system at once, and "
                         "`ilcdob design` makes one pair's filters from one trial of --from; use `ilcdob reproduce "
-                        "--law multi-source` for a learning chain, or ilcdob.design.law.multi_source.multi_source_learning "
+                        "--law multi-source` for a learning chain, or "
+                        "ilcdob.design.law.multi_source.multi_source_learning "
                         "with every trial")
     if law == "exact-reference" and not o.trial:
         raise SpecError("`--law exact-reference`: the law needs the reference trajectory of the trial; give --trial "

@@ -1020,7 +1020,8 @@ def _theorem_html(folder: Path, data: dict[str, Any] | None) -> str:
              f"bound of the identification ({html_text(data['samples'])} sampled plants per Delta set, seed "
              f"{html_text(data['seed'])}), "
              "for the law as flown (the Theorem's filters through the learning band F, "
-             "<code>ilcdob.design.filters.band</code>); it holds where that stays within 1.01 at every frequency. Beside it, "
+             "<code>ilcdob.design.filters.band</code>); it holds where that stays within 1.01 at every frequency. "
+             "Beside it, "
              "the paper's first-order condition |Delta_(j-1)| &lt; |1 + P_(j-1) C_(j-1)| / 2 (paper Sec. III; "
              "margin = rhs / |Delta|, &gt; 1: holds), which is neither sufficient nor necessary; "
              "docs/theory.md section 2 explains both.</p>"]

@@ -39,7 +39,8 @@ _THREADPOOL_LIMITS: list[Any] = []  # the process's threadpoolctl limits, kept r
 
 def limit_library_threads(threads: int = LIBRARY_THREADS) -> dict[str, int]:
     """Limit BLAS/OpenMP (:func:`threadpoolctl.threadpool_limits`) and Clarabel's KKT solver
-    (:data:`ilcdob.design.methods.robust.CLARABEL_THREADS`, :data:`ilcdob.design.methods.robust_set.CLARABEL_THREADS`) to
+    (:data:`ilcdob.design.methods.robust.CLARABEL_THREADS`,
+    :data:`ilcdob.design.methods.robust_set.CLARABEL_THREADS`) to
     ``threads`` threads in this process, for its life.
 
     Parameters

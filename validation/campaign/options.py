@@ -78,7 +78,8 @@ class CampaignOptions:
         The default is left out of the settings hash, so campaigns started before the law
         existed resume.
     delta_set : {"structured", "disc", "auto"}
-        The Delta set robust-set designs guarantee over (:attr:`ilcdob.design.methods.robust_set.RobustSetOptions.delta_set`;
+        The Delta set robust-set designs guarantee over
+        (:attr:`ilcdob.design.methods.robust_set.RobustSetOptions.delta_set`;
         default: the family the true plants are drawn from). In the settings hash only when
         robust-set is flown over another set than the disc (so campaigns from before the option resume).
     margin : float
