@@ -237,3 +237,20 @@ def test_every_ilcdob_import_resolves() -> None:
                 except ImportError:
                     bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.module} has no {alias.name}")
     assert bad == []
+
+
+def test_committed_reports_are_what_their_runs_wrote() -> None:
+    """Every file a committed report's manifest lists has the digest its run recorded: a generated report is
+    regenerated, never edited by hand (or by a rename across the tree)."""
+    import hashlib
+    import json
+
+    manifests = sorted((ROOT / "reports").rglob("manifest.json"))
+    assert manifests, "no committed report found"
+    bad = []
+    for manifest in manifests:
+        for name, digest in json.loads(manifest.read_text(encoding="utf-8")).get("files", {}).items():
+            path = manifest.parent / name
+            if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+                bad.append(str(path.relative_to(ROOT)))
+    assert bad == [], f"differ from their manifests: {bad}"
