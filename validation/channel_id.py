@@ -28,6 +28,8 @@ from ilcdob.specs import PlantSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.closed_loop import CHANNEL_UNITS, ClosedLoopVehicle, check_channel, fly_closed_loop
 
+from .vehicle_chain import fit_candidates
+
 __all__ = ["CHANNEL_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel", "channel_flight",
            "MakeClosedLoop"]
 
@@ -148,18 +150,10 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
     SpecError
         A bad channel, axis, duration or sample time; no candidate.
     """
-    from ilcdob.identification.tfest import tfest
-
     if not structures:
         raise SpecError("`structures`: got none, expected at least one candidate structure")
     est = channel_flight(make, name, ts, channel, axis, 0, duration, up=True)
     val = channel_flight(make, name, ts, channel, axis, 1, duration, up=False)
-    results = []
-    for st in structures:
-        fit = tfest(est, "u", "y", st, validation=val)
-        results.append((fit.fit_validation, st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay),
-                        fit.fit_estimation))
-    best = max(r[0] for r in results)
-    chosen = next(r for r in results if r[0] >= best - 1.0)  # fewest parameters within 1 point
-    return ChannelFit(name, axis, channel, chosen[1], chosen[2], chosen[3], chosen[0],
-                      {_label(r[1]): r[0] for r in results})
+    candidates, chosen = fit_candidates(est, val, structures)
+    return ChannelFit(name, axis, channel, chosen.structure, chosen.plant, chosen.fit_estimation,
+                      chosen.fit_validation, {_label(c.structure): c.fit_validation for c in candidates})

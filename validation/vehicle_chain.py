@@ -50,7 +50,7 @@ from .scenarios import Scenario, check_order
 from .simulate import Flight
 
 __all__ = ["STRUCTURES", "VehicleFit", "VehicleExperiments", "ChirpExperiments", "identify_vehicles",
-           "fly_baselines", "fly_learning", "vehicle_reference", "run_vehicle_axes", "run_vehicle_laws",
+           "fly_baselines", "fly_learning", "fit_candidates", "Candidate", "vehicle_reference", "run_vehicle_axes", "run_vehicle_laws",
            "run_vehicle_scenario",
            "rough_loop", "dryden_gust", "MakeVehicle", "FlyTrial", "LawPath"]
 
@@ -228,18 +228,58 @@ class ChirpExperiments:
         VehicleFit
             The structure with the best held-out fit (fewest parameters within 1 point).
         """
-        from ilcdob.identification.tfest import tfest
-
         est = _chirp_flight(self.make, name, self.ts, 0, self.duration, self.axis)
         val = _chirp_flight(self.make, name, self.ts, 1, self.duration, self.axis)
-        results = {}
-        for st in STRUCTURES:
-            fit = tfest(est, "u", "y", st, validation=val)
-            results[VehicleFit.label(st)] = (fit.fit_validation, st, PlantSpec(tuple(fit.num), tuple(fit.den),
-                                                                              fit.delay), fit.fit_estimation)
-        best = max(results.values(), key=lambda v: v[0])
-        chosen = next(v for v in results.values() if v[0] >= best[0] - 1.0)  # fewest parameters within 1 point
-        return VehicleFit(name, chosen[1], chosen[2], {k: v[0] for k, v in results.items()}, chosen[3])
+        candidates, chosen = fit_candidates(est, val, STRUCTURES)
+        return VehicleFit(name, chosen.structure, chosen.plant,
+                          {VehicleFit.label(c.structure): c.fit_validation for c in candidates}, chosen.fit_estimation)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate structure fitted to a vehicle's flights (:func:`fit_candidates`).
+
+    Attributes
+    ----------
+    structure : ModelStructure
+    plant : PlantSpec
+        Its fit ``u -> y``.
+    fit_estimation, fit_validation : float
+        Fit (%) on the estimation and on the held-out flight.
+    """
+
+    structure: ModelStructure
+    plant: PlantSpec
+    fit_estimation: float
+    fit_validation: float
+
+
+def fit_candidates(est: FlightData, val: FlightData, structures: Sequence[ModelStructure]
+                   ) -> tuple[list[Candidate], Candidate]:
+    """Fit every candidate structure to ``est`` (``u -> y``, output error), score it on ``val`` and choose one:
+    the best held-out fit, a structure with fewer parameters winning unless a larger one fits 1 point better.
+
+    Parameters
+    ----------
+    est, val : FlightData
+        Estimation and held-out flights, signals ``u`` and ``y``.
+    structures : sequence of ModelStructure
+        Candidates, fewest parameters first (at least one).
+
+    Returns
+    -------
+    (list of Candidate, Candidate)
+        Every candidate in ``structures``' order, and the one chosen.
+    """
+    from ilcdob.identification.tfest import tfest
+
+    candidates = []
+    for st in structures:
+        fit = tfest(est, "u", "y", st, validation=val)
+        candidates.append(Candidate(st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay), fit.fit_estimation,
+                                    fit.fit_validation))
+    best = max(c.fit_validation for c in candidates)
+    return candidates, next(c for c in candidates if c.fit_validation >= best - 1.0)
 
 
 def identify_vehicles(make: MakeVehicle | VehicleExperiments, names: Sequence[str],

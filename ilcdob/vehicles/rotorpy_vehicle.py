@@ -84,12 +84,13 @@ def _airframe(airframe: object) -> dict:
     if not isinstance(airframe, Mapping):
         raise SpecError(f"`airframe`: got {type(airframe).__name__}, expected a shipped set's name or a mapping "
                         "of rotorpy parameters")
-    required = set.intersection(*(set(shipped_airframe(n)) for n in ROTORPY_VEHICLES))
+    shipped = [set(importlib.import_module(f"rotorpy.vehicles.{m}").quad_params) for m in ROTORPY_VEHICLES.values()]
+    required = set.intersection(*shipped)
     missing = sorted(required - set(airframe))
     if missing:
         raise SpecError(f"`airframe`: the parameter set lacks {missing} (a complete rotorpy set has "
                         f"{sorted(required)}; start from a shipped one, e.g. airframe='hummingbird' with `params`)")
-    known = set.union(*(set(shipped_airframe(n)) for n in ROTORPY_VEHICLES)) | _SE3_GAINS
+    known = set.union(*shipped) | _SE3_GAINS
     unknown = sorted(set(airframe) - known)
     if unknown:
         raise SpecError(f"`airframe`: {unknown} are not rotorpy parameters (known: {sorted(known)})")
