@@ -28,7 +28,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from .interface import per_axis
+from .interface import per_axis, trial_samples
 
 __all__ = ["CHANNELS", "CHANNEL_UNITS", "ClosedLoopVehicle", "ClosedLoopTrial", "fly_closed_loop", "check_channel"]
 
@@ -161,14 +161,7 @@ def fly_closed_loop(vehicle: ClosedLoopVehicle, reference: object, *, velocity: 
         raise SpecError(f"`vehicle`: got {type(vehicle).__name__}, expected a vehicle with ts, reset(), position() "
                         "and track(position, velocity, acceleration)")
     row = CHANNELS.index(check_channel(channel))
-    if n is None:
-        if isinstance(reference, dict):
-            lengths = {np.asarray(v).size for v in reference.values()}
-            if len(lengths) != 1:
-                raise SpecError(f"`reference`: axes of different lengths {sorted(lengths)}; give `n`")
-            n = lengths.pop()
-        else:
-            n = np.asarray(reference).shape[0] if np.ndim(reference) else 0
+    n = trial_samples(reference, n)
     if n < 2:
         raise SpecError(f"`reference`: {n} sample(s), expected a trial of at least 2")
     r = per_axis(reference, n, "reference")

@@ -117,6 +117,35 @@ class VehicleTrial:
         return float(np.sqrt(np.mean(self.e_meas[:, axis] ** 2)))
 
 
+def trial_samples(reference: object, n: int | None) -> int:
+    """Samples of a trial: ``n`` when given, else the reference's length.
+
+    Parameters
+    ----------
+    reference : array_like or mapping
+        ``N x 3``, or per axis (every axis the same length).
+    n : int or None
+
+    Returns
+    -------
+    int
+        0 for a scalar reference (which :func:`per_axis` then refuses).
+
+    Raises
+    ------
+    SpecError
+        Axes of a mapping with different lengths and no ``n``.
+    """
+    if n is not None:
+        return n
+    if isinstance(reference, Mapping):
+        sizes = {np.asarray(v).size for v in reference.values()}
+        if len(sizes) != 1:
+            raise SpecError("`reference`: give every axis the same number of samples, or `n`")
+        return sizes.pop()
+    return np.asarray(reference).shape[0] if np.ndim(reference) else 0
+
+
 def per_axis(value: object, n: int, name: str) -> np.ndarray:
     """``value`` as an ``n x 3`` array, one column per axis (x, y, z).
 
@@ -229,14 +258,7 @@ def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem | PIDSpec], ref
             raise SpecError(f"`loops[{ax!r}]`: got {type(loops[ax]).__name__}, expected a LoopSystem or a PIDSpec")
         if abs(loops[ax].ts - vehicle.ts) > 1e-12 * vehicle.ts:
             raise SpecError(f"`loops[{ax!r}]`: sample time {loops[ax].ts} s, but the vehicle steps {vehicle.ts} s")
-    if n is None:
-        if isinstance(reference, Mapping):
-            sizes = {np.asarray(v).size for v in reference.values()}
-            if len(sizes) != 1:
-                raise SpecError("`reference`: give every axis the same number of samples, or `n`")
-            n = sizes.pop()
-        else:
-            n = np.asarray(reference).shape[0]
+    n = trial_samples(reference, n)
     r = per_axis(reference, n, "reference")
     d_f = per_axis(learning, n, "learning")
     a_ff = per_axis(feedforward, n, "feedforward")
