@@ -21,14 +21,17 @@ from typing import Any, Callable
 import numpy as np
 from scipy import signal as sps
 
+from ilcdob.channel_loop import ChannelLoop
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.display import html_table
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 from ilcdob.specs import LimitSpec
+from ilcdob.vehicles.closed_loop import CHANNEL_UNITS
 
 from .filters.band import LearningBand, check_bandwidth, choose_band
+from .maps.channel_filters import channel_filters
 from .maps.closed_form import LearningFilters, closed_form_filters, simulate_map
 from .maps.finite_horizon import finite_horizon_ratio
 from .law import LawContext, LearningLaw, Stage
@@ -42,8 +45,8 @@ from .methods import METHODS, DesignInputs, Method, method_named
 from .methods.robust import RobustPairDesigner
 from .checks.theorem import theorem_rhs
 
-__all__ = ["PairDesign", "LearningSignal", "design_pair", "pair_band", "with_law", "fleet_delta_sets",
-           "design_with_band"]
+__all__ = ["PairDesign", "LearningSignal", "design_pair", "design_channel_pair", "pair_band", "with_law",
+           "fleet_delta_sets", "design_with_band"]
 
 
 Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -456,6 +459,51 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
         filters["limit"] = Limit.entry(limits, on_limit)
     design = replace(design, filters=filters, choose=chooser if request == "auto" else None, path=path,
                      limits=limits, on_limit=on_limit, source_gf=src.nominal.G_f)
+    return design_with_band(design, chooser(error=None))
+
+
+def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: object = "auto",
+                        acceleration_limit: float | None = None) -> PairDesign:
+    """The closed-form design between two vehicles on their own controllers (:mod:`.maps.channel_filters`).
+
+    The learning signal enters the target's channel (:attr:`ilcdob.channel_loop.ChannelLoop.channel`) in that
+    channel's unit; the law is the paper's (the reference's share of the error is learned with the
+    disturbance), through the learning band as every design (:mod:`.filters.band`).
+
+    Parameters
+    ----------
+    source, target : ChannelLoop
+        Vehicles j-1 and j.
+    band : "auto", float or None
+        As :func:`design_pair`; ``"auto"`` chooses the corner per trial from the source's error and, with
+        ``acceleration_limit``, the noise the filter passes (in the acceleration it makes the target command).
+    acceleration_limit : float, optional
+        What the target may be asked to command on top of its flight, m/s^2 (> 0).
+
+    Returns
+    -------
+    PairDesign
+
+    Raises
+    ------
+    SpecError
+        Not channel loops, other sample times, a bad band or limit.
+    """
+    lf = channel_filters(source, target)
+    request = check_bandwidth(band, source.ts)
+    if acceleration_limit is not None and not (isinstance(acceleration_limit, (int, float))
+                                               and np.isfinite(acceleration_limit) and acceleration_limit > 0):
+        raise SpecError(f"`acceleration_limit`: got {acceleration_limit!r}, expected a limit > 0 m/s^2")
+    head = {"method": "closed-form", "law": DEFAULT_LAW, "from": source.name, "to": target.name,
+            "sample_time": source.ts, "channel": target.channel}
+    made = METHODS["closed-form"].design(DesignInputs(None, source, target, head, lambda: lf))
+    filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[target.channel]}/m",
+                                         "L2": f"{CHANNEL_UNITS[target.channel]}/{CHANNEL_UNITS[source.channel]}"}}
+    k_j = target.channel_gain
+    chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
+                      l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)))
+    design = PairDesign("closed-form", filters, made.core, source_gf=source.G_f,
+                        choose=chooser if request == "auto" else None)
     return design_with_band(design, chooser(error=None))
 
 

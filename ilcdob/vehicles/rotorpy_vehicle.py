@@ -44,6 +44,8 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
+from .closed_loop import check_channel
+
 __all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe"]
 
 #: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.044, 0.5
@@ -178,6 +180,24 @@ class RotorpyVehicle:
                 raise SpecError(f"`position_gains`: got {position_gains!r}, expected (kp, kd) > 0 per axis")
             self._inner.kp_pos, self._inner.kd_pos = kp, kd  # SE3Control's public gains
         self.reset()
+
+    def channel_gain(self, channel: str) -> np.ndarray:
+        """The acceleration its SE3 position loop commands per unit of ``channel`` signal, per axis.
+
+        1 on the acceleration channel, ``kp`` (1/s^2) on the position channel, ``kd`` (1/s) on the
+        velocity channel (``a = a_ff + kp (r - x) + kd (v_ref - v)``: rotorpy's ``SE3Control``).
+
+        Parameters
+        ----------
+        channel : {"position", "velocity", "acceleration"}
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(3,)``.
+        """
+        gains = {"position": self._inner.kp_pos, "velocity": self._inner.kd_pos, "acceleration": np.ones(3)}
+        return np.asarray(gains[check_channel(channel)], float).copy()
 
     @property
     def mass(self) -> float:

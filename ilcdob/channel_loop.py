@@ -1,0 +1,144 @@
+"""A vehicle on its own controller as the learning sees it: its identified maps (docs/closed_loop.md).
+
+The paper's learning needs two maps per vehicle (paper Sec. III): ``Gd`` from an acceleration
+disturbance on the airframe to the position, and ``Gf`` from the learning signal to the position.
+For a vehicle flying its own controller, with the learning signal ``u`` added to one row of the
+setpoint its flight stack accepts (:mod:`ilcdob.vehicles.closed_loop`)::
+
+    y = T r + Gd d + Gf u,      e = r - y,      Gf = K Gd
+
+``K`` is the controller's map from the channel to the acceleration it commands: 1 on the
+acceleration feed-forward channel (it is added where a wind force acts), ``kp`` for a position
+offset and ``kd`` for a velocity offset on a single position/velocity loop such as rotorpy's SE3
+or a Crazyflie's PID (the setpoint reaches the airframe only through ``K``, whatever else the loop
+feeds back). ``Gd`` is identified: on the acceleration channel it is the channel's own map; from a
+setpoint channel's map ``G_ch`` it is ``G_ch / K``.
+
+Units: s, m, the channel's unit for ``u`` (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`), m/s^2 for ``d``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import control as ct
+import numpy as np
+
+from .discretize import DiscreteBlock, plant_block
+from .errors import SpecError, UnstableLoopError
+from .loop import STABILITY_MARGIN
+from .specs import PlantSpec
+from .vehicles.closed_loop import CHANNEL_UNITS, check_channel
+
+__all__ = ["ChannelLoop", "channel_loop"]
+
+
+@dataclass(frozen=True)
+class ChannelLoop:
+    """One vehicle axis on its own controller (module docstring).
+
+    Attributes
+    ----------
+    name : str
+        The vehicle.
+    ts : float
+        Setpoint period, s.
+    channel : {"position", "velocity", "acceleration"}
+        Where the learning signal enters.
+    disturbance_map : PlantSpec
+        ``Gd`` in continuous time: acceleration on the airframe (m/s^2) -> position (m); stable.
+    channel_gain : float
+        ``K``: acceleration (m/s^2) the controller commands per unit of channel signal (1 on the
+        acceleration channel).
+    """
+
+    name: str
+    ts: float
+    channel: str
+    disturbance_map: PlantSpec
+    channel_gain: float = 1.0
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        check_channel(self.channel)
+        if not isinstance(self.disturbance_map, PlantSpec):
+            raise SpecError(f"`disturbance_map`: got {type(self.disturbance_map).__name__}, expected a PlantSpec "
+                            "(the identified map from an acceleration on the airframe to the position)")
+        k = self.channel_gain
+        if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+            raise SpecError(f"`channel_gain`: got {k!r}, expected the controller's acceleration per unit of "
+                            f"{self.channel} signal, > 0 ({CHANNEL_UNITS['acceleration']} per "
+                            f"{CHANNEL_UNITS[self.channel]})")
+        if self.channel == "acceleration" and k != 1.0:
+            raise SpecError(f"`channel_gain`: got {k!r} on the acceleration channel, where the learning signal "
+                            "is added where a disturbance acts: it must be 1")
+        bad = self.block.poles[np.abs(self.block.poles) >= STABILITY_MARGIN]
+        if bad.size:
+            raise UnstableLoopError(f"vehicle {self.name!r}: its disturbance map has poles {np.round(bad, 6)} on "
+                                    "or outside the unit circle; a vehicle on its own controller must hold its "
+                                    "position (identify the closed loop, not the airframe)")
+
+    @property
+    def block(self) -> DiscreteBlock:
+        """``Gd`` sampled with a zero-order hold, with its analytic poles and zeros (:func:`plant_block`)."""
+        if "block" not in self._cache:
+            self._cache["block"] = plant_block(self.disturbance_map, self.ts)
+        return self._cache["block"]
+
+    @property
+    def G_d(self) -> ct.StateSpace:
+        """``Gd``: disturbance (m/s^2) -> position (m), discrete."""
+        return self.block.sys
+
+    @property
+    def G_f(self) -> ct.StateSpace:
+        """``Gf = K Gd``: learning signal (channel unit) -> position (m), discrete."""
+        s = self.block.sys
+        return ct.ss(s.A, s.B, self.channel_gain * s.C, self.channel_gain * s.D, s.dt)
+
+    @property
+    def nominal(self) -> "ChannelLoop":
+        """The loop the learning assumes: the identified one itself."""
+        return self
+
+    def poles(self) -> np.ndarray:
+        """Poles of ``Gd`` (z-plane, analytic)."""
+        return self.block.poles
+
+
+def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0
+                 ) -> ChannelLoop:
+    """The loop of a vehicle from its identified channel map ``G_ch`` (channel -> position).
+
+    ``Gd = G_ch / K`` (module docstring).
+
+    Parameters
+    ----------
+    name : str
+    ts : float
+        Setpoint period, s.
+    channel : {"position", "velocity", "acceleration"}
+    channel_map : PlantSpec
+        The channel's fit (:func:`ilcdob.validation.channel_id.identify_channel`), channel unit -> m.
+    channel_gain : float
+        ``K`` (module docstring): 1 on the acceleration channel, the controller's ``kp`` on the position
+        channel, its ``kd`` on the velocity channel.
+
+    Returns
+    -------
+    ChannelLoop
+
+    Raises
+    ------
+    SpecError
+        A bad channel or gain.
+    UnstableLoopError
+        The map is not stable.
+    """
+    if not (isinstance(channel_gain, (int, float)) and math.isfinite(channel_gain) and channel_gain > 0):
+        raise SpecError(f"`channel_gain`: got {channel_gain!r}, expected a gain > 0")
+    num = [c / channel_gain for c in channel_map.num]
+    return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
+                       float(channel_gain))
