@@ -21,7 +21,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.channel_loop import ChannelLoop
+from ilcdob.vehicles.channel_loop import ChannelLoop
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.display import html_table
@@ -466,7 +466,7 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
                         acceleration_limit: float | None = None) -> PairDesign:
     """The closed-form design between two vehicles on their own controllers (:mod:`.maps.channel_filters`).
 
-    The learning signal enters the target's channel (:attr:`ilcdob.channel_loop.ChannelLoop.channel`) in that
+    The learning signal enters the target's channel (:attr:`ilcdob.vehicles.channel_loop.ChannelLoop.channel`) in that
     channel's unit; the law is the paper's (the reference's share of the error is learned with the
     disturbance), through the learning band as every design (:mod:`.filters.band`).
 

@@ -5,7 +5,7 @@ What a lab whose vehicles keep their flight stack's position controller does, on
 
 1. :func:`identify_channel_loops`: per vehicle and axis the channel it learns through is identified from
    two chirp flights on its own controller (:func:`~.channel_id.identify_channel`) and becomes its
-   :class:`~ilcdob.channel_loop.ChannelLoop` (``Gd = G_ch / K``, ``K`` the vehicle's channel gain).
+   :class:`~ilcdob.vehicles.channel_loop.ChannelLoop` (``Gd = G_ch / K``, ``K`` the vehicle's channel gain).
 2. :func:`fly_channel_chain`: every vehicle flies the trial without learning, then the cyclic chain of
    :func:`~.reproduce.learning_chain` passes learning around the order, each learning signal computed
    from the previous flight's measured error by the closed-form design between the two vehicles'
@@ -22,7 +22,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ilcdob.channel_loop import ChannelLoop, channel_loop
+from ilcdob.vehicles.channel_loop import ChannelLoop, channel_loop
 from ilcdob.design.pair import PairDesign, design_channel_pair
 from ilcdob.errors import SpecError
 from ilcdob.vehicles.closed_loop import ClosedLoopTrial, ClosedLoopVehicle, check_channel, fly_closed_loop
@@ -102,7 +102,18 @@ class ChannelChain:
     chain: list[tuple[str, str]]
 
     def rmse(self, trial: ClosedLoopTrial) -> float:
-        """RMS tracking error over the learned axes of one trial, m."""
+        """RMS tracking error over the learned axes of one trial.
+
+        Parameters
+        ----------
+        trial : ClosedLoopTrial
+            A flight of this chain (its ``error`` in m, one column per axis).
+
+        Returns
+        -------
+        float
+            The RMS of the error over the chain's ``axes`` and the whole trial, m.
+        """
         idx = [AXES.index(ax) for ax in self.axes]
         return float(np.sqrt(np.mean(trial.error[:, idx] ** 2)))
 

@@ -1,6 +1,6 @@
 """The Theorem's filters between vehicles on their own controllers (paper Sec. III; docs/closed_loop.md).
 
-With ``Gf = K Gd`` per vehicle (:mod:`ilcdob.channel_loop`) the Theorem's pair is::
+With ``Gf = K Gd`` per vehicle (:mod:`ilcdob.vehicles.channel_loop`) the Theorem's pair is::
 
     L1_j = Gd_j / (Gf_j Gd_{j-1}) = 1 / (K_j Gd_{j-1})
     L2_j = L1_j Gf_{j-1}          = K_{j-1} / K_j
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ilcdob.channel_loop import ChannelLoop
+from ilcdob.vehicles.channel_loop import ChannelLoop
 from ilcdob.errors import SpecError
 
 from ..filters.noncausal import ZPKFilter
@@ -48,7 +48,7 @@ def channel_filters(source: ChannelLoop, target: ChannelLoop) -> LearningFilters
     """
     for what, lp in (("source", source), ("target", target)):
         if not isinstance(lp, ChannelLoop):
-            raise SpecError(f"`{what}`: got {type(lp).__name__}, expected a ChannelLoop (ilcdob.channel_loop)")
+            raise SpecError(f"`{what}`: got {type(lp).__name__}, expected a ChannelLoop (ilcdob.vehicles.channel_loop)")
     if abs(source.ts - target.ts) > 1e-12 * source.ts:
         raise SpecError(f"`ts`: vehicles {source.name!r} ({source.ts} s) and {target.name!r} ({target.ts} s) must "
                         "share one setpoint period")

@@ -21,16 +21,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import control as ct
 import numpy as np
 
-from .discretize import DiscreteBlock, plant_block
-from .errors import SpecError, UnstableLoopError
-from .loop import STABILITY_MARGIN
-from .specs import PlantSpec
-from .vehicles.closed_loop import CHANNEL_UNITS, check_channel
+from ilcdob.discretize import DiscreteBlock, plant_block
+from ilcdob.errors import SpecError, UnstableLoopError
+from ilcdob.loop import STABILITY_MARGIN
+from ilcdob.specs import PlantSpec
+from .closed_loop import CHANNEL_UNITS, check_channel
 
 __all__ = ["ChannelLoop", "channel_loop"]
 
