@@ -463,7 +463,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
 
 
 def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: object = "auto",
-                        acceleration_limit: float | None = None) -> PairDesign:
+                        acceleration_limit: float | None = None, disturbance: str = "command") -> PairDesign:
     """The closed-form design between two vehicles on their own controllers (:mod:`.maps.channel_filters`).
 
     The learning signal enters the target's channel (:attr:`ilcdob.vehicles.channel_loop.ChannelLoop.channel`) in that
@@ -479,6 +479,11 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
         ``acceleration_limit``, the noise the filter passes (in the acceleration it makes the target command).
     acceleration_limit : float, optional
         What the target may be asked to command on top of its flight, m/s^2 (> 0).
+    disturbance : {"command", "airframe", "wind"}
+        Where the disturbance acts (:mod:`.maps.flown`): added to the command as the learning signal is (the
+        paper's), an acceleration on the rigid body, or a wind velocity through each airframe's drag (the
+        wind law); the last two through the airframe correction ``W`` of the vehicles' identified airframes
+        (:attr:`~ilcdob.vehicles.channel_loop.ChannelLoop.airframe`).
 
     Returns
     -------
@@ -487,8 +492,10 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
     Raises
     ------
     SpecError
-        Not channel loops, other sample times, a bad band or limit.
+        Not channel loops, other sample times, a bad band, limit or disturbance; off the command, an airframe
+        missing or without a rigid body to split off, or a drag too small to learn the wind from.
     """
+    check_disturbance(disturbance)
     lf = channel_filters(source, target)
     request = check_bandwidth(band, source.ts)
     if acceleration_limit is not None and not (isinstance(acceleration_limit, (int, float))
@@ -497,12 +504,14 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
     head = {"method": "closed-form", "law": DEFAULT_LAW, "from": source.name, "to": target.name,
             "sample_time": source.ts, "channel": target.channel}
     made = METHODS["closed-form"].design(DesignInputs(None, source, target, head, lambda: lf))
+    path = airframe_path_filter(source, target, disturbance == "wind") if disturbance != "command" else None
     filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[target.channel]}/m",
-                                         "L2": f"{CHANNEL_UNITS[target.channel]}/{CHANNEL_UNITS[source.channel]}"}}
+                                         "L2": f"{CHANNEL_UNITS[target.channel]}/{CHANNEL_UNITS[source.channel]}"},
+               "disturbance": {"at": disturbance, **({"W": {"sos": path.tolist()}} if path is not None else {})}}
     k_j = target.channel_gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
-                      l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)))
-    design = PairDesign("closed-form", filters, made.core, source_gf=source.G_f,
+                      l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)) * _sos_gain(path, w, source.ts))
+    design = PairDesign("closed-form", filters, made.core, source_gf=source.G_f, path=path,
                         choose=chooser if request == "auto" else None)
     return design_with_band(design, chooser(error=None))
 

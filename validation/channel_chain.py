@@ -72,8 +72,8 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
         gain = np.asarray(make(name, 0, None, None).channel_gain(channel), float)
         fits[name] = {ax: identify_channel(lambda nm, seed: make(nm, seed, None, None), name, ts, channel, ax,
                                            duration) for ax in axes}
-        loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]))
-                       for ax in axes}
+        loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
+                                        fits[name][ax].airframe) for ax in axes}
     return loops, fits
 
 
@@ -126,7 +126,8 @@ class ChannelChain:
 def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop]], make: MakeDisturbed, reference: np.ndarray,
                       order: Sequence[str], iterations: int = 3, *, velocity: np.ndarray | None = None,
                       acceleration: np.ndarray | None = None, command_disturbance: Callable | None = None,
-                      wind: Callable | None = None, band: object = "auto") -> ChannelChain:
+                      wind: Callable | None = None, band: object = "auto", disturbance: str = "command"
+                      ) -> ChannelChain:
     """Fly the chain (module docstring, step 2).
 
     Parameters
@@ -147,6 +148,9 @@ def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop]], make: Make
         The disturbance of every flight (:data:`MakeDisturbed`).
     band : "auto", float or None
         The learning band (:func:`~ilcdob.design.pair.design_channel_pair`).
+    disturbance : {"command", "airframe", "wind"}
+        Where the law assumes the disturbance acts (:func:`~ilcdob.design.pair.design_channel_pair`): ``"wind"``
+        is the wind law, learning the wind velocity through each airframe's identified drag.
 
     Returns
     -------
@@ -178,7 +182,8 @@ def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop]], make: Make
         u = {}
         for ax in axes:
             if (src, tgt, ax) not in designs:
-                designs[src, tgt, ax] = design_channel_pair(loops[src][ax], loops[tgt][ax], band=band)
+                designs[src, tgt, ax] = design_channel_pair(loops[src][ax], loops[tgt][ax], band=band,
+                                                              disturbance=disturbance)
             i = AXES.index(ax)
             u[ax] = designs[src, tgt, ax].learning(prev.error[:, i], prev.learning[:, i]).d_f
         return fly(tgt, u)

@@ -11,6 +11,14 @@ winning unless a larger one fits 1 point better. The fit is the channel map ``G_
 on the acceleration channel it is also the map of an acceleration disturbance on the airframe, on the
 position channel the loop's complementary sensitivity.
 
+Where the vehicle reports the acceleration its controller commanded (a flight stack's log: PX4's
+acceleration setpoint; :attr:`~ilcdob.vehicles.closed_loop.ClosedLoopTrial.command`), the same two
+flights also identify the airframe, commanded acceleration -> position, with one integrator
+(:data:`AIRFRAME_STRUCTURES`): its slowest real pole is the airframe's drag per unit mass, what a
+wind velocity acts through (the wind law, docs/closed_loop.md). In simulation the controller acts on
+the true state, so the commanded acceleration carries none of the sensor noise and the output-error
+fit is unbiased; on a real vehicle the estimator's noise reaches it through the loop.
+
 Units: s, m, and the channel's unit (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`).
 """
 
@@ -28,9 +36,11 @@ from ilcdob.specs import PlantSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.closed_loop import CHANNEL_UNITS, ClosedLoopVehicle, check_channel, fly_closed_loop
 
+from ilcdob.design.maps.flown import rigid_body_split
+
 from .vehicle_chain import fit_candidates
 
-__all__ = ["CHANNEL_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel", "channel_flight",
+__all__ = ["CHANNEL_STRUCTURES", "AIRFRAME_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel", "channel_flight",
            "MakeClosedLoop"]
 
 #: Candidate structures of a channel map, fewest free parameters first: the vehicle's loop holds its position,
@@ -38,6 +48,11 @@ __all__ = ["CHANNEL_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_chan
 #: derivative or feed-forward path puts in (1 zero), and one pole and zero more (4 poles, 2 zeros).
 CHANNEL_STRUCTURES = (ModelStructure(n_poles=2), ModelStructure(n_poles=3), ModelStructure(n_poles=3, n_zeros=1),
                       ModelStructure(n_poles=4, n_zeros=1), ModelStructure(n_poles=4, n_zeros=2))
+#: Candidate structures of the airframe (commanded acceleration -> position): the rigid body's integrator and
+#: drag pole with the attitude loop's lag (3 poles), a second lag pole, and the zero an attitude loop's
+#: derivative puts in.
+AIRFRAME_STRUCTURES = (ModelStructure(n_poles=3, n_integrators=1), ModelStructure(n_poles=4, n_integrators=1),
+                       ModelStructure(n_poles=4, n_zeros=1, n_integrators=1))
 #: Chirp amplitude per channel (m, m/s, m/s^2): a few centimetres of motion for a multirotor's loop.
 CHIRP_AMPLITUDE = {"position": 0.1, "velocity": 0.2, "acceleration": 1.0}
 #: ``make(name, seed) -> ClosedLoopVehicle``: a fresh vehicle at rest, ``seed`` its sensor noise's.
@@ -62,6 +77,12 @@ class ChannelFit:
         Fit (%) of the chosen structure on the estimation and the held-out flight.
     fits : dict of str to float
         Held-out fit (%) of every candidate, by ``"<poles>p<zeros>z"``.
+    airframe : PlantSpec or None
+        Where the flights logged the commanded acceleration: the airframe's fit, m/s^2 -> m (module docstring).
+    airframe_fit : float or None
+        Its held-out fit, %.
+    drag : float or None
+        The airframe's drag per unit mass, 1/s: its fit's slowest real pole besides the integrator.
     """
 
     name: str
@@ -72,6 +93,9 @@ class ChannelFit:
     fit_estimation: float
     fit_validation: float
     fits: dict[str, float]
+    airframe: PlantSpec | None = None
+    airframe_fit: float | None = None
+    drag: float | None = None
 
 
 def _label(st: ModelStructure) -> str:
@@ -102,7 +126,8 @@ def channel_flight(make: MakeClosedLoop, name: str, ts: float, channel: str, axi
     Returns
     -------
     FlightData
-        Signals ``u`` (the chirp, the channel's unit) and ``y`` (measured position on ``axis``, m).
+        Signals ``u`` (the chirp, the channel's unit) and ``y`` (measured position on ``axis``, m); where the
+        vehicle reports it, ``command`` (its controller's commanded acceleration on ``axis``, m/s^2).
     """
     check_channel(channel)
     if axis not in AXES:
@@ -117,8 +142,11 @@ def channel_flight(make: MakeClosedLoop, name: str, ts: float, channel: str, axi
     if abs(vehicle.ts - ts) > 1e-12 * ts:
         raise SpecError(f"`ts`: {ts} s, but vehicle {name!r} steps {vehicle.ts} s")
     trial = fly_closed_loop(vehicle, np.zeros((n, 3)), learning={axis: u}, channel=channel)
-    return FlightData(t, {"u": u, "y": trial.y_meas[:, AXES.index(axis)]},
-                      {"u": CHANNEL_UNITS[channel], "y": "m"}, source=f"{name} {axis} {channel} chirp")
+    i = AXES.index(axis)
+    signals, units = {"u": u, "y": trial.y_meas[:, i]}, {"u": CHANNEL_UNITS[channel], "y": "m"}
+    if trial.command is not None:
+        signals["command"], units["command"] = trial.command[:, i], "m/s^2"
+    return FlightData(t, signals, units, source=f"{name} {axis} {channel} chirp")
 
 
 def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, axis: str = "x",
@@ -155,5 +183,17 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
     est = channel_flight(make, name, ts, channel, axis, 0, duration, up=True)
     val = channel_flight(make, name, ts, channel, axis, 1, duration, up=False)
     candidates, chosen = fit_candidates(est, val, structures)
+    airframe = airframe_fit = drag = None
+    if "command" in est.signals:
+        _, body = fit_candidates(_command_flight(est), _command_flight(val), AIRFRAME_STRUCTURES)
+        airframe, airframe_fit = body.plant, body.fit_validation
+        drag = float(rigid_body_split(airframe, name)[2][1])
     return ChannelFit(name, axis, channel, chosen.structure, chosen.plant, chosen.fit_estimation,
-                      chosen.fit_validation, {_label(c.structure): c.fit_validation for c in candidates})
+                      chosen.fit_validation, {_label(c.structure): c.fit_validation for c in candidates},
+                      airframe, airframe_fit, drag)
+
+
+def _command_flight(flight: FlightData) -> FlightData:
+    """The flight as the airframe's data: the commanded acceleration as its input ``u``."""
+    return FlightData(flight.t, {"u": flight.signals["command"], "y": flight.signals["y"]},
+                      {"u": "m/s^2", "y": "m"}, source=f"{flight.source}, commanded acceleration")

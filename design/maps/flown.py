@@ -62,6 +62,7 @@ from scipy import signal as sps
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
+from ilcdob.vehicles.channel_loop import ChannelLoop
 
 __all__ = ["rigid_body_split", "model_attitude", "airframe_path_filter", "check_disturbance", "DISTURBANCE_PATHS"]
 
@@ -164,16 +165,18 @@ def model_attitude(loop: LoopSystem) -> tuple[np.ndarray, np.ndarray, int]:
 MIN_WIND_DRAG = 0.02
 
 
-def airframe_path_filter(source: LoopSystem, target: LoopSystem, wind: bool = False) -> np.ndarray:
+def airframe_path_filter(source: LoopSystem | ChannelLoop, target: LoopSystem | ChannelLoop,
+                         wind: bool = False) -> np.ndarray:
     """Discrete ``W = A_hat_{j-1} / A_hat_j`` (Tustin) as second-order sections: the
     airframe-wind correction of the learning filter (module docstring); with ``wind`` times
     ``a_j / a_{j-1}``, the ratio of the models' drag poles.
 
     Parameters
     ----------
-    source : LoopSystem
-        Loop of vehicle j-1 (the trial learned from), built from its model.
-    target : LoopSystem
+    source : LoopSystem or ChannelLoop
+        Loop of vehicle j-1 (the trial learned from), built from its model; a vehicle on its own
+        controller through its identified airframe (:attr:`~ilcdob.vehicles.channel_loop.ChannelLoop.airframe`).
+    target : LoopSystem or ChannelLoop
         Loop of vehicle j (the one that flies the learning signal).
     wind : bool
         The disturbance is a wind velocity acting through each airframe's drag.
@@ -187,10 +190,12 @@ def airframe_path_filter(source: LoopSystem, target: LoopSystem, wind: bool = Fa
     ------
     SpecError
         A model without a rigid body to split off (with ``wind``: without a drag pole), different
-        model delays, or ``A_hat_j`` with a zero in the closed right half plane (W would be unstable).
+        model delays, ``A_hat_j`` with a zero in the closed right half plane (W would be unstable), or
+        a vehicle on its own controller without an identified airframe.
     """
-    ns, ds, rs = rigid_body_split(source.spec.nominal_plant, source.name)
-    nt, dt_, rt = rigid_body_split(target.spec.nominal_plant, target.name)
+    ps, pt = _airframe_model(source), _airframe_model(target)
+    ns, ds, rs = rigid_body_split(ps, source.name)
+    nt, dt_, rt = rigid_body_split(pt, target.name)
     gain = 1.0
     if wind:
         for loop, rigid in ((source, rs), (target, rt)):
@@ -204,7 +209,6 @@ def airframe_path_filter(source: LoopSystem, target: LoopSystem, wind: bool = Fa
                             f"would amplify the trial {rt[1] / rs[1]:.0f} times. Learn from a vehicle with "
                             "measurable drag, or with --disturbance airframe")
         gain = float(rt[1] / rs[1])
-    ps, pt = source.spec.nominal_plant, target.spec.nominal_plant
     if abs(ps.delay - pt.delay) > 1e-9:
         raise SpecError(f"models of {source.name!r} and {target.name!r}: delays {ps.delay:g} s and "
                         f"{pt.delay:g} s differ; the airframe correction needs equal model delays")
@@ -214,3 +218,15 @@ def airframe_path_filter(source: LoopSystem, target: LoopSystem, wind: bool = Fa
                         "A_hat_j-1/A_hat_j would be unstable")
     b, a = sps.bilinear(gain * np.polymul(ns, dt_), np.polymul(ds, nt), fs=1.0 / source.ts)
     return sps.tf2sos(np.atleast_1d(b), np.atleast_1d(a))
+
+
+def _airframe_model(loop: LoopSystem | ChannelLoop) -> PlantSpec:
+    """The model ``P_hat = A_hat R`` of a loop's airframe: the paper loop's plant model, or a vehicle on
+    its own controller's identified airframe."""
+    if not isinstance(loop, ChannelLoop):
+        return loop.spec.nominal_plant
+    if loop.airframe is None:
+        raise SpecError(f"vehicle {loop.name!r}: no identified airframe (commanded acceleration -> position), and a "
+                        "disturbance on the airframe or in wind reaches it through it; identify its channel from "
+                        "flights that log the commanded acceleration, or learn with disturbance='command'")
+    return loop.airframe

@@ -1,18 +1,23 @@
 """A vehicle on its own controller as the learning sees it: its identified maps (docs/closed_loop.md).
 
 The paper's learning needs two maps per vehicle (paper Sec. III): ``Gd`` from an acceleration
-disturbance on the airframe to the position, and ``Gf`` from the learning signal to the position.
+disturbance to the position, and ``Gf`` from the learning signal to the position.
 For a vehicle flying its own controller, with the learning signal ``u`` added to one row of the
 setpoint its flight stack accepts (:mod:`ilcdob.vehicles.closed_loop`)::
 
     y = T r + Gd d + Gf u,      e = r - y,      Gf = K Gd
 
 ``K`` is the controller's map from the channel to the acceleration it commands: 1 on the
-acceleration feed-forward channel (it is added where a wind force acts), ``kp`` for a position
+acceleration feed-forward channel (added to the command, where the paper's disturbance acts), ``kp`` for a position
 offset and ``kd`` for a velocity offset on a single position/velocity loop such as rotorpy's SE3
-or a Crazyflie's PID (the setpoint reaches the airframe only through ``K``, whatever else the loop
-feeds back). ``Gd`` is identified: on the acceleration channel it is the channel's own map; from a
-setpoint channel's map ``G_ch`` it is ``G_ch / K``.
+or a Crazyflie's Mellinger controller without its integral (the setpoint reaches the airframe only
+through ``K``, whatever else the loop feeds back); a cascade's position channel (PX4, ArduPilot, a
+Crazyflie's PID) has no constant ``K``. ``Gd`` is identified: on the acceleration channel it is the channel's own map; from a
+setpoint channel's map ``G_ch`` it is ``G_ch / K``. ``d`` is an acceleration added to the
+controller's command, as the paper's disturbance and the learning signal are; a force on the rigid
+body (wind through drag) bypasses the attitude loop, and the learning reaches it through the
+airframe correction of :mod:`ilcdob.design.maps.flown`, built from each vehicle's identified
+airframe (commanded acceleration -> position, :attr:`ChannelLoop.airframe`).
 
 Units: s, m, the channel's unit for ``u`` (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`), m/s^2 for ``d``.
 """
@@ -47,10 +52,14 @@ class ChannelLoop:
     channel : {"position", "velocity", "acceleration"}
         Where the learning signal enters.
     disturbance_map : PlantSpec
-        ``Gd`` in continuous time: acceleration on the airframe (m/s^2) -> position (m); stable.
+        ``Gd`` in continuous time: acceleration added to the command (m/s^2) -> position (m); stable.
     channel_gain : float
         ``K``: acceleration (m/s^2) the controller commands per unit of channel signal (1 on the
         acceleration channel).
+    airframe : PlantSpec or None
+        The airframe's identified model, commanded acceleration (m/s^2) -> position (m), with one
+        integrator and a drag pole, where the flights logged the commanded acceleration; needed for a
+        disturbance on the airframe or in wind (module docstring).
     """
 
     name: str
@@ -58,6 +67,7 @@ class ChannelLoop:
     channel: str
     disturbance_map: PlantSpec
     channel_gain: float = 1.0
+    airframe: PlantSpec | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -70,6 +80,9 @@ class ChannelLoop:
             raise SpecError(f"`channel_gain`: got {k!r}, expected the controller's acceleration per unit of "
                             f"{self.channel} signal, > 0 ({CHANNEL_UNITS['acceleration']} per "
                             f"{CHANNEL_UNITS[self.channel]})")
+        if self.airframe is not None and not isinstance(self.airframe, PlantSpec):
+            raise SpecError(f"`airframe`: got {type(self.airframe).__name__}, expected a PlantSpec (commanded "
+                            "acceleration -> position) or None")
         if self.channel == "acceleration" and k != 1.0:
             raise SpecError(f"`channel_gain`: got {k!r} on the acceleration channel, where the learning signal "
                             "is added where a disturbance acts: it must be 1")
@@ -107,8 +120,8 @@ class ChannelLoop:
         return self.block.poles
 
 
-def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0
-                 ) -> ChannelLoop:
+def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0,
+                 airframe: PlantSpec | None = None) -> ChannelLoop:
     """The loop of a vehicle from its identified channel map ``G_ch`` (channel -> position).
 
     ``Gd = G_ch / K`` (module docstring).
@@ -124,6 +137,8 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
     channel_gain : float
         ``K`` (module docstring): 1 on the acceleration channel, the controller's ``kp`` on the position
         channel, its ``kd`` on the velocity channel.
+    airframe : PlantSpec, optional
+        The airframe's identified model (:attr:`ChannelLoop.airframe`).
 
     Returns
     -------
@@ -140,4 +155,4 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         raise SpecError(f"`channel_gain`: got {channel_gain!r}, expected a gain > 0")
     num = [c / channel_gain for c in channel_map.num]
     return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
-                       float(channel_gain))
+                       float(channel_gain), airframe)

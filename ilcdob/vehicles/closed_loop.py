@@ -9,8 +9,8 @@ targets, the Crazyflie full-state setpoint). The learning signal is added to one
 
 * ``"position"``: an offset of the position setpoint, m (every flight stack accepts one);
 * ``"velocity"``: a velocity feed-forward, m/s;
-* ``"acceleration"``: an acceleration feed-forward, m/s^2 (PX4 adds it after its velocity loop, where a
-  wind force acts).
+* ``"acceleration"``: an acceleration feed-forward, m/s^2 (PX4 adds it after its velocity loop, to the
+  acceleration its controller commands).
 
 A :class:`ClosedLoopVehicle` offers ``ts``, ``reset()``, ``position()`` (measured, m, relative to the
 start) and ``track(position, velocity, acceleration)`` (one sample time towards that setpoint, world
@@ -111,6 +111,10 @@ class ClosedLoopTrial:
         Learning signal on the channel, ``N x 3`` (:data:`CHANNEL_UNITS`).
     channel : str
         Where it entered.
+    command : numpy.ndarray or None
+        The acceleration the vehicle's controller commanded over each sample, ``N x 3``, m/s^2, gravity
+        excluded (what a flight stack logs, e.g. PX4's acceleration setpoint), where the vehicle reports
+        it as ``commanded_acceleration`` after each :meth:`~ClosedLoopVehicle.track`; else None.
     """
 
     t: np.ndarray
@@ -118,6 +122,7 @@ class ClosedLoopTrial:
     y_meas: np.ndarray
     learning: np.ndarray
     channel: str
+    command: np.ndarray | None = None
 
     @property
     def error(self) -> np.ndarray:
@@ -170,7 +175,11 @@ def fly_closed_loop(vehicle: ClosedLoopVehicle, reference: object, *, velocity: 
     setpoint[row] = setpoint[row] + d_f
     vehicle.reset()
     y = np.zeros((n, 3))
+    logs = hasattr(vehicle, "commanded_acceleration")
+    command = np.zeros((n, 3)) if logs else None
     for k in range(n):
         y[k] = vehicle.position()
         vehicle.track(setpoint[0][k], setpoint[1][k], setpoint[2][k])
-    return ClosedLoopTrial(np.arange(n) * vehicle.ts, r, y, d_f, CHANNELS[row])
+        if logs:
+            command[k] = vehicle.commanded_acceleration
+    return ClosedLoopTrial(np.arange(n) * vehicle.ts, r, y, d_f, CHANNELS[row], command)

@@ -214,6 +214,7 @@ class RotorpyVehicle:
         """Hover at rest at ``altitude``, time 0, the sensor noise restarted from ``seed``."""
         self.state = self._hover()
         self.t = 0.0
+        self.commanded_acceleration = np.zeros(3)  # what its SE3 loop last commanded, m/s^2, gravity excluded
         self._rng = np.random.default_rng(self.seed)
 
     def position(self) -> np.ndarray:
@@ -235,7 +236,9 @@ class RotorpyVehicle:
         s["wind"] = self._vector(self.wind, "wind")
         flat = {"x": x, "x_dot": v, "x_ddot": a + self._vector(self.command_disturbance, "command_disturbance"),
                 "x_dddot": np.zeros(3), "x_ddddot": np.zeros(3), "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
-        self.state = self._model.step(s, self._inner.update(self.t, s, flat), self.ts)
+        control = self._inner.update(self.t, s, flat)
+        self.commanded_acceleration = np.asarray(control["cmd_acc"], float) - np.array([0.0, 0.0, _G])
+        self.state = self._model.step(s, control, self.ts)
         self.t += self.ts
 
     def track(self, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray) -> None:
