@@ -8,7 +8,7 @@ of :data:`CHANNEL_STRUCTURES` is fitted with :func:`~ilcdob.identification.tfest
 closed-loop data: the chirp is the only input the fit sees, and the loop's response to the noise is what
 the held-out flight scores) and the one with the best held-out fit is chosen, one with fewer parameters
 winning unless a larger one fits 1 point better. The fit is the channel map ``G_ch`` (channel -> position):
-on the acceleration channel it is also the map of an acceleration disturbance on the airframe, on the
+on the acceleration channel it is also the map of an acceleration added to the command, on the
 position channel the loop's complementary sensitivity.
 
 Where the vehicle reports the acceleration its controller commanded (a flight stack's log: PX4's
@@ -35,13 +35,12 @@ from ilcdob.signals import FlightData, check_grid
 from ilcdob.specs import PlantSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.closed_loop import CHANNEL_UNITS, ClosedLoopVehicle, check_channel, fly_closed_loop
-
 from ilcdob.design.maps.flown import rigid_body_split
 
 from .vehicle_chain import fit_candidates
 
-__all__ = ["CHANNEL_STRUCTURES", "AIRFRAME_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel", "channel_flight",
-           "MakeClosedLoop"]
+__all__ = ["CHANNEL_STRUCTURES", "AIRFRAME_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel",
+           "channel_flight", "MakeClosedLoop"]
 
 #: Candidate structures of a channel map, fewest free parameters first: the vehicle's loop holds its position,
 #: so no integrator; a second-order position loop (2 poles), with its attitude lag (3), with the zero its
@@ -82,7 +81,8 @@ class ChannelFit:
     airframe_fit : float or None
         Its held-out fit, %.
     drag : float or None
-        The airframe's drag per unit mass, 1/s: its fit's slowest real pole besides the integrator.
+        The airframe's drag per unit mass, 1/s: its fit's slowest real pole besides the integrator (None
+        where the fit has no such pole; a design through the airframe then says why).
     """
 
     name: str
@@ -187,7 +187,10 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
     if "command" in est.signals:
         _, body = fit_candidates(_command_flight(est), _command_flight(val), AIRFRAME_STRUCTURES)
         airframe, airframe_fit = body.plant, body.fit_validation
-        drag = float(rigid_body_split(airframe, name)[2][1])
+        try:
+            drag = float(rigid_body_split(airframe, name)[2][1])
+        except SpecError:
+            drag = None
     return ChannelFit(name, axis, channel, chosen.structure, chosen.plant, chosen.fit_estimation,
                       chosen.fit_validation, {_label(c.structure): c.fit_validation for c in candidates},
                       airframe, airframe_fit, drag)

@@ -8,16 +8,17 @@ setpoint its flight stack accepts (:mod:`ilcdob.vehicles.closed_loop`)::
     y = T r + Gd d + Gf u,      e = r - y,      Gf = K Gd
 
 ``K`` is the controller's map from the channel to the acceleration it commands: 1 on the
-acceleration feed-forward channel (added to the command, where the paper's disturbance acts), ``kp`` for a position
-offset and ``kd`` for a velocity offset on a single position/velocity loop such as rotorpy's SE3
-or a Crazyflie's Mellinger controller without its integral (the setpoint reaches the airframe only
-through ``K``, whatever else the loop feeds back); a cascade's position channel (PX4, ArduPilot, a
-Crazyflie's PID) has no constant ``K``. ``Gd`` is identified: on the acceleration channel it is the channel's own map; from a
-setpoint channel's map ``G_ch`` it is ``G_ch / K``. ``d`` is an acceleration added to the
-controller's command, as the paper's disturbance and the learning signal are; a force on the rigid
-body (wind through drag) bypasses the attitude loop, and the learning reaches it through the
-airframe correction of :mod:`ilcdob.design.maps.flown`, built from each vehicle's identified
-airframe (commanded acceleration -> position, :attr:`ChannelLoop.airframe`).
+acceleration feed-forward channel (added to the command, where the paper's disturbance acts),
+``kp`` for a position offset and ``kd`` for a velocity offset on a single position/velocity loop
+such as rotorpy's SE3 or a Crazyflie's Mellinger controller without its integral (the setpoint
+reaches the airframe only through ``K``, whatever else the loop feeds back); a cascade's position
+channel (PX4, ArduPilot, a Crazyflie's PID) has no constant ``K``. ``Gd`` is identified: on the
+acceleration channel it is the channel's own map; from a setpoint channel's map ``G_ch`` it is
+``G_ch / K``. ``d`` is an acceleration added to the controller's command, as the paper's
+disturbance and the learning signal are; a force on the rigid body (wind through drag) bypasses the
+attitude loop, and the learning reaches it through the airframe correction of
+:mod:`ilcdob.design.maps.flown`, built from each vehicle's identified airframe (commanded
+acceleration -> position, :attr:`ChannelLoop.airframe`).
 
 Units: s, m, the channel's unit for ``u`` (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`), m/s^2 for ``d``.
 """
