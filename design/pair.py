@@ -38,7 +38,7 @@ from .law import LawContext, LearningLaw, Stage
 from .law.designed import Designed
 from .law.limit import Limit
 from .sets.delta import DeltaSet, delta_bound, delta_set
-from .maps.flown import airframe_path_filter, check_disturbance
+from .maps.flown import check_disturbance, disturbance_path
 from .law.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTerms, check_law, reference_terms
 from .law.limit import LIMIT_POLICIES, LimitReport
 from .methods import METHODS, DesignInputs, Method, method_named
@@ -379,7 +379,7 @@ def pair_band(fleet: Fleet, source: str, target: str, bandwidth: object = "auto"
     """
     check_disturbance(disturbance)
     src, tgt = fleet.loop(source), fleet.loop(target)
-    path = airframe_path_filter(src, tgt, disturbance == "wind") if disturbance != "command" else None
+    path, _ = disturbance_path(src, tgt, disturbance)
     request = check_bandwidth(bandwidth, fleet.sample_time)
     return _band_chooser(fleet, src, tgt, request, path, deltas, cache(partial(closed_form_filters, src, tgt)))(
         error=error)
@@ -442,7 +442,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
     request = check_bandwidth(band, fleet.sample_time)
     src, tgt = fleet.loop(source), fleet.loop(target)
-    path = airframe_path_filter(src, tgt, disturbance == "wind") if disturbance != "command" else None
+    path, path_entry = disturbance_path(src, tgt, disturbance)
     closed_form = cache(partial(closed_form_filters, src, tgt))  # built once, when first needed
     head = {"method": chosen.name, "law": DEFAULT_LAW, "from": source, "to": target,
             "sample_time": fleet.sample_time}
@@ -453,8 +453,7 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
     design = PairDesign(chosen.name, made.filters, made.core, made.lifted, robust=made.robust, loops=(src, tgt))
     chooser = _band_chooser(fleet, src, tgt, request, path, deltas, closed_form, model_edge=not chosen.guaranteed)
     limits = {s.name: s for s in fleet.systems}[target].limits
-    filters = {**design.filters, "disturbance": {"at": disturbance,
-                                                 **({"W": {"sos": path.tolist()}} if path is not None else {})}}
+    filters = {**design.filters, "disturbance": path_entry}
     if limits is not None:
         filters["limit"] = Limit.entry(limits, on_limit)
     design = replace(design, filters=filters, choose=chooser if request == "auto" else None, path=path,
@@ -504,10 +503,10 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
     head = {"method": "closed-form", "law": DEFAULT_LAW, "from": source.name, "to": target.name,
             "sample_time": source.ts, "channel": target.channel}
     made = METHODS["closed-form"].design(DesignInputs(None, source, target, head, lambda: lf))
-    path = airframe_path_filter(source, target, disturbance == "wind") if disturbance != "command" else None
+    path, path_entry = disturbance_path(source, target, disturbance)
     filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[target.channel]}/m",
                                          "L2": f"{CHANNEL_UNITS[target.channel]}/{CHANNEL_UNITS[source.channel]}"},
-               "disturbance": {"at": disturbance, **({"W": {"sos": path.tolist()}} if path is not None else {})}}
+               "disturbance": path_entry}
     k_j = target.channel_gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
                       l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)) * _sos_gain(path, w, source.ts))

@@ -80,9 +80,6 @@ class ChannelFit:
         Where the flights logged the commanded acceleration: the airframe's fit, m/s^2 -> m (module docstring).
     airframe_fit : float or None
         Its held-out fit, %.
-    drag : float or None
-        The airframe's drag per unit mass, 1/s: its fit's slowest real pole besides the integrator (None
-        where the fit has no such pole; a design through the airframe then says why).
     """
 
     name: str
@@ -95,7 +92,17 @@ class ChannelFit:
     fits: dict[str, float]
     airframe: PlantSpec | None = None
     airframe_fit: float | None = None
-    drag: float | None = None
+
+    @property
+    def drag(self) -> float | None:
+        """The airframe's drag per unit mass, 1/s: its fit's slowest real pole besides the integrator (None
+        without an airframe fit or where it has no such pole; a design through the airframe then says why)."""
+        if self.airframe is None:
+            return None
+        try:
+            return float(rigid_body_split(self.airframe, self.name)[2][1])
+        except SpecError:
+            return None
 
 
 def _label(st: ModelStructure) -> str:
@@ -183,17 +190,13 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
     est = channel_flight(make, name, ts, channel, axis, 0, duration, up=True)
     val = channel_flight(make, name, ts, channel, axis, 1, duration, up=False)
     candidates, chosen = fit_candidates(est, val, structures)
-    airframe = airframe_fit = drag = None
+    airframe = airframe_fit = None
     if "command" in est.signals:
         _, body = fit_candidates(_command_flight(est), _command_flight(val), AIRFRAME_STRUCTURES)
         airframe, airframe_fit = body.plant, body.fit_validation
-        try:
-            drag = float(rigid_body_split(airframe, name)[2][1])
-        except SpecError:
-            drag = None
     return ChannelFit(name, axis, channel, chosen.structure, chosen.plant, chosen.fit_estimation,
                       chosen.fit_validation, {_label(c.structure): c.fit_validation for c in candidates},
-                      airframe, airframe_fit, drag)
+                      airframe, airframe_fit)
 
 
 def _command_flight(flight: FlightData) -> FlightData:

@@ -64,7 +64,8 @@ from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
 from ilcdob.vehicles.channel_loop import ChannelLoop
 
-__all__ = ["rigid_body_split", "model_attitude", "airframe_path_filter", "check_disturbance", "DISTURBANCE_PATHS"]
+__all__ = ["rigid_body_split", "model_attitude", "airframe_path_filter", "disturbance_path", "check_disturbance",
+           "DISTURBANCE_PATHS"]
 
 #: Where the disturbance acts: ``command`` (the paper's loop, added to the command), ``airframe`` (an
 #: acceleration on the rigid body, behind the attitude chain) or ``wind`` (a wind velocity through each
@@ -218,6 +219,35 @@ def airframe_path_filter(source: LoopSystem | ChannelLoop, target: LoopSystem | 
                         "A_hat_j-1/A_hat_j would be unstable")
     b, a = sps.bilinear(gain * np.polymul(ns, dt_), np.polymul(ds, nt), fs=1.0 / source.ts)
     return sps.tf2sos(np.atleast_1d(b), np.atleast_1d(a))
+
+
+def disturbance_path(source: LoopSystem | ChannelLoop, target: LoopSystem | ChannelLoop, disturbance: str
+                     ) -> tuple[np.ndarray | None, dict]:
+    """The correction a design learns through for a checked ``disturbance`` (:func:`check_disturbance`), and
+    the ``disturbance`` entry of its ``filters.json``.
+
+    Parameters
+    ----------
+    source, target : LoopSystem or ChannelLoop
+        Vehicles j-1 and j (:func:`airframe_path_filter`).
+    disturbance : {"command", "airframe", "wind"}
+        Where the disturbance acts.
+
+    Returns
+    -------
+    (numpy.ndarray or None, dict)
+        ``W``'s sections (None on the command, where no correction is needed) and ``{"at": disturbance}``
+        with ``W``'s ``{"sos": ...}`` where there is one.
+
+    Raises
+    ------
+    SpecError
+        As :func:`airframe_path_filter`.
+    """
+    if disturbance == "command":
+        return None, {"at": disturbance}
+    path = airframe_path_filter(source, target, disturbance == "wind")
+    return path, {"at": disturbance, "W": {"sos": path.tolist()}}
 
 
 def _airframe_model(loop: LoopSystem | ChannelLoop) -> PlantSpec:
