@@ -31,7 +31,7 @@ from ilcdob.specs import LimitSpec
 from ilcdob.vehicles.closed_loop import CHANNEL_UNITS
 
 from .filters.band import LearningBand, check_bandwidth, choose_band
-from .maps.channel_filters import channel_filters
+from .maps.channel_filters import channel_filters, channel_gf, channel_view, learning_channel
 from .maps.closed_form import LearningFilters, closed_form_filters, simulate_map
 from .maps.finite_horizon import finite_horizon_ratio
 from .law import LawContext, LearningLaw, Stage
@@ -461,9 +461,12 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
     return design_with_band(design, chooser(error=None))
 
 
-def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: object = "auto",
+def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *, band: object = "auto",
                         acceleration_limit: float | None = None, disturbance: str = "command") -> PairDesign:
-    """The closed-form design between two vehicles on their own controllers (:mod:`.maps.channel_filters`).
+    """The closed-form design between two vehicles learning through a setpoint channel (:mod:`.maps.channel_filters`).
+
+    Either may be a vehicle on its own controller, with or without the add-on DOB, or ilcdob's PID + DOB
+    loop learning on its acceleration feed-forward (a mixed fleet).
 
     The learning signal enters the target's channel (:attr:`ilcdob.vehicles.channel_loop.ChannelLoop.channel`) in that
     channel's unit; the law is the paper's (the reference's share of the error is learned with the
@@ -471,8 +474,8 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
 
     Parameters
     ----------
-    source, target : ChannelLoop
-        Vehicles j-1 and j.
+    source, target : ChannelLoop or LoopSystem
+        Vehicles j-1 and j (a LoopSystem: its model's maps).
     band : "auto", float or None
         As :func:`design_pair`; ``"auto"`` chooses the corner per trial from the source's error and, with
         ``acceleration_limit``, the noise the filter passes (in the acceleration it makes the target command).
@@ -491,7 +494,8 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
     Raises
     ------
     SpecError
-        Not channel loops, other sample times, a bad band, limit or disturbance; off the command, an airframe
+        Not vehicles, other sample times, a target without a DOB after a source with one, a bad band, limit or
+        disturbance; off the command, an airframe
         missing or without a rigid body to split off, or a drag too small to learn the wind from.
     """
     check_disturbance(disturbance)
@@ -500,17 +504,18 @@ def design_channel_pair(source: ChannelLoop, target: ChannelLoop, *, band: objec
     if acceleration_limit is not None and not (isinstance(acceleration_limit, (int, float))
                                                and np.isfinite(acceleration_limit) and acceleration_limit > 0):
         raise SpecError(f"`acceleration_limit`: got {acceleration_limit!r}, expected a limit > 0 m/s^2")
+    ch_src, ch_tgt = learning_channel(source), learning_channel(target)
     head = {"method": "closed-form", "law": DEFAULT_LAW, "from": source.name, "to": target.name,
-            "sample_time": source.ts, "channel": target.channel}
+            "sample_time": source.ts, "channel": ch_tgt}
     made = METHODS["closed-form"].design(DesignInputs(None, source, target, head, lambda: lf))
     path, path_entry = disturbance_path(source, target, disturbance)
-    filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[target.channel]}/m",
-                                         "L2": f"{CHANNEL_UNITS[target.channel]}/{CHANNEL_UNITS[source.channel]}"},
+    filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[ch_tgt]}/m",
+                                         "L2": f"{CHANNEL_UNITS[ch_tgt]}/{CHANNEL_UNITS[ch_src]}"},
                "disturbance": path_entry}
-    k_j = target.channel_gain
+    k_j = channel_view(target).gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
                       l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)) * _sos_gain(path, w, source.ts))
-    design = PairDesign("closed-form", filters, made.core, source_gf=source.G_f, path=path,
+    design = PairDesign("closed-form", filters, made.core, source_gf=channel_gf(source), path=path,
                         choose=chooser if request == "auto" else None)
     return design_with_band(design, chooser(error=None))
 

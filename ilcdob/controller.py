@@ -32,7 +32,7 @@ import numpy as np
 from .errors import SpecError
 from .loop import LoopSystem
 
-__all__ = ["OuterLoopController", "LawStateSpace"]
+__all__ = ["OuterLoopController", "DisturbanceObserver", "LawStateSpace"]
 
 
 class _Block:
@@ -52,6 +52,47 @@ class _Block:
     def update(self, u: float) -> None:
         x = self.x
         self.x = [sum(aij * xj for aij, xj in zip(row, x)) + bi * u for row, bi in zip(self.a, self.b)]
+
+
+class DisturbanceObserver:
+    """The DOB of one axis stepped per sample: ``d_hat[k] = M{y_m}[k] - Q{u2}[k]`` (module docstring).
+
+    Used by :class:`OuterLoopController` and, on a vehicle flying its own controller, by the add-on DOB of
+    :mod:`ilcdob.vehicles.dob_loop`, whose ``u2`` is the acceleration that controller commanded.
+
+    Parameters
+    ----------
+    q, m : control.StateSpace
+        Discrete ``Q`` (strictly proper) and ``M = Q/P_hat`` (:func:`ilcdob.discretize.q_block`,
+        :func:`~ilcdob.discretize.m_block`).
+
+    Raises
+    ------
+    SpecError
+        ``Q`` is not strictly proper (an algebraic loop through the DOB).
+    """
+
+    def __init__(self, q, m) -> None:
+        if float(np.asarray(q.D).ravel()[0]) != 0.0:
+            raise SpecError("`q`: the DOB's Q must be strictly proper in discrete time (algebraic loop through the "
+                            "DOB)")
+        self._sys = (q, m)
+        self.reset()
+
+    def reset(self) -> None:
+        """Both blocks at rest, the estimate 0."""
+        self._q, self._m = _Block(self._sys[0]), _Block(self._sys[1])
+        self.d_hat = 0.0
+
+    def estimate(self, measurement: float) -> float:
+        """The estimate of this sample, m/s^2, from the measured position ``y_m[k]`` (m); also :attr:`d_hat`."""
+        self.d_hat = self._m.output(measurement) - self._q.output()
+        return self.d_hat
+
+    def update(self, command: float, measurement: float) -> None:
+        """Advance with this sample's command ``u2[k]`` (m/s^2, as the vehicle received it) and ``y_m[k]`` (m)."""
+        self._q.update(command)
+        self._m.update(measurement)
 
 
 @dataclass(frozen=True)
@@ -156,12 +197,14 @@ class OuterLoopController:
         if float(loop.Q.D[0, 0]) != 0.0:
             raise SpecError("`loop`: its Q must be strictly proper in discrete time (algebraic loop through the DOB)")
         self.loop, self.dob = loop, bool(dob)
+        self._observer = DisturbanceObserver(loop.Q, loop.M)
         self.ts = loop.ts
         self.reset()
 
     def reset(self) -> None:
         """Back to rest: every block's state zero, no command pending."""
-        self._c, self._q, self._m = _Block(self.loop.C), _Block(self.loop.Q), _Block(self.loop.M)
+        self._c = _Block(self.loop.C)
+        self._observer.reset()
         self.d_hat = 0.0
         self._pending: tuple[float, float] | None = None
 
@@ -197,7 +240,7 @@ class OuterLoopController:
         u1 = self._c.output(e) + feedforward
         self._c.update(e)
         if self.dob:
-            self.d_hat = self._m.output(measurement) - self._q.output()
+            self.d_hat = self._observer.estimate(measurement)
             u2 = u1 - self.d_hat - learning
         else:
             if learning:
@@ -218,8 +261,7 @@ class OuterLoopController:
             raise SpecError("OuterLoopController.update: no command to update with; call command() first")
         u2, measurement = self._pending
         if self.dob:
-            self._q.update(u2 if applied is None else applied)
-            self._m.update(measurement)
+            self._observer.update(u2 if applied is None else applied, measurement)
         self._pending = None
 
     def step(self, reference: float, measurement: float, *, feedforward: float = 0.0,

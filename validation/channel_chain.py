@@ -11,27 +11,35 @@ What a lab whose vehicles keep their flight stack's position controller does, on
    from the previous flight's measured error by the closed-form design between the two vehicles'
    identified loops (:func:`ilcdob.design.pair.design_channel_pair`, its band chosen per trial).
 
-No ilcdob controller and no DOB flies: the vehicles hold their paths with their own loops, and the
-learning signal is added to the setpoint row of each vehicle's channel. Units: s, m, m/s, m/s^2.
+No ilcdob controller flies: the vehicles hold their paths with their own loops, and the learning signal is
+added to the setpoint row of each vehicle's channel. With ``dob=`` the vehicles fly the paper's DOB on top
+(:class:`~ilcdob.vehicles.dob_loop.AddOnDOB`, built on each airframe identified in step 1, after which the
+channel is identified again with the DOB flying), and :func:`fly_channel_chain` flies them so. A vehicle
+whose loops are :class:`~ilcdob.loop.LoopSystem`\ s is ilcdob's PID + DOB (its ``make`` returns a
+:class:`~ilcdob.vehicles.dob_loop.PaperLoopVehicle`): a mixed fleet. Units: s, m, m/s, m/s^2.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
 from ilcdob.vehicles.channel_loop import ChannelLoop, channel_loop
+from ilcdob.design.maps.channel_filters import learning_channel
 from ilcdob.design.pair import PairDesign, design_channel_pair
 from ilcdob.errors import SpecError
+from ilcdob.loop import LoopSystem
+from ilcdob.specs import DOBSpec
+from ilcdob.vehicles.dob_loop import AddOnDOB
 from ilcdob.vehicles.closed_loop import ClosedLoopTrial, ClosedLoopVehicle, check_channel, fly_closed_loop
 from ilcdob.vehicles.interface import AXES
 
 from .channel_id import ChannelFit, identify_channel
 from .reproduce import check_iterations, learning_chain
 
-__all__ = ["MakeDisturbed", "ChannelChain", "identify_channel_loops", "fly_channel_chain"]
+__all__ = ["MakeDisturbed", "ChannelChain", "identify_channel_loops", "with_dob", "fly_channel_chain"]
 
 #: ``make(name, seed, command_disturbance, wind) -> ClosedLoopVehicle``: a fresh vehicle at rest, ``seed`` its
 #: sensor noise's, the disturbances callables of time (s) -> ``(3,)`` (m/s^2 added to the command; m/s of wind)
@@ -39,8 +47,33 @@ __all__ = ["MakeDisturbed", "ChannelChain", "identify_channel_loops", "fly_chann
 MakeDisturbed = Callable[[str, int, Callable | None, Callable | None], ClosedLoopVehicle]
 
 
+def with_dob(make: MakeDisturbed, loops: Mapping[str, Mapping[str, ChannelLoop | LoopSystem]]) -> MakeDisturbed:
+    """``make`` with every vehicle whose loops carry an add-on DOB (:attr:`ChannelLoop.dob`) wrapped in it.
+
+    Parameters
+    ----------
+    make : callable
+        :data:`MakeDisturbed`.
+    loops : mapping
+        ``loops[name][axis]``; the DOB of a vehicle runs on its loops' axes, on their airframes.
+
+    Returns
+    -------
+    callable
+        :data:`MakeDisturbed`.
+    """
+    def flown(name, seed, cmd, wind):
+        vehicle = make(name, seed, cmd, wind)
+        mine = [lp for lp in loops.get(name, {}).values() if isinstance(lp, ChannelLoop) and lp.dob is not None]
+        if not mine:
+            return vehicle
+        return AddOnDOB(vehicle, {ax: lp.airframe for ax, lp in loops[name].items()}, mine[0].dob, mine[0].channel)
+
+    return flown
+
+
 def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts: float,
-                           axes: Sequence[str] = ("x",), duration: float = 30.0
+                           axes: Sequence[str] = ("x",), duration: float = 30.0, *, dob: DOBSpec | None = None
                            ) -> tuple[dict[str, dict[str, ChannelLoop]], dict[str, dict[str, ChannelFit]]]:
     """Every vehicle's loop per axis from its channel's identification flights (module docstring, step 1).
 
@@ -57,13 +90,17 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
         The axes learned.
     duration : float
         Length of each identification flight, s.
+    dob : DOBSpec, optional
+        Fly every vehicle with the add-on DOB of this ``Q`` on its identified airframes and identify its
+        channel again so (module docstring); the loops carry it.
 
     Returns
     -------
     loops : dict
         ``loops[name][axis]``: :class:`ChannelLoop`.
     fits : dict
-        ``fits[name][axis]``: the channel fit it came from.
+        ``fits[name][axis]``: the channel fit it came from (with ``dob``: the one with the DOB flying; the
+        loop keeps the airframe fitted without it, the model its DOB runs on).
     """
     loops: dict[str, dict[str, ChannelLoop]] = {}
     fits: dict[str, dict[str, ChannelFit]] = {}
@@ -74,6 +111,15 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
                                            duration) for ax in axes}
         loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
                                         fits[name][ax].airframe) for ax in axes}
+        if dob is not None:
+            if any(fits[name][ax].airframe is None for ax in axes):
+                raise SpecError(f"`dob`: vehicle {name!r} logs no commanded acceleration, so no airframe was "
+                                "identified for its DOB to invert")
+            dobbed = with_dob(make, {name: {ax: replace(lp, dob=dob) for ax, lp in loops[name].items()}})
+            fits[name] = {ax: identify_channel(lambda nm, seed: dobbed(nm, seed, None, None), name, ts, channel, ax,
+                                               duration) for ax in axes}
+            loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
+                                            loops[name][ax].airframe, dob) for ax in axes}
     return loops, fits
 
 
@@ -123,7 +169,7 @@ class ChannelChain:
                 for name, flights in self.learning.items()}
 
 
-def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop]], make: MakeDisturbed, reference: np.ndarray,
+def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop | LoopSystem]], make: MakeDisturbed, reference: np.ndarray,
                       order: Sequence[str], iterations: int = 3, *, velocity: np.ndarray | None = None,
                       acceleration: np.ndarray | None = None, command_disturbance: Callable | None = None,
                       wind: Callable | None = None, band: object = "auto", disturbance: str = "command"
@@ -133,9 +179,11 @@ def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop]], make: Make
     Parameters
     ----------
     loops : mapping
-        ``loops[name][axis]`` (:func:`identify_channel_loops`); every vehicle the same axes.
+        ``loops[name][axis]`` (:func:`identify_channel_loops`), or the :class:`~ilcdob.loop.LoopSystem` of a
+        vehicle on ilcdob's PID + DOB (module docstring); every vehicle the same axes.
     make : callable
-        :data:`MakeDisturbed`; flight ``k`` of the ``i``-th vehicle of ``order`` has seed ``10 k + i``.
+        :data:`MakeDisturbed`; flight ``k`` of the ``i``-th vehicle of ``order`` has seed ``10 k + i``; a
+        vehicle whose loops carry an add-on DOB flies it (:func:`with_dob`).
     reference : numpy.ndarray
         ``N x 3`` position, m, from where the vehicles start.
     order : sequence of str
@@ -171,12 +219,13 @@ def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop]], make: Make
         raise SpecError(f"`loops`: every vehicle needs loops for the same axes ({list(axes)})")
     designs: dict[tuple[str, str, str], PairDesign] = {}
     count = {nm: 0 for nm in order}
+    flown = with_dob(make, loops)
 
     def fly(name: str, learning: dict[str, np.ndarray] | None) -> ClosedLoopTrial:
-        vehicle = make(name, 10 * count[name] + order.index(name), command_disturbance, wind)
+        vehicle = flown(name, 10 * count[name] + order.index(name), command_disturbance, wind)
         count[name] += 1
         return fly_closed_loop(vehicle, reference, velocity=velocity, acceleration=acceleration, learning=learning,
-                               channel=loops[name][axes[0]].channel)
+                               channel=learning_channel(loops[name][axes[0]]))
 
     def step(src: str, tgt: str, prev: ClosedLoopTrial) -> ClosedLoopTrial:
         u = {}

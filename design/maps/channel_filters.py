@@ -1,38 +1,153 @@
-"""The Theorem's filters between vehicles on their own controllers (paper Sec. III; docs/closed_loop.md).
+"""The Theorem's filters between vehicles that learn through a setpoint channel (paper Sec. III; docs/closed_loop.md).
 
-With ``Gf = K Gd`` per vehicle (:mod:`ilcdob.vehicles.channel_loop`) the Theorem's pair is::
+Every vehicle here is seen through the channel its learning signal enters
+(:mod:`ilcdob.vehicles.channel_loop`): ``Gf = K G`` and ``Gd = (1 - Q) G`` with ``G = P/D`` of its loop,
+``Q`` the DOB's where it flies one (the add-on DOB, :mod:`ilcdob.vehicles.dob_loop`) and ``1 - Q`` read
+as 1 where it does not. ilcdob's PID + DOB loop is such a vehicle on its acceleration feed-forward
+(``K = 1``; a learning signal ``u`` there is ``-d_f`` of the paper's law). With the ratio
+``R = Gd/Gf = (1 - Q)/K`` the Theorem's pair is::
 
-    L1_j = Gd_j / (Gf_j Gd_{j-1}) = 1 / (K_j Gd_{j-1})
-    L2_j = L1_j Gf_{j-1}          = K_{j-1} / K_j
+    L1_j = Gd_j / (Gf_j Gd_{j-1}) = R_j Gd_{j-1}^{-1}
+    L2_j = L1_j Gf_{j-1}          = R_j / R_{j-1} = (K_{j-1}/K_j) (1 - Q_j)/(1 - Q_{j-1})
 
-so vehicle j learns ``u_j = L1{e_{j-1}} + L2{u_{j-1}}``, and ``Gf_j u_j = -Gd_j d`` when the maps
-are exact: the disturbance the source met, in the learner's channel. ``L1`` inverts the source's
-identified disturbance map: its zeros are ``Gd_{j-1}``'s poles, its poles ``Gd_{j-1}``'s zeros
-(the ZOH sampling zero outside the unit circle becomes anti-causal, a delay an advance), taken
-from the sampled map's analytic poles and zeros (:func:`ilcdob.discretize.plant_block`) and
-checked against ``1/(K_j Gd_{j-1}(e^{jwTs}))`` (:func:`~.closed_form.matched`).
+so ``Gf_j u_j = -Gd_j d`` when the maps are exact: the disturbance the source met, in the learner's
+channel. ``L1`` inverts the source's disturbance map: its zeros are ``Gd_{j-1}``'s poles, its poles
+``Gd_{j-1}``'s zeros (the ZOH sampling zero outside the unit circle becomes anti-causal, a delay an
+advance), taken from the blocks' analytic poles and zeros (:func:`ilcdob.discretize.plant_block`; for
+the PID + DOB loop as :func:`~.closed_form.inverse_gd_filter` takes them) and checked against
+``R_j / Gd_{j-1}(e^{jwTs})`` (:func:`~.closed_form.matched`).
+
+``1 - Q`` vanishes at ``z = 1``. Where both vehicles fly a DOB the common root cancels analytically; a
+vehicle without a DOB cannot learn from one with a DOB this way: that source's error holds no trace of
+a constant disturbance (its DOB removed it), and ``L2`` would integrate.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
+import control as ct
 import numpy as np
 
-from ilcdob.vehicles.channel_loop import ChannelLoop
+from ilcdob.discretize import DiscreteBlock
 from ilcdob.errors import SpecError
+from ilcdob.loop import LoopSystem
+from ilcdob.vehicles.channel_loop import ChannelLoop
 
-from ..filters.noncausal import ZPKFilter
-from .closed_form import LearningFilters, matched
+from .closed_form import LearningFilters, _block, _plant_zeros, _zeros_without_one, matched
 
-__all__ = ["channel_filters"]
+__all__ = ["channel_filters", "channel_view", "channel_gf", "learning_channel", "ChannelView"]
 
 
-def channel_filters(source: ChannelLoop, target: ChannelLoop) -> LearningFilters:
+@dataclass(frozen=True)
+class ChannelView:
+    """One vehicle as the channel learning sees it (module docstring).
+
+    Attributes
+    ----------
+    name : str
+    ts : float
+        Sample time, s.
+    gain : float
+        ``K``.
+    q : DiscreteBlock or None
+        The DOB's ``Q`` (None: no DOB).
+    inverse_zeros, inverse_poles : numpy.ndarray
+        Zeros and poles of ``Gd^{-1}`` (z-plane), without the pole ``z = 1`` of a DOB's ``1/(1 - Q)``.
+    inverse : callable
+        ``inverse(w)``: ``Gd^{-1}(e^{jwTs})`` from the blocks' responses (``w`` in rad/s).
+    """
+
+    name: str
+    ts: float
+    gain: float
+    q: DiscreteBlock | None
+    inverse_zeros: np.ndarray
+    inverse_poles: np.ndarray
+    inverse: Callable[[np.ndarray], np.ndarray]
+
+    def ratio(self, w: np.ndarray) -> np.ndarray:
+        """``R = Gd/Gf = (1 - Q)/K`` at ``w`` rad/s."""
+        one = 1.0 if self.q is None else 1.0 - self.q.response(w)
+        return one / self.gain * np.ones(np.shape(w))
+
+    def ratio_roots(self, one: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Zeros and poles of ``1 - Q`` (none without a DOB); the zero ``z = 1`` only with ``one``."""
+        zeros, poles = _one_minus_roots(self.q, self.name)
+        return (np.append(zeros, 1.0 + 0j) if one and self.q is not None else zeros), poles
+
+
+def _one_minus_roots(q: DiscreteBlock | None, name: str) -> tuple[np.ndarray, np.ndarray]:
+    if q is None:
+        return np.zeros(0, complex), np.zeros(0, complex)
+    return _zeros_without_one(q, f"vehicle {name!r}"), np.asarray(q.poles, complex)
+
+
+def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
+    """A vehicle's :class:`ChannelView`: a vehicle on its own controller, or ilcdob's PID + DOB loop on its
+    acceleration feed-forward (its model's maps).
+
+    Parameters
+    ----------
+    vehicle : ChannelLoop or LoopSystem
+
+    Returns
+    -------
+    ChannelView
+
+    Raises
+    ------
+    SpecError
+        Neither.
+    """
+    if isinstance(vehicle, ChannelLoop):
+        blk, q = vehicle.block, vehicle.q
+        zeros = blk.zeros if blk.zeros is not None else np.zeros(0, complex)
+        om_zeros, q_poles = _one_minus_roots(q, vehicle.name)
+
+        def inverse(w):
+            one = 1.0 if q is None else 1.0 - q.response(w)
+            return 1.0 / (blk.response(w) * one)
+
+        return ChannelView(vehicle.name, vehicle.ts, vehicle.channel_gain, q, np.concatenate([blk.poles, q_poles]),
+                           np.concatenate([zeros, om_zeros]), inverse)
+    if isinstance(vehicle, LoopSystem):
+        src = vehicle.nominal
+        q = _block(src, "Q")
+
+        def inverse(w):
+            p, m, c, qq = (_block(src, k).response(w) for k in ("P", "M", "C", "Q"))
+            return 1.0 / p + (m + c) / (1 - qq)
+
+        # Gd^-1 = D/(P (1 - Q)): zeros the closed-loop poles; poles the zeros of P_hat and 1 - Q, M's and C's poles
+        poles = np.concatenate([_plant_zeros(src), _one_minus_roots(q, vehicle.name)[0],
+                                _block(src, "M").poles, _block(src, "C").poles])
+        return ChannelView(vehicle.name, vehicle.ts, 1.0, q, src.poles(), poles, inverse)
+    raise SpecError(f"got {type(vehicle).__name__}, expected a ChannelLoop (ilcdob.vehicles.channel_loop) or a "
+                    "LoopSystem (ilcdob's PID + DOB)")
+
+
+def learning_channel(vehicle: ChannelLoop | LoopSystem) -> str:
+    """The channel a vehicle learns through: its own, or ``"acceleration"`` for ilcdob's PID + DOB."""
+    return vehicle.channel if isinstance(vehicle, ChannelLoop) else "acceleration"
+
+
+def channel_gf(vehicle: ChannelLoop | LoopSystem) -> ct.StateSpace:
+    """``Gf`` of the vehicle's model on its channel (discrete): :attr:`ChannelLoop.G_f`, or ``-G_f`` of ilcdob's
+    PID + DOB loop (the acceleration feed-forward is ``-d_f``, module docstring)."""
+    if isinstance(vehicle, ChannelLoop):
+        return vehicle.G_f
+    return -vehicle.nominal.G_f
+
+
+def channel_filters(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem) -> LearningFilters:
     """The closed-form pair for ``target`` learning from ``source`` (module docstring).
 
     Parameters
     ----------
-    source, target : ChannelLoop
-        Vehicles j-1 and j.
+    source, target : ChannelLoop or LoopSystem
+        Vehicles j-1 and j (a LoopSystem: ilcdob's PID + DOB, learning on its acceleration feed-forward).
 
     Returns
     -------
@@ -42,20 +157,30 @@ def channel_filters(source: ChannelLoop, target: ChannelLoop) -> LearningFilters
     Raises
     ------
     SpecError
-        Not channel loops, or different sample times.
+        Not vehicles, different sample times, or a target without a DOB learning from a source with one.
     NumericalError
-        The zero-pole form of ``L1`` disagrees with its formula.
+        The zero-pole form of a filter disagrees with its formula.
     """
-    for what, lp in (("source", source), ("target", target)):
-        if not isinstance(lp, ChannelLoop):
-            raise SpecError(f"`{what}`: got {type(lp).__name__}, expected a ChannelLoop (ilcdob.vehicles.channel_loop)")
-    if abs(source.ts - target.ts) > 1e-12 * source.ts:
-        raise SpecError(f"`ts`: vehicles {source.name!r} ({source.ts} s) and {target.name!r} ({target.ts} s) must "
-                        "share one setpoint period")
-    blk = source.block
-    zeros = blk.zeros if blk.zeros is not None else np.zeros(0, complex)
-    k_j = target.channel_gain
-    l1 = matched(blk.poles, zeros, source.ts, lambda w: 1.0 / (k_j * blk.response(w)),
-                 f"learning filter {source.name!r} -> {target.name!r}")
-    l2 = ZPKFilter(np.zeros(0, complex), np.zeros(0, complex), source.channel_gain / k_j, source.ts)
+    views = []
+    for what, v in (("source", source), ("target", target)):
+        try:
+            views.append(channel_view(v))
+        except SpecError as exc:
+            raise SpecError(f"`{what}`: {exc}") from None
+    src, tgt = views
+    if abs(src.ts - tgt.ts) > 1e-12 * src.ts:
+        raise SpecError(f"`ts`: vehicles {src.name!r} ({src.ts} s) and {tgt.name!r} ({tgt.ts} s) must share one "
+                        "setpoint period")
+    if src.q is not None and tgt.q is None:
+        raise SpecError(f"vehicle {tgt.name!r} flies no DOB and cannot learn from {src.name!r}, which does: a DOB "
+                        "removes a constant disturbance from its vehicle's error, so that error cannot tell the "
+                        f"learner's loop what to cancel; give {tgt.name!r} the add-on DOB "
+                        "(ilcdob.vehicles.dob_loop.AddOnDOB) or learn it from a vehicle without one")
+    # 1 - Q_j's zero at z = 1 cancels the pole 1/(1 - Q_{j-1}) puts there where both fly a DOB
+    (rz_j, rp_j), (rz_p, rp_p) = tgt.ratio_roots(src.q is None), src.ratio_roots(False)
+    what = f"learning filter {src.name!r} -> {tgt.name!r}"
+    l1 = matched(np.concatenate([rz_j, src.inverse_zeros]), np.concatenate([rp_j, src.inverse_poles]), src.ts,
+                 lambda w: tgt.ratio(w) * src.inverse(w), what)
+    l2 = matched(np.concatenate([rz_j, rp_p]), np.concatenate([rp_j, rz_p]), src.ts,
+                 lambda w: tgt.ratio(w) / src.ratio(w), f"{what} (L2)")
     return LearningFilters(source=source, target=target, L1=l1, L2=l2)

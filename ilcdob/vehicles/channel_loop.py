@@ -20,6 +20,13 @@ attitude loop, and the learning reaches it through the airframe correction of
 :mod:`ilcdob.design.maps.flown`, built from each vehicle's identified airframe (commanded
 acceleration -> position, :attr:`ChannelLoop.airframe`).
 
+With the add-on DOB (:class:`~ilcdob.vehicles.dob_loop.AddOnDOB`: the paper's DOB on the identified
+airframe, its estimate taken off through the same channel, the learning signal added after it) the
+vehicle's maps are ``Gf = K P/D`` and ``Gd = (1 - Q) P/D`` with ``D = 1 - Q + P (M + C)`` of the
+vehicle's own loop ``C``: so ``Gd = (1 - Q) Gf / K`` exactly, whatever the airframe model's error (it
+enters ``D`` only). ``G_ch`` is then identified with the DOB flying, and :attr:`ChannelLoop.dob` holds
+its ``Q``.
+
 Units: s, m, the channel's unit for ``u`` (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`), m/s^2 for ``d``.
 """
 
@@ -31,10 +38,10 @@ from dataclasses import dataclass, field
 import control as ct
 import numpy as np
 
-from ilcdob.discretize import DiscreteBlock, plant_block
+from ilcdob.discretize import DiscreteBlock, plant_block, q_block
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import STABILITY_MARGIN
-from ilcdob.specs import PlantSpec
+from ilcdob.specs import DOBSpec, PlantSpec
 from .closed_loop import CHANNEL_UNITS, check_channel
 
 __all__ = ["ChannelLoop", "channel_loop"]
@@ -53,7 +60,8 @@ class ChannelLoop:
     channel : {"position", "velocity", "acceleration"}
         Where the learning signal enters.
     disturbance_map : PlantSpec
-        ``Gd`` in continuous time: acceleration added to the command (m/s^2) -> position (m); stable.
+        ``Gf / K`` in continuous time: acceleration added to the command (m/s^2) -> position (m); stable.
+        Without the add-on DOB this is ``Gd`` itself; with it ``Gd = (1 - Q)`` times it (module docstring).
     channel_gain : float
         ``K``: acceleration (m/s^2) the controller commands per unit of channel signal (1 on the
         acceleration channel).
@@ -61,6 +69,9 @@ class ChannelLoop:
         The airframe's identified model, commanded acceleration (m/s^2) -> position (m), with one
         integrator and a drag pole, where the flights logged the commanded acceleration; needed for a
         disturbance on the airframe or in wind (module docstring).
+    dob : DOBSpec or None
+        The add-on DOB's ``Q`` when the vehicle flies one (:class:`~ilcdob.vehicles.dob_loop.AddOnDOB`, built on
+        ``airframe``); None: the vehicle's loop alone.
     """
 
     name: str
@@ -69,6 +80,7 @@ class ChannelLoop:
     disturbance_map: PlantSpec
     channel_gain: float = 1.0
     airframe: PlantSpec | None = None
+    dob: DOBSpec | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -84,6 +96,11 @@ class ChannelLoop:
         if self.airframe is not None and not isinstance(self.airframe, PlantSpec):
             raise SpecError(f"`airframe`: got {type(self.airframe).__name__}, expected a PlantSpec (commanded "
                             "acceleration -> position) or None")
+        if self.dob is not None and not isinstance(self.dob, DOBSpec):
+            raise SpecError(f"`dob`: got {type(self.dob).__name__}, expected a DOBSpec (the add-on DOB's Q) or None")
+        if self.dob is not None and self.airframe is None:
+            raise SpecError(f"vehicle {self.name!r}: an add-on DOB needs the identified airframe it inverts "
+                            "(`airframe`, commanded acceleration -> position)")
         if self.channel == "acceleration" and k != 1.0:
             raise SpecError(f"`channel_gain`: got {k!r} on the acceleration channel, where the learning signal "
                             "is added where a disturbance acts: it must be 1")
@@ -101,9 +118,22 @@ class ChannelLoop:
         return self._cache["block"]
 
     @property
+    def q(self) -> DiscreteBlock | None:
+        """The add-on DOB's ``Q`` as it flies (:func:`~ilcdob.discretize.q_block` on the airframe); None without."""
+        if self.dob is None:
+            return None
+        if "q" not in self._cache:
+            self._cache["q"] = q_block(self.dob, self.airframe, self.ts)
+        return self._cache["q"]
+
+    @property
     def G_d(self) -> ct.StateSpace:
-        """``Gd``: disturbance (m/s^2) -> position (m), discrete."""
-        return self.block.sys
+        """``Gd``: disturbance (m/s^2) -> position (m), discrete; ``(1 - Q)`` times ``disturbance_map`` with the
+        add-on DOB."""
+        if self.q is None:
+            return self.block.sys
+        q = self.q.sys
+        return ct.series(ct.ss(q.A, q.B, -q.C, 1.0 - q.D, q.dt), self.block.sys)
 
     @property
     def G_f(self) -> ct.StateSpace:
@@ -117,15 +147,15 @@ class ChannelLoop:
         return self
 
     def poles(self) -> np.ndarray:
-        """Poles of ``Gd`` (z-plane, analytic)."""
+        """Poles of ``Gf`` (z-plane, analytic); ``Gd`` has the add-on DOB's ``Q``'s besides."""
         return self.block.poles
 
 
 def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0,
-                 airframe: PlantSpec | None = None) -> ChannelLoop:
+                 airframe: PlantSpec | None = None, dob: DOBSpec | None = None) -> ChannelLoop:
     """The loop of a vehicle from its identified channel map ``G_ch`` (channel -> position).
 
-    ``Gd = G_ch / K`` (module docstring).
+    ``Gd = G_ch / K``, times ``1 - Q`` with the add-on DOB (module docstring).
 
     Parameters
     ----------
@@ -140,6 +170,8 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         channel, its ``kd`` on the velocity channel.
     airframe : PlantSpec, optional
         The airframe's identified model (:attr:`ChannelLoop.airframe`).
+    dob : DOBSpec, optional
+        The add-on DOB the vehicle flew ``channel_map``'s flights with (:attr:`ChannelLoop.dob`).
 
     Returns
     -------
@@ -156,4 +188,4 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         raise SpecError(f"`channel_gain`: got {channel_gain!r}, expected a gain > 0")
     num = [c / channel_gain for c in channel_map.num]
     return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
-                       float(channel_gain), airframe)
+                       float(channel_gain), airframe, dob)

@@ -28,7 +28,7 @@ from ilcdob.fleet import AXES  # the fleet file's axes, in the order of the comm
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PIDSpec
 
-__all__ = ["Vehicle", "VehicleTrial", "fly_vehicle", "AXES"]
+__all__ = ["Vehicle", "VehicleTrial", "fly_vehicle", "axis_controllers", "AXES"]
 
 
 @runtime_checkable
@@ -212,6 +212,45 @@ class _PIDAlone:
         """Nothing to advance: the PID advanced in :meth:`command`."""
 
 
+def axis_controllers(vehicle: Vehicle, loops: Mapping[str, LoopSystem | PIDSpec], dob: bool = True
+                     ) -> list[OuterLoopController | _PIDAlone]:
+    """The per-axis control law :func:`fly_vehicle` flies ``vehicle`` with, x, y, z, at rest.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    loops : mapping of str to LoopSystem or PIDSpec
+        As :func:`fly_vehicle`.
+    dob : bool
+        Run the DOB on the axes with a loop.
+
+    Returns
+    -------
+    list
+        One :class:`~ilcdob.controller.OuterLoopController` (or PID alone) per axis.
+
+    Raises
+    ------
+    SpecError
+        ``vehicle`` lacks the protocol, an axis has no loop, or sample times differ.
+    """
+    if not isinstance(vehicle, Vehicle):
+        raise SpecError(f"`vehicle`: got {type(vehicle).__name__}, expected an object with ts, reset(), "
+                        "position() and step(command) (ilcdob.vehicles.interface.Vehicle)")
+    missing = [ax for ax in AXES if ax not in loops]
+    if missing:
+        raise SpecError(f"`loops`: no loop for axes {missing}; every axis needs one (the same loop may serve several)")
+    for ax in AXES:
+        if isinstance(loops[ax], PIDSpec):
+            continue
+        if not isinstance(loops[ax], LoopSystem):
+            raise SpecError(f"`loops[{ax!r}]`: got {type(loops[ax]).__name__}, expected a LoopSystem or a PIDSpec")
+        if abs(loops[ax].ts - vehicle.ts) > 1e-12 * vehicle.ts:
+            raise SpecError(f"`loops[{ax!r}]`: sample time {loops[ax].ts} s, but the vehicle steps {vehicle.ts} s")
+    return [_PIDAlone(loops[ax], vehicle.ts, ax) if isinstance(loops[ax], PIDSpec) else
+            OuterLoopController(loops[ax], dob=dob) for ax in AXES]
+
+
 def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem | PIDSpec], reference: object, *,
                 learning: object = None, feedforward: object = None, dob: bool = True,
                 n: int | None = None) -> VehicleTrial:
@@ -245,27 +284,13 @@ def fly_vehicle(vehicle: Vehicle, loops: Mapping[str, LoopSystem | PIDSpec], ref
         ``vehicle`` lacks the protocol, an axis has no loop, sample times differ, or a signal has the
         wrong shape.
     """
-    if not isinstance(vehicle, Vehicle):
-        raise SpecError(f"`vehicle`: got {type(vehicle).__name__}, expected an object with ts, reset(), "
-                        "position() and step(command) (ilcdob.vehicles.interface.Vehicle)")
-    missing = [ax for ax in AXES if ax not in loops]
-    if missing:
-        raise SpecError(f"`loops`: no loop for axes {missing}; every axis needs one (the same loop may serve several)")
-    for ax in AXES:
-        if isinstance(loops[ax], PIDSpec):
-            continue
-        if not isinstance(loops[ax], LoopSystem):
-            raise SpecError(f"`loops[{ax!r}]`: got {type(loops[ax]).__name__}, expected a LoopSystem or a PIDSpec")
-        if abs(loops[ax].ts - vehicle.ts) > 1e-12 * vehicle.ts:
-            raise SpecError(f"`loops[{ax!r}]`: sample time {loops[ax].ts} s, but the vehicle steps {vehicle.ts} s")
+    ctl = axis_controllers(vehicle, loops, dob)
     n = trial_samples(reference, n)
     r = per_axis(reference, n, "reference")
     d_f = per_axis(learning, n, "learning")
     a_ff = per_axis(feedforward, n, "feedforward")
     if not dob and np.any(d_f):
         raise SpecError("`learning`: a learning signal needs the DOB (dob=True)")
-    ctl = [_PIDAlone(loops[ax], vehicle.ts, ax) if isinstance(loops[ax], PIDSpec) else
-           OuterLoopController(loops[ax], dob=dob) for ax in AXES]
     vehicle.reset()
     y, cmd, applied, d_hat = (np.zeros((n, 3)) for _ in range(4))
     r_l, d_f_l, a_ff_l = r.tolist(), d_f.tolist(), a_ff.tolist()  # Python floats: the loop runs per sample

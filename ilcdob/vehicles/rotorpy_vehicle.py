@@ -234,10 +234,12 @@ class RotorpyVehicle:
         """One ``ts`` of the SE3 controller tracking the flat output ``(x, v, a)`` (world frame, absolute)."""
         s = self.state
         s["wind"] = self._vector(self.wind, "wind")
-        flat = {"x": x, "x_dot": v, "x_ddot": a + self._vector(self.command_disturbance, "command_disturbance"),
+        d = self._vector(self.command_disturbance, "command_disturbance")
+        flat = {"x": x, "x_dot": v, "x_ddot": a + d,
                 "x_dddot": np.zeros(3), "x_ddddot": np.zeros(3), "yaw": 0.0, "yaw_dot": 0.0, "yaw_ddot": 0.0}
         control = self._inner.update(self.t, s, flat)
-        self.commanded_acceleration = np.asarray(control["cmd_acc"], float) - np.array([0.0, 0.0, _G])
+        # what the controller commanded, as a flight stack logs it: the disturbance is the world's, not its
+        self.commanded_acceleration = np.asarray(control["cmd_acc"], float) - np.array([0.0, 0.0, _G]) - d
         self.state = self._model.step(s, control, self.ts)
         self.t += self.ts
 
