@@ -32,7 +32,7 @@ from ilcdob.fleet import Fleet
 from ilcdob.fleet_io import fleet_to_toml
 from ilcdob.names import file_name
 from ilcdob.signals import FlightData, segments
-from ilcdob.specs import IdentificationSpec, PlantSpec, SystemSpec
+from ilcdob.specs import PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.quadrotor import TABLE_I, QuadrotorParams, fly, table_i_vehicles
 
@@ -159,11 +159,7 @@ def identified_systems(fleet: Fleet, results: dict[str, VehicleIdentification]) 
         vid = results.get(spec.name)
         if vid is not None:
             e = vid.estimate
-            ident = IdentificationSpec(e.structure.n_poles, e.structure.n_zeros, e.structure.n_integrators,
-                                       tuple(e.theta), tuple(map(tuple, e.covariance)), e.delay_estimated,
-                                       e.fit_estimation,
-                                       e.fit_validation if e.fit_validation is not None else float("nan"),
-                                       IDENTIFICATION_SOURCE)
+            ident = e.identification_spec(IDENTIFICATION_SOURCE)
             spec = dataclasses.replace(spec, plant=PlantSpec(tuple(e.num), tuple(e.den), e.delay), model=None,
                                        identification=ident)
         systems.append(spec)

@@ -16,6 +16,7 @@ import numpy as np
 
 from ilcdob.display import html_table
 from ilcdob.signals import FlightData
+from ilcdob.specs import IdentificationSpec
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
 from .oe import discretise, response, simulate_zoh
@@ -371,6 +372,24 @@ class TFEstimate:
             den, num = self.structure.split(th)
             out.append((num, den, float(d)))
         return out
+
+    def identification_spec(self, source: str) -> IdentificationSpec:
+        """What a fleet file keeps of the fit (:class:`~ilcdob.specs.IdentificationSpec`): structure,
+        parameters, covariance and fits, its Delta set's definition.
+
+        Parameters
+        ----------
+        source : str
+            The flights it was identified from.
+
+        Returns
+        -------
+        IdentificationSpec
+        """
+        return IdentificationSpec(self.structure.n_poles, self.structure.n_zeros, self.structure.n_integrators,
+                                  tuple(self.theta), tuple(map(tuple, self.covariance)), self.delay_estimated,
+                                  self.fit_estimation,
+                                  self.fit_validation if self.fit_validation is not None else float("nan"), source)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (the ``model.json`` of ``ilcdob identify``)."""

@@ -208,7 +208,7 @@ def multiplicative_bound(structure: ModelStructure, theta: np.ndarray, covarianc
     Linearised: ``Delta = dG/G``, ``dG = (dG/dtheta) dtheta``; the bound is
     ``k * sqrt(g_re' Cov g_re + g_im' Cov g_im) / |G|``, the RMS magnitude of the linearised
     relative error, scaled by ``k`` (3: about 99 % for a Gaussian estimate); the gradients
-    are forward differences. This bound defines the Delta set of an identified model
+    are analytic (those of ``B / (s^K A) e^{-s delay}`` in each coefficient and the delay). This bound defines the Delta set of an identified model
     (docs/theory.md section 3, docs/identification.md).
 
     Parameters
@@ -235,15 +235,17 @@ def multiplicative_bound(structure: ModelStructure, theta: np.ndarray, covarianc
     """
     w = np.asarray(w, float)
     cov = np.asarray(covariance, float)
-    x = np.concatenate([theta, [delay]]) if delay_estimated else np.asarray(theta, float).copy()
     g0 = frequency_response(structure, theta, delay, w)
-    grads = np.empty((x.size, w.size), dtype=complex)
-    for i in range(x.size):
-        h = 1e-6 * max(1.0, abs(x[i]))
-        xp = x.copy()
-        xp[i] += h
-        th, d = (xp[:-1], xp[-1]) if delay_estimated else (xp, delay)
-        grads[i] = (frequency_response(structure, th, d, w) - g0) / h
+    den, num = structure.split(theta)
+    s = 1j * w
+    a = np.polyval(den[: structure.n_free_poles + 1], s)  # A(s), without the integrators
+    base = np.exp(-s * delay) / np.polyval(den, s)  # e^{-s delay} / (s^K A(s))
+    # analytic gradient: dG/da_i = -G s^i / A, dG/db_i = s^i e^{-s delay} / (s^K A), dG/d delay = -s G
+    n_a, n_b = structure.n_free_poles, num.size
+    grads = [-g0 * s ** i / a for i in range(n_a - 1, -1, -1)] + [base * s ** i for i in range(n_b - 1, -1, -1)]
+    if delay_estimated:
+        grads.append(-s * g0)
+    grads = np.array(grads)
     var = (np.einsum("iw,ij,jw->w", grads.real, cov, grads.real)
            + np.einsum("iw,ij,jw->w", grads.imag, cov, grads.imag))
     return k * np.sqrt(np.clip(var, 0, None)) / np.abs(g0)

@@ -251,3 +251,46 @@ def test_rotorpy_on_its_own_controller_learns_in_hover():
     wind = fly_channel_chain(loops, make, np.zeros((n, 3)), ["hummingbird", "lab-quad"], 1, wind=gust,
                              disturbance="wind").ratios()
     assert all(r[0] <= 0.10 for r in wind.values()), (wind, fits)
+
+
+def test_rotorpy_mixed_fleet_with_the_add_on_dob_learns_in_hover():
+    """A mixed fleet on rotorpy: its hummingbird flown by ilcdob's PID + DOB (on the airframe identified from its
+    SE3 flights), a 1.4 kg airframe of our own on its SE3 controller's position setpoint with the add-on DOB,
+    0.5 mm noise, the paper's hover disturbance: learning each from the other leaves <= 5 % of the error with
+    the DOB alone (15 s trials; the 30 s figures of three vehicles, 0.6-1.9 %, are in docs/closed_loop.md)."""
+    pytest.importorskip("rotorpy")
+    from ilcdob.loop import build_loop
+    from ilcdob.specs import DOBSpec, PIDSpec, SystemSpec
+    from ilcdob.validation.channel_chain import fly_channel_chain, identify_channel_loops
+    from ilcdob.validation.channel_id import identify_channel
+    from ilcdob.validation.scenarios import scenario
+    from ilcdob.vehicles.dob_loop import PaperLoopVehicle
+    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, shipped_airframe
+
+    ts = 0.01
+    base = shipped_airframe("hummingbird")
+    lab = {**base, "mass": 1.4, "Ixx": 0.012, "Iyy": 0.012, "Izz": 0.022,
+           "rotor_pos": {k: 1.5 * np.asarray(v) for k, v in base["rotor_pos"].items()}}
+
+    def make(name, seed, cmd=None, wind=None):
+        own = name == "lab-quad"
+        return RotorpyVehicle(name, ts, noise_std=5e-4, seed=seed, airframe=lab if own else None,
+                              command_disturbance=cmd, wind=wind, position_gains=((4, 4, 10), (3, 3, 7)) if own else None)
+
+    pid = PIDSpec(kp=3.0, ki=0.3, kd=2.42, derivative_filter=0.05, acceleration_feedforward=True)
+    airframe = identify_channel(make, "hummingbird", ts, "acceleration", "x", 15.0).airframe
+    paper = build_loop(SystemSpec("hummingbird", plant=airframe, controller=pid, dob=DOBSpec(3, 0.15)), ts)
+    loops, _ = identify_channel_loops(make, {"lab-quad": "position"}, ts, duration=15.0, dob=DOBSpec(3, 0.1))
+    loops["hummingbird"] = {"x": paper}
+    assert loops["lab-quad"]["x"].dob == DOBSpec(3, 0.1)
+
+    def make_mixed(name, seed, cmd, wind):
+        vehicle = make(name, seed, cmd, wind)
+        return PaperLoopVehicle(vehicle, {"x": paper, "y": pid, "z": pid}) if name == "hummingbird" else vehicle
+
+    sc = scenario(1)
+    chain = fly_channel_chain(loops, make_mixed, np.zeros((1500, 3)), ["hummingbird", "lab-quad"], 1,
+                              command_disturbance=lambda tt: np.array([float(sc.disturbance(np.array([tt]))[0]),
+                                                                       0.0, 0.0]))
+    ratios = chain.ratios()
+    assert all(r[0] <= 0.05 for r in ratios.values()), ratios

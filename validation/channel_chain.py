@@ -110,7 +110,8 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
         fits[name] = {ax: identify_channel(lambda nm, seed: make(nm, seed, None, None), name, ts, channel, ax,
                                            duration) for ax in axes}
         loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
-                                        fits[name][ax].airframe) for ax in axes}
+                                        fits[name][ax].airframe, None, fits[name][ax].identification)
+                       for ax in axes}
         if dob is not None:
             if any(fits[name][ax].airframe is None for ax in axes):
                 raise SpecError(f"`dob`: vehicle {name!r} logs no commanded acceleration, so no airframe was "
@@ -119,7 +120,8 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
             fits[name] = {ax: identify_channel(lambda nm, seed: dobbed(nm, seed, None, None), name, ts, channel, ax,
                                                duration) for ax in axes}
             loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
-                                            loops[name][ax].airframe, dob) for ax in axes}
+                                            loops[name][ax].airframe, dob, fits[name][ax].identification)
+                           for ax in axes}
     return loops, fits
 
 

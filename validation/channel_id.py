@@ -32,7 +32,7 @@ import numpy as np
 from ilcdob.errors import SpecError
 from ilcdob.fleet import AXES
 from ilcdob.signals import FlightData, check_grid
-from ilcdob.specs import PlantSpec
+from ilcdob.specs import IdentificationSpec, PlantSpec
 from ilcdob.uncertainty import ModelStructure
 from ilcdob.vehicles.closed_loop import CHANNEL_UNITS, ClosedLoopVehicle, check_channel, fly_closed_loop
 from ilcdob.design.maps.flown import rigid_body_split
@@ -80,6 +80,10 @@ class ChannelFit:
         Where the flights logged the commanded acceleration: the airframe's fit, m/s^2 -> m (module docstring).
     airframe_fit : float or None
         Its held-out fit, %.
+    identification : IdentificationSpec or None
+        The chosen fit's parameters and covariance: the channel map's Delta set. The chirp is added outside
+        the loop and the sensor noise does not reach it, so the output-error fit and its covariance are those
+        of open-loop data.
     """
 
     name: str
@@ -92,6 +96,7 @@ class ChannelFit:
     fits: dict[str, float]
     airframe: PlantSpec | None = None
     airframe_fit: float | None = None
+    identification: IdentificationSpec | None = None
 
     @property
     def drag(self) -> float | None:
@@ -196,7 +201,7 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
         airframe, airframe_fit = body.plant, body.fit_validation
     return ChannelFit(name, axis, channel, chosen.structure, chosen.plant, chosen.fit_estimation,
                       chosen.fit_validation, {_label(c.structure): c.fit_validation for c in candidates},
-                      airframe, airframe_fit)
+                      airframe, airframe_fit, chosen.identification)
 
 
 def _command_flight(flight: FlightData) -> FlightData:

@@ -246,12 +246,15 @@ class Candidate:
         Its fit ``u -> y``.
     fit_estimation, fit_validation : float
         Fit (%) on the estimation and on the held-out flight.
+    identification : IdentificationSpec or None
+        Its parameters and their covariance (the model's Delta set, :class:`~ilcdob.specs.IdentificationSpec`).
     """
 
     structure: ModelStructure
     plant: PlantSpec
     fit_estimation: float
     fit_validation: float
+    identification: IdentificationSpec | None = None
 
 
 def fit_candidates(est: FlightData, val: FlightData, structures: Sequence[ModelStructure]
@@ -277,7 +280,7 @@ def fit_candidates(est: FlightData, val: FlightData, structures: Sequence[ModelS
     for st in structures:
         fit = tfest(est, "u", "y", st, validation=val)
         candidates.append(Candidate(st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay), fit.fit_estimation,
-                                    fit.fit_validation))
+                                    fit.fit_validation, fit.identification_spec(f"{est.source}; held out: {val.source}")))
     best = max(c.fit_validation for c in candidates)
     return candidates, next(c for c in candidates if c.fit_validation >= best - 1.0)
 

@@ -41,7 +41,8 @@ import numpy as np
 from ilcdob.discretize import DiscreteBlock, plant_block, q_block
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import STABILITY_MARGIN
-from ilcdob.specs import DOBSpec, PlantSpec
+from ilcdob.specs import DOBSpec, IdentificationSpec, PlantSpec
+from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 from .closed_loop import CHANNEL_UNITS, check_channel
 
 __all__ = ["ChannelLoop", "channel_loop"]
@@ -72,6 +73,9 @@ class ChannelLoop:
     dob : DOBSpec or None
         The add-on DOB's ``Q`` when the vehicle flies one (:class:`~ilcdob.vehicles.dob_loop.AddOnDOB`, built on
         ``airframe``); None: the vehicle's loop alone.
+    identification : IdentificationSpec or None
+        The channel fit's parameters and covariance (:attr:`ilcdob.validation.channel_id.ChannelFit.identification`):
+        its Delta set (:meth:`delta`).
     """
 
     name: str
@@ -81,6 +85,7 @@ class ChannelLoop:
     channel_gain: float = 1.0
     airframe: PlantSpec | None = None
     dob: DOBSpec | None = None
+    identification: IdentificationSpec | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -96,6 +101,9 @@ class ChannelLoop:
         if self.airframe is not None and not isinstance(self.airframe, PlantSpec):
             raise SpecError(f"`airframe`: got {type(self.airframe).__name__}, expected a PlantSpec (commanded "
                             "acceleration -> position) or None")
+        if self.identification is not None and not isinstance(self.identification, IdentificationSpec):
+            raise SpecError(f"`identification`: got {type(self.identification).__name__}, expected an "
+                            "IdentificationSpec (the channel fit's parameters and covariance) or None")
         if self.dob is not None and not isinstance(self.dob, DOBSpec):
             raise SpecError(f"`dob`: got {type(self.dob).__name__}, expected a DOBSpec (the add-on DOB's Q) or None")
         if self.dob is not None and self.airframe is None:
@@ -146,13 +154,45 @@ class ChannelLoop:
         """The loop the learning assumes: the identified one itself."""
         return self
 
+    def delta(self, w: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """The channel map's multiplicative uncertainty ``|Delta(jw)|`` at 3 standard deviations of its fit
+        (:func:`~ilcdob.uncertainty.multiplicative_bound`), times ``scale``: ``Gd`` and ``Gf`` share it.
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+        scale : float
+            Multiplier (> 0) of the identified standard deviations.
+
+        Returns
+        -------
+        numpy.ndarray
+            One bound per frequency.
+
+        Raises
+        ------
+        SpecError
+            No identification, or a bad ``scale``.
+        """
+        ident = self.identification
+        if ident is None:
+            raise SpecError(f"vehicle {self.name!r}: its channel map has no identification (parameters and "
+                            "covariance), so no uncertainty set; identify it (identify_channel_loops)")
+        if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+            raise SpecError(f"`scale`: got {scale!r}, expected a multiplier > 0 of the standard deviations")
+        return scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),
+                                            np.asarray(ident.parameters), np.asarray(ident.covariance),
+                                            self.disturbance_map.delay, ident.delay_estimated, w)
+
     def poles(self) -> np.ndarray:
         """Poles of ``Gf`` (z-plane, analytic); ``Gd`` has the add-on DOB's ``Q``'s besides."""
         return self.block.poles
 
 
 def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0,
-                 airframe: PlantSpec | None = None, dob: DOBSpec | None = None) -> ChannelLoop:
+                 airframe: PlantSpec | None = None, dob: DOBSpec | None = None,
+                 identification: IdentificationSpec | None = None) -> ChannelLoop:
     """The loop of a vehicle from its identified channel map ``G_ch`` (channel -> position).
 
     ``Gd = G_ch / K``, times ``1 - Q`` with the add-on DOB (module docstring).
@@ -172,6 +212,8 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         The airframe's identified model (:attr:`ChannelLoop.airframe`).
     dob : DOBSpec, optional
         The add-on DOB the vehicle flew ``channel_map``'s flights with (:attr:`ChannelLoop.dob`).
+    identification : IdentificationSpec, optional
+        The fit's parameters and covariance (:attr:`ChannelLoop.identification`).
 
     Returns
     -------
@@ -188,4 +230,4 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         raise SpecError(f"`channel_gain`: got {channel_gain!r}, expected a gain > 0")
     num = [c / channel_gain for c in channel_map.num]
     return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
-                       float(channel_gain), airframe, dob)
+                       float(channel_gain), airframe, dob, identification)

@@ -1,0 +1,152 @@
+"""Will learning help between vehicles that learn through a setpoint channel? The exact worst case per frequency.
+
+For the pair of :mod:`ilcdob.design.maps.channel_filters`, a vehicle's ratio ``R = Gd/Gf = (1 - Q)/K`` is
+exact whatever its loop (``K`` is the controller's gain, ``Q`` software), so per frequency the learner's
+error with learning over its error without, for any true maps of both vehicles, is::
+
+    T(w) = e_j / e'_j = 1 - F(w) Gd_{j-1} / Gd_hat_{j-1}
+
+with ``F`` what the law puts in front of the Theorem's filters: the learning band's gain and the factor
+of a sampling zero inverted with zero phase error (:mod:`ilcdob.design.filters.noncausal`). Only the
+source's model error matters; the learner's cancels.
+
+* A vehicle on its own controller carries the uncertainty of its identified channel map,
+  ``Gd = Gd_hat (1 + Delta)`` with ``|Delta(jw)| <= W(w)`` (3 sigma of its fit,
+  :meth:`ilcdob.vehicles.channel_loop.ChannelLoop.delta`, or a stated bound), so
+  ``max |T| = |1 - F| + |F| W``: learning helps where ``|F| W < 1 - |1 - F|``, with the Theorem's
+  filters (``F = 1``) wherever ``W < 1``.
+* ilcdob's PID + DOB loop carries its plant's, and ``Gd/Gd_hat`` is the Moebius map of
+  :func:`~.theorem.exact_worst_ratio`, evaluated by it.
+
+What it covers: every ``Delta`` of any phase inside the disc, the disturbance part of the error over
+trials long against the filters' memory; not the source's own learning signal, reference terms or noise.
+Units: rad/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ilcdob.errors import SpecError
+from ilcdob.loop import LoopSystem
+from ilcdob.vehicles.channel_loop import ChannelLoop
+
+from ..filters.band import LearningBand
+from ..maps.channel_filters import channel_filters
+from ..sets.delta import delta_bound
+from ..sets.worst_case import mask_intervals
+from .theorem import EXACT_TOL, exact_worst_ratio
+
+__all__ = ["ChannelPairCheck", "channel_check"]
+
+
+@dataclass(frozen=True)
+class ChannelPairCheck:
+    """The exact worst case of one pair (module docstring).
+
+    Attributes
+    ----------
+    source, target : str
+        Vehicles j-1 and j.
+    w : numpy.ndarray
+        Frequencies, rad/s.
+    bound : numpy.ndarray
+        ``W``: the radius of the source's Delta set on ``w``.
+    bound_source : str
+        ``"identification"`` (3 sigma of the fit, scaled) or ``"stated bound"``.
+    factor : numpy.ndarray
+        ``F`` on ``w`` (complex).
+    worst : numpy.ndarray
+        ``max |T|`` on ``w``.
+    """
+
+    source: str
+    target: str
+    w: np.ndarray
+    bound: np.ndarray
+    bound_source: str
+    factor: np.ndarray
+    worst: np.ndarray
+
+    @property
+    def worst_ratio(self) -> float:
+        """The largest worst-case ratio on the grid."""
+        return float(np.max(self.worst))
+
+    @property
+    def worst_w(self) -> float:
+        """Where it is, rad/s."""
+        return float(self.w[int(np.argmax(self.worst))])
+
+    @property
+    def holds(self) -> bool:
+        """Whether learning can make the error no worse at any frequency (within ``1 + EXACT_TOL``)."""
+        return bool(np.all(self.worst <= 1.0 + EXACT_TOL))
+
+    def worse_bands(self) -> list[tuple[float, float]]:
+        """The frequency bands (rad/s) where the worst case exceeds ``1 + EXACT_TOL``."""
+        return mask_intervals(self.w, self.worst > 1.0 + EXACT_TOL)
+
+    def __repr__(self) -> str:
+        verdict = "never worse" if self.holds else f"can be worse in {self.worse_bands()} rad/s"
+        return (f"<ChannelPairCheck {self.source!r} -> {self.target!r}: worst ratio {self.worst_ratio:.4g} at "
+                f"{self.worst_w:.4g} rad/s ({self.bound_source}); {verdict}>")
+
+
+def channel_check(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *,
+                  band: LearningBand | None = None, w: np.ndarray | None = None, scale: float = 1.0,
+                  bound: float | None = None) -> ChannelPairCheck:
+    """The exact worst case of ``target`` learning from ``source`` (module docstring).
+
+    Parameters
+    ----------
+    source, target : ChannelLoop or LoopSystem
+        Vehicles j-1 and j (:func:`~ilcdob.design.maps.channel_filters.channel_filters`).
+    band : LearningBand, optional
+        The learning band the law flies (default: none, the Theorem's filters).
+    w : array_like, optional
+        Frequencies, rad/s (default: 400 log-spaced from 0.01 rad/s to 0.999 Nyquist).
+    scale : float
+        Multiplier (> 0) of the identified standard deviations.
+    bound : float, optional
+        A stated multiplicative bound in (0, 1) on the source's map instead of its identification.
+
+    Returns
+    -------
+    ChannelPairCheck
+
+    Raises
+    ------
+    SpecError
+        As :func:`~ilcdob.design.maps.channel_filters.channel_filters`; a source with neither an
+        identification nor a bound; a bad ``scale``, ``bound`` or ``band``.
+    """
+    lf = channel_filters(source, target)
+    ts = source.ts
+    w = np.geomspace(0.01, 0.999 * np.pi / ts, 400) if w is None else np.asarray(w, float)
+    if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w <= 0) or np.any(w >= np.pi / ts):
+        raise SpecError(f"`w`: expected frequencies in (0, {np.pi / ts:.6g}) rad/s (below Nyquist)")
+    if band is not None and not isinstance(band, LearningBand):
+        raise SpecError(f"`band`: got {type(band).__name__}, expected a LearningBand or None")
+    with np.errstate(all="ignore"):
+        factor = lf.L1.freqresp(w) / lf.L1.exact_freqresp(w)
+    if band is not None:
+        factor = factor * band.response(w)
+    if isinstance(source, LoopSystem):
+        got = delta_bound(source.spec, ts, w, scale, bound)
+        if got is None:
+            raise SpecError(f"system {source.name!r}: neither an identification nor a stated bound, so no Delta set")
+        _, radius, origin = got
+        worst = exact_worst_ratio(source, w, radius, factor)
+        origin = "stated bound" if origin == "fleet bound" and bound is not None else origin
+    else:
+        if bound is not None:
+            if not (isinstance(bound, (int, float)) and np.isfinite(bound) and 0 < bound < 1):
+                raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+            radius, origin = np.full(w.size, float(bound)), "stated bound"
+        else:
+            radius, origin = source.delta(w, scale), "identification"
+        worst = np.abs(1.0 - factor) + np.abs(factor) * radius
+    return ChannelPairCheck(source.name, target.name, w, np.asarray(radius, float), origin, factor, worst)
