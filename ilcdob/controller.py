@@ -85,12 +85,31 @@ class DisturbanceObserver:
         self.d_hat = 0.0
 
     def estimate(self, measurement: float) -> float:
-        """The estimate of this sample, m/s^2, from the measured position ``y_m[k]`` (m); also :attr:`d_hat`."""
+        """The estimate of this sample.
+
+        Parameters
+        ----------
+        measurement : float
+            The measured position ``y_m[k]``, m.
+
+        Returns
+        -------
+        float
+            ``d_hat[k]``, m/s^2 (also :attr:`d_hat`).
+        """
         self.d_hat = self._m.output(measurement) - self._q.output()
         return self.d_hat
 
     def update(self, command: float, measurement: float) -> None:
-        """Advance with this sample's command ``u2[k]`` (m/s^2, as the vehicle received it) and ``y_m[k]`` (m)."""
+        """Advance both blocks by one sample.
+
+        Parameters
+        ----------
+        command : float
+            ``u2[k]``, m/s^2, as the vehicle received it.
+        measurement : float
+            ``y_m[k]``, m.
+        """
         self._q.update(command)
         self._m.update(measurement)
 

@@ -68,12 +68,34 @@ class ChannelView:
     inverse: Callable[[np.ndarray], np.ndarray]
 
     def ratio(self, w: np.ndarray) -> np.ndarray:
-        """``R = Gd/Gf = (1 - Q)/K`` at ``w`` rad/s."""
+        """``R = Gd/Gf = (1 - Q)/K``.
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Its response on ``z = e^{jwTs}``.
+        """
         one = 1.0 if self.q is None else 1.0 - self.q.response(w)
         return one / self.gain * np.ones(np.shape(w))
 
     def ratio_roots(self, one: bool) -> tuple[np.ndarray, np.ndarray]:
-        """Zeros and poles of ``1 - Q`` (none without a DOB); the zero ``z = 1`` only with ``one``."""
+        """Zeros and poles of ``1 - Q`` (none without a DOB).
+
+        Parameters
+        ----------
+        one : bool
+            Include the zero ``z = 1`` (False where it cancels against the source's).
+
+        Returns
+        -------
+        (numpy.ndarray, numpy.ndarray)
+            Zeros and poles, z-plane.
+        """
         zeros, poles = _one_minus_roots(self.q, self.name)
         return (np.append(zeros, 1.0 + 0j) if one and self.q is not None else zeros), poles
 
@@ -129,13 +151,33 @@ def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
 
 
 def learning_channel(vehicle: ChannelLoop | LoopSystem) -> str:
-    """The channel a vehicle learns through: its own, or ``"acceleration"`` for ilcdob's PID + DOB."""
+    """The channel a vehicle learns through.
+
+    Parameters
+    ----------
+    vehicle : ChannelLoop or LoopSystem
+
+    Returns
+    -------
+    str
+        Its own channel, or ``"acceleration"`` for ilcdob's PID + DOB.
+    """
     return vehicle.channel if isinstance(vehicle, ChannelLoop) else "acceleration"
 
 
 def channel_gf(vehicle: ChannelLoop | LoopSystem) -> ct.StateSpace:
-    """``Gf`` of the vehicle's model on its channel (discrete): :attr:`ChannelLoop.G_f`, or ``-G_f`` of ilcdob's
-    PID + DOB loop (the acceleration feed-forward is ``-d_f``, module docstring)."""
+    """``Gf`` of the vehicle's model on its channel.
+
+    Parameters
+    ----------
+    vehicle : ChannelLoop or LoopSystem
+
+    Returns
+    -------
+    control.StateSpace
+        Discrete: :attr:`ChannelLoop.G_f`, or ``-G_f`` of ilcdob's PID + DOB loop (the acceleration
+        feed-forward is ``-d_f``, module docstring).
+    """
     if isinstance(vehicle, ChannelLoop):
         return vehicle.G_f
     return -vehicle.nominal.G_f

@@ -104,7 +104,17 @@ class AddOnDOB:
         self.reset()
 
     def channel_gain(self, channel: str) -> np.ndarray:
-        """The vehicle's own (:meth:`RotorpyVehicle.channel_gain <ilcdob.vehicles.rotorpy_vehicle.RotorpyVehicle.channel_gain>`)."""
+        """The wrapped vehicle's ``K`` (the DOB leaves it as it is).
+
+        Parameters
+        ----------
+        channel : {"position", "velocity", "acceleration"}
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(3,)``, as the vehicle's ``channel_gain``.
+        """
         return self.vehicle.channel_gain(channel)
 
     @property
@@ -179,6 +189,16 @@ class PaperLoopVehicle:
 
     def channel_gain(self, channel: str) -> np.ndarray:
         """1 on the acceleration channel, the only one this loop offers.
+
+        Parameters
+        ----------
+        channel : str
+            Must be ``"acceleration"``.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(3,)`` ones.
 
         Raises
         ------
