@@ -495,8 +495,8 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     ------
     SpecError
         Not vehicles, other sample times, a target without a DOB after a source with one, a bad band, limit or
-        disturbance; off the command, an airframe
-        missing or without a rigid body to split off, or a drag too small to learn the wind from.
+        disturbance; off the command, an airframe missing or without a rigid body to split off, or a drag too
+        small to learn the wind from.
     """
     check_disturbance(disturbance)
     lf = channel_filters(source, target)

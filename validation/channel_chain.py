@@ -15,7 +15,7 @@ No ilcdob controller flies: the vehicles hold their paths with their own loops, 
 added to the setpoint row of each vehicle's channel. With ``dob=`` the vehicles fly the paper's DOB on top
 (:class:`~ilcdob.vehicles.dob_loop.AddOnDOB`, built on each airframe identified in step 1, after which the
 channel is identified again with the DOB flying), and :func:`fly_channel_chain` flies them so. A vehicle
-whose loops are :class:`~ilcdob.loop.LoopSystem`\ s is ilcdob's PID + DOB (its ``make`` returns a
+whose loops are :class:`~ilcdob.loop.LoopSystem` objects is ilcdob's PID + DOB (its ``make`` returns a
 :class:`~ilcdob.vehicles.dob_loop.PaperLoopVehicle`): a mixed fleet. Units: s, m, m/s, m/s^2.
 """
 
@@ -107,21 +107,22 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
     for name, channel in channels.items():
         check_channel(channel)
         gain = np.asarray(make(name, 0, None, None).channel_gain(channel), float)
-        fits[name] = {ax: identify_channel(lambda nm, seed: make(nm, seed, None, None), name, ts, channel, ax,
-                                           duration) for ax in axes}
-        loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
-                                        fits[name][ax].airframe, None, fits[name][ax].identification)
-                       for ax in axes}
+
+        def identified(flown: MakeDisturbed, airframes: Mapping[str, object] | None, q: DOBSpec | None) -> None:
+            fits[name] = {ax: identify_channel(lambda nm, seed: flown(nm, seed, None, None), name, ts, channel, ax,
+                                               duration) for ax in axes}
+            loops[name] = {ax: channel_loop(name, ts, channel, f.plant, float(gain[AXES.index(ax)]),
+                                            f.airframe if airframes is None else airframes[ax], q, f.identification)
+                           for ax, f in fits[name].items()}
+
+        identified(make, None, None)
         if dob is not None:
-            if any(fits[name][ax].airframe is None for ax in axes):
+            if any(f.airframe is None for f in fits[name].values()):
                 raise SpecError(f"`dob`: vehicle {name!r} logs no commanded acceleration, so no airframe was "
                                 "identified for its DOB to invert")
-            dobbed = with_dob(make, {name: {ax: replace(lp, dob=dob) for ax, lp in loops[name].items()}})
-            fits[name] = {ax: identify_channel(lambda nm, seed: dobbed(nm, seed, None, None), name, ts, channel, ax,
-                                               duration) for ax in axes}
-            loops[name] = {ax: channel_loop(name, ts, channel, fits[name][ax].plant, float(gain[AXES.index(ax)]),
-                                            loops[name][ax].airframe, dob, fits[name][ax].identification)
-                           for ax in axes}
+            airframes = {ax: lp.airframe for ax, lp in loops[name].items()}
+            identified(with_dob(make, {name: {ax: replace(lp, dob=dob) for ax, lp in loops[name].items()}}),
+                       airframes, dob)
     return loops, fits
 
 
@@ -171,8 +172,8 @@ class ChannelChain:
                 for name, flights in self.learning.items()}
 
 
-def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop | LoopSystem]], make: MakeDisturbed, reference: np.ndarray,
-                      order: Sequence[str], iterations: int = 3, *, velocity: np.ndarray | None = None,
+def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop | LoopSystem]], make: MakeDisturbed,
+                      reference: np.ndarray, order: Sequence[str], iterations: int = 3, *, velocity: np.ndarray | None = None,
                       acceleration: np.ndarray | None = None, command_disturbance: Callable | None = None,
                       wind: Callable | None = None, band: object = "auto", disturbance: str = "command"
                       ) -> ChannelChain:

@@ -48,7 +48,25 @@ def _setpoint(position: object, velocity: object, acceleration: object) -> list[
     return rows
 
 
-class AddOnDOB:
+class _Wrapped:
+    """A vehicle wrapped by a per-sample law acting on the sample's measurement (:meth:`position`, then ``track``)."""
+
+    vehicle: ClosedLoopVehicle | Vehicle
+    _y: np.ndarray | None = None
+
+    def position(self) -> np.ndarray:
+        """The wrapped vehicle's measured position, ``(3,)``, m; the law acts on it at the next ``track``."""
+        self._y = np.asarray(self.vehicle.position(), float)
+        return self._y.copy()
+
+    def _measured(self) -> np.ndarray:
+        """This sample's measurement, taken now if :meth:`position` was not asked for it."""
+        y = self._y if self._y is not None else np.asarray(self.vehicle.position(), float)
+        self._y = None
+        return y
+
+
+class AddOnDOB(_Wrapped):
     """A vehicle on its own controller with the paper's DOB added through its learning channel (module docstring).
 
     A :class:`~ilcdob.vehicles.closed_loop.ClosedLoopVehicle` itself: identify its channel and fly it as any
@@ -128,12 +146,7 @@ class AddOnDOB:
         for obs, _ in self._observers.values():
             obs.reset()
         self.d_hat = np.zeros(3)  # the last estimate, m/s^2
-        self._y: np.ndarray | None = None
-
-    def position(self) -> np.ndarray:
-        """The vehicle's measured position, ``(3,)``, m; the DOB estimates from it at the next :meth:`track`."""
-        self._y = np.asarray(self.vehicle.position(), float)
-        return self._y.copy()
+        self._y = None
 
     def track(self, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray) -> None:
         """One ``ts`` towards the setpoint with ``-d_hat/K`` added to the channel (module docstring).
@@ -149,7 +162,7 @@ class AddOnDOB:
             A row that is not three finite numbers.
         """
         rows = _setpoint(position, velocity, acceleration)
-        y = self._y if self._y is not None else np.asarray(self.vehicle.position(), float)
+        y = self._measured()
         row = CHANNELS.index(self.channel)
         for i, (obs, k) in self._observers.items():
             self.d_hat[i] = obs.estimate(float(y[i]))
@@ -158,10 +171,9 @@ class AddOnDOB:
         a_c = np.asarray(self.vehicle.commanded_acceleration, float)
         for i, (obs, _) in self._observers.items():
             obs.update(float(a_c[i]), float(y[i]))
-        self._y = None
 
 
-class PaperLoopVehicle:
+class PaperLoopVehicle(_Wrapped):
     """A :class:`~ilcdob.vehicles.interface.Vehicle` flown by ilcdob's PID + DOB, with a setpoint interface
     (module docstring).
 
@@ -216,12 +228,7 @@ class PaperLoopVehicle:
         self._ctl = axis_controllers(self.vehicle, self.loops)
         self.commanded_acceleration = np.zeros(3)
         self.d_hat = np.zeros(3)
-        self._y: np.ndarray | None = None
-
-    def position(self) -> np.ndarray:
-        """The vehicle's measured position, ``(3,)``, m."""
-        self._y = np.asarray(self.vehicle.position(), float)
-        return self._y.copy()
+        self._y = None
 
     def track(self, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray) -> None:
         """One sample of the PID + DOB towards the setpoint, its acceleration row fed forward.
@@ -237,7 +244,7 @@ class PaperLoopVehicle:
             A row that is not three finite numbers.
         """
         r, _, a_ff = _setpoint(position, velocity, acceleration)
-        y = self._y if self._y is not None else np.asarray(self.vehicle.position(), float)
+        y = self._measured()
         cmd = np.array([c.command(float(r[i]), float(y[i]), feedforward=float(a_ff[i]))
                         for i, c in enumerate(self._ctl)])
         self.d_hat = np.array([c.d_hat for c in self._ctl])
@@ -245,4 +252,3 @@ class PaperLoopVehicle:
         for c, a in zip(self._ctl, applied.tolist()):
             c.update(a)
         self.commanded_acceleration = applied
-        self._y = None
