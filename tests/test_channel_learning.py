@@ -212,59 +212,12 @@ def test_bad_channel_loops_name_what_is_wrong():
                         ChannelLoop("b", 0.02, "position", MAPS["b"], 6.5))
 
 
-def test_rotorpy_on_its_own_controller_learns_in_hover():
-    """rotorpy's SE3 controller holds two vehicles (rotorpy's hummingbird on its acceleration feed-forward,
-    a 1.4 kg airframe of our own on its position setpoint), 0.5 mm sensor noise, the paper's hover
-    disturbance: the first learning flight of each leaves <= 10 % of its error without learning. In Dryden
-    turbulence through rotorpy's own drag model the wind law (airframes and drags identified from the
-    logged commanded acceleration) leaves <= 10 % too (20 s trials; the 30 s figures of three vehicles,
-    1.2-2.5 % in Dryden, are in docs/closed_loop.md)."""
+@pytest.fixture(scope="module")
+def rotorpy_pair():
+    """rotorpy's hummingbird on its acceleration feed-forward and a 1.4 kg airframe of our own on its position
+    setpoint, both on rotorpy's SE3 controller, 0.5 mm noise, identified from 15 s chirp flights."""
     pytest.importorskip("rotorpy")
-    from ilcdob.validation.channel_chain import fly_channel_chain, identify_channel_loops
-    from ilcdob.validation.scenarios import scenario
-    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, shipped_airframe
-
-    ts = 0.01
-    base = shipped_airframe("hummingbird")
-    lab = {**base, "mass": 1.4, "Ixx": 0.012, "Iyy": 0.012, "Izz": 0.022,
-           "rotor_pos": {k: 1.5 * np.asarray(v) for k, v in base["rotor_pos"].items()}}
-    airframes = {"hummingbird": None, "lab-quad": lab}
-
-    def make(name, seed, cmd, wind):
-        return RotorpyVehicle(name, ts, noise_std=5e-4, seed=seed, airframe=airframes[name], command_disturbance=cmd,
-                              wind=wind, position_gains=((4, 4, 10), (3, 3, 7)) if name == "lab-quad" else None)
-
-    loops, fits = identify_channel_loops(make, {"hummingbird": "acceleration", "lab-quad": "position"}, ts,
-                                         duration=15.0)
-    assert loops["lab-quad"]["x"].channel_gain == 4.0 and loops["hummingbird"]["x"].channel == "acceleration"
-    sc = scenario(1)
-    n = 2000
-    chain = fly_channel_chain(loops, make, np.zeros((n, 3)), ["hummingbird", "lab-quad"], 1,
-                              command_disturbance=lambda tt: np.array([float(sc.disturbance(np.array([tt]))[0]),
-                                                                       0.0, 0.0]))
-    ratios = chain.ratios()
-    assert chain.chain == [("hummingbird", "lab-quad"), ("lab-quad", "hummingbird")]
-    assert all(r[0] <= 0.10 for r in ratios.values()), (ratios, fits)
-    from ilcdob.validation.vehicle_chain import dryden_gust
-
-    gust = dryden_gust(n * ts + 1.0, ts, 2.0, seed=7)
-    wind = fly_channel_chain(loops, make, np.zeros((n, 3)), ["hummingbird", "lab-quad"], 1, wind=gust,
-                             disturbance="wind").ratios()
-    assert all(r[0] <= 0.10 for r in wind.values()), (wind, fits)
-
-
-def test_rotorpy_mixed_fleet_with_the_add_on_dob_learns_in_hover():
-    """A mixed fleet on rotorpy: its hummingbird flown by ilcdob's PID + DOB (on the airframe identified from its
-    SE3 flights), a 1.4 kg airframe of our own on its SE3 controller's position setpoint with the add-on DOB,
-    0.5 mm noise, the paper's hover disturbance: learning each from the other leaves <= 5 % of the error with
-    the DOB alone (15 s trials; the 30 s figures of three vehicles, 0.6-1.9 %, are in docs/closed_loop.md)."""
-    pytest.importorskip("rotorpy")
-    from ilcdob.loop import build_loop
-    from ilcdob.specs import DOBSpec, PIDSpec, SystemSpec
-    from ilcdob.validation.channel_chain import fly_channel_chain, identify_channel_loops
-    from ilcdob.validation.channel_id import identify_channel
-    from ilcdob.validation.scenarios import scenario
-    from ilcdob.vehicles.dob_loop import PaperLoopVehicle
+    from ilcdob.validation.channel_chain import identify_channel_loops
     from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, shipped_airframe
 
     ts = 0.01
@@ -275,22 +228,74 @@ def test_rotorpy_mixed_fleet_with_the_add_on_dob_learns_in_hover():
     def make(name, seed, cmd=None, wind=None):
         own = name == "lab-quad"
         return RotorpyVehicle(name, ts, noise_std=5e-4, seed=seed, airframe=lab if own else None,
-                              command_disturbance=cmd, wind=wind, position_gains=((4, 4, 10), (3, 3, 7)) if own else None)
+                              command_disturbance=cmd, wind=wind,
+                              position_gains=((4, 4, 10), (3, 3, 7)) if own else None)
 
+    loops, fits = identify_channel_loops(make, {"hummingbird": "acceleration", "lab-quad": "position"}, ts,
+                                         duration=15.0)
+    return make, loops, fits
+
+
+def _hover(tt):
+    from ilcdob.validation.scenarios import scenario
+
+    return np.array([float(scenario(1).disturbance(np.array([tt]))[0]), 0.0, 0.0])
+
+
+def test_rotorpy_on_its_own_controller_learns_in_hover(rotorpy_pair):
+    """rotorpy's SE3 controller holds the two vehicles (:func:`rotorpy_pair`), the paper's hover disturbance: the
+    first learning flight of each leaves <= 10 % of its error without learning. In Dryden turbulence through
+    rotorpy's own drag model the wind law (airframes and drags identified from the logged commanded
+    acceleration) leaves <= 10 % too (20 s trials; the 30 s figures of three vehicles, 1.2-2.5 % in Dryden,
+    are in docs/closed_loop.md)."""
+    from ilcdob.validation.channel_chain import fly_channel_chain
+    from ilcdob.validation.vehicle_chain import dryden_gust
+
+    make, loops, fits = rotorpy_pair
+    assert loops["lab-quad"]["x"].channel_gain == 4.0 and loops["hummingbird"]["x"].channel == "acceleration"
+    n = 2000
+    chain = fly_channel_chain(loops, make, np.zeros((n, 3)), ["hummingbird", "lab-quad"], 1,
+                              command_disturbance=_hover)
+    ratios = chain.ratios()
+    assert chain.chain == [("hummingbird", "lab-quad"), ("lab-quad", "hummingbird")]
+    assert all(r[0] <= 0.10 for r in ratios.values()), (ratios, fits)
+    gust = dryden_gust(n * 0.01 + 1.0, 0.01, 2.0, seed=7)
+    wind = fly_channel_chain(loops, make, np.zeros((n, 3)), ["hummingbird", "lab-quad"], 1, wind=gust,
+                             disturbance="wind").ratios()
+    assert all(r[0] <= 0.10 for r in wind.values()), (wind, fits)
+
+
+def test_rotorpy_mixed_fleet_with_the_add_on_dob_learns_in_hover(rotorpy_pair):
+    """A mixed fleet on rotorpy: its hummingbird flown by ilcdob's PID + DOB (on the airframe identified from its
+    SE3 flights), the airframe of our own on its SE3 position setpoint with the add-on DOB (its channel
+    identified again with the DOB flying), the paper's hover disturbance: learning each from the other leaves
+    <= 5 % of the error with the DOB alone (15 s trials; the 30 s figures of three vehicles, 0.6-1.9 %, are in
+    docs/closed_loop.md)."""
+    from dataclasses import replace
+
+    from ilcdob.loop import build_loop
+    from ilcdob.specs import DOBSpec, PIDSpec, SystemSpec
+    from ilcdob.validation.channel_chain import fly_channel_chain, with_dob
+    from ilcdob.validation.channel_id import identify_channel
+    from ilcdob.vehicles.dob_loop import PaperLoopVehicle
+
+    make, loops, fits = rotorpy_pair
+    ts, dob = 0.01, DOBSpec(3, 0.1)
     pid = PIDSpec(kp=3.0, ki=0.3, kd=2.42, derivative_filter=0.05, acceleration_feedforward=True)
-    airframe = identify_channel(make, "hummingbird", ts, "acceleration", "x", 15.0).airframe
-    paper = build_loop(SystemSpec("hummingbird", plant=airframe, controller=pid, dob=DOBSpec(3, 0.15)), ts)
-    loops, _ = identify_channel_loops(make, {"lab-quad": "position"}, ts, duration=15.0, dob=DOBSpec(3, 0.1))
-    loops["hummingbird"] = {"x": paper}
-    assert loops["lab-quad"]["x"].dob == DOBSpec(3, 0.1)
+    paper = build_loop(SystemSpec("hummingbird", plant=fits["hummingbird"]["x"].airframe, controller=pid,
+                                  dob=DOBSpec(3, 0.15)), ts)
+    lab = replace(loops["lab-quad"]["x"], dob=dob)
+    dobbed = with_dob(make, {"lab-quad": {"x": lab}})
+    fit = identify_channel(lambda nm, seed: dobbed(nm, seed, None, None), "lab-quad", ts, "position", "x", 15.0)
+    mixed = {"hummingbird": {"x": paper},
+             "lab-quad": {"x": channel_loop("lab-quad", ts, "position", fit.plant, 4.0, lab.airframe, dob,
+                                            fit.identification)}}
 
     def make_mixed(name, seed, cmd, wind):
         vehicle = make(name, seed, cmd, wind)
         return PaperLoopVehicle(vehicle, {"x": paper, "y": pid, "z": pid}) if name == "hummingbird" else vehicle
 
-    sc = scenario(1)
-    chain = fly_channel_chain(loops, make_mixed, np.zeros((1500, 3)), ["hummingbird", "lab-quad"], 1,
-                              command_disturbance=lambda tt: np.array([float(sc.disturbance(np.array([tt]))[0]),
-                                                                       0.0, 0.0]))
+    chain = fly_channel_chain(mixed, make_mixed, np.zeros((1500, 3)), ["hummingbird", "lab-quad"], 1,
+                              command_disturbance=_hover)
     ratios = chain.ratios()
     assert all(r[0] <= 0.05 for r in ratios.values()), ratios
