@@ -197,7 +197,8 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
                         figures: bool = True, overwrite: bool = False, progress: Progress | None = None,
                         argv: Sequence[str] | None = None, order: Sequence[str] | None = None,
                         sensor_noise: float | None = None, bandwidth: object = "auto",
-                        workers: int | None = None, figure_workers: int | None = None) -> Any:
+                        workers: int | None = None, figure_workers: int | None = None,
+                        controller: str = "ilcdob") -> Any:
     """Run the paper's scenarios on a fleet and write the reproduction folder (paper Sec. IV).
 
     Parameters
@@ -241,14 +242,20 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         Processes building and rendering the figures (:class:`ilcdob.validation.figures.FigureRenderer`;
         default one per usable core): on the linear plant the fleet's figures while the first
         scenario flies and each scenario's while the next flies, the others once every scenario is flown.
+    controller : {"ilcdob", "own"}
+        Who flies the vehicles' position loop: ilcdob's PID + DOB, or (``plant="rotorpy"`` only) rotorpy's own
+        SE3 controller with the learning on a setpoint channel (:mod:`ilcdob.validation.channel_reproduction`;
+        no fleet file, law, order, band or workers).
 
     Returns
     -------
-    ReproductionResult
+    ReproductionResult or ChannelReproduction
     """
     run = _Reproduction(list(scenarios), iterations, plant, seed, law, figures, order, sensor_noise, bandwidth,
-                        workers, figure_workers, progress).checked()
+                        workers, figure_workers, progress, controller).checked()
     output = _Output("reproduce", out, overwrite, argv)
+    if run.controller == "own":
+        return run.fly_own(output, fleet)
     return run.fly_vehicles(output, fleet) if plant == "rotorpy" else run.fly_fleet(output, fleet)
 
 
@@ -268,6 +275,7 @@ class _Reproduction:
     workers: int | None
     figure_workers: int | None
     progress: Progress | None
+    controller: str = "ilcdob"
 
     def checked(self) -> _Reproduction:
         """The settings with the law's name checked (:func:`ilcdob.design.law.laws.check_law`).
@@ -284,6 +292,12 @@ class _Reproduction:
         render_workers(self.figure_workers, name="figure_workers")  # a bad count fails before the run
         if self.plant not in ("linear", "nonlinear", "rotorpy"):
             raise SpecError(f"`plant`: got {self.plant!r}, expected 'linear', 'nonlinear' or 'rotorpy'")
+        if self.controller not in ("ilcdob", "own"):
+            raise SpecError(f"`--controller`: got {self.controller!r}, expected 'ilcdob' (its PID + DOB flies the "
+                            "vehicles) or 'own' (the vehicle's own controller, --plant rotorpy)")
+        if self.controller == "own" and self.plant != "rotorpy":
+            raise SpecError(f"`--controller own`: needs --plant rotorpy (got {self.plant!r}): the linear and nonlinear "
+                            "plants are ilcdob's own loop; rotorpy's vehicles fly their SE3 controller")
         if self.workers is not None and self.plant != "rotorpy":
             raise SpecError(f"`--workers`: got {self.workers}, but only `--plant rotorpy` flies in parallel (plant "
                             f"{self.plant!r})")
@@ -324,6 +338,42 @@ class _Reproduction:
         with FigureRenderer(self.figure_workers) as renderer:
             content = _report(res, self.figures, renderer)
         output.write(content, law=res.law)
+        return res
+
+    def fly_own(self, output: _Output, fleet: str | Path | None) -> Any:
+        """``--plant rotorpy --controller own``: identify rotorpy's vehicles' channels and fly the scenarios on their
+        own SE3 controllers (:func:`~ilcdob.validation.channel_reproduction.reproduce_channels`), write the folder.
+
+        Parameters
+        ----------
+        output : _Output
+            The reproduction folder.
+        fleet : str or Path or None
+            Must be None: the vehicles are the run's.
+
+        Returns
+        -------
+        ChannelReproduction
+
+        Raises
+        ------
+        SpecError
+            A fleet, order, law, band or workers given.
+        """
+        given = [opt for opt, v in (("--fleet", fleet), ("--order", self.order),
+                                    ("--law", None if self.law == "paper" else self.law),
+                                    ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth),
+                                    ("--workers", self.workers)) if v is not None]
+        if given:
+            raise SpecError(f"`--controller own` takes no {', '.join(given)}: it flies its own vehicles with the paper's "
+                            "law and the wind law, the band chosen from each trial, in one process")
+        output.check()
+        from ilcdob.validation.channel_reproduction import ChannelSettings, reproduce_channels
+
+        settings = ChannelSettings(dryden_seed=self.seed, **({} if self.sensor_noise is None else
+                                                             {"sensor_noise_std": self.sensor_noise}))
+        res = reproduce_channels(self.scenarios, self.iterations, settings, progress=self.progress)
+        output.write(res.files(self.figures), law="paper")
         return res
 
     def fly_fleet(self, output: _Output, fleet: str | Path | None) -> Any:

@@ -174,7 +174,16 @@ def _reproduce(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     res = uc.reproduce_to_folder(a.out, fleet=a.fleet, scenarios=a.scenarios, iterations=a.iterations,
                                  plant=a.plant, seed=a.seed, law=a.law, figures=not a.no_figures,
                                  overwrite=a.overwrite, progress=con.progress, argv=argv, order=a.order,
-                                 sensor_noise=a.sensor_noise, bandwidth=a.bandwidth, workers=a.workers)
+                                 sensor_noise=a.sensor_noise, bandwidth=a.bandwidth, workers=a.workers,
+                                 controller=a.controller)
+    if a.controller == "own":
+        con.note(f"wrote {a.out} ({time.perf_counter() - start:.1f} s, the vehicles' own controllers)")
+        for r in res.runs:
+            for name in r.order:
+                print(f"scenario {r.scenario} {r.channel:>12} {r.disturbance:>6} {r.law:>7} {name:>12}: no learning "
+                      f"{r.baseline_rmse[name]:.4f} m, learning / no learning "
+                      + ", ".join(f"{v:.4f}" for v in r.ratios[name]))
+        return 0
     con.note(f"wrote {a.out} ({time.perf_counter() - start:.1f} s, law {res.law})")
     for sr in res.scenarios:
         for name in sr.order:

@@ -375,6 +375,9 @@ _REPRODUCE = Command(
              help="linear: the fleet's models; nonlinear: identify and fly the 6-DOF quadrotors; rotorpy: identify "
                   "and fly rotorpy's multirotors in the paper's disturbance and in wind, every law (needs the "
                   "[rotorpy] extra)"),
+        flag("--controller", choices=("ilcdob", "own"), default="ilcdob",
+             help="who flies the position loop: ilcdob's PID + DOB, or (--plant rotorpy) the vehicles' own SE3 "
+                  "controller, learning through a setpoint channel (acceleration and position)"),
         SEED.but(type=int, help="seed of the sensor noise (rotorpy: of the Dryden turbulence)"),
         WORKERS.but(help="processes flying the scenarios, --plant rotorpy only (default 1)"),
         flag("--sensor-noise", type=float, help="white position-sensor noise of every flight, m (default: 0 linear, "
