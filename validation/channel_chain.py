@@ -173,7 +173,8 @@ class ChannelChain:
 
 
 def fly_channel_chain(loops: Mapping[str, Mapping[str, ChannelLoop | LoopSystem]], make: MakeDisturbed,
-                      reference: np.ndarray, order: Sequence[str], iterations: int = 3, *, velocity: np.ndarray | None = None,
+                      reference: np.ndarray, order: Sequence[str], iterations: int = 3, *,
+                      velocity: np.ndarray | None = None,
                       acceleration: np.ndarray | None = None, command_disturbance: Callable | None = None,
                       wind: Callable | None = None, band: object = "auto", disturbance: str = "command"
                       ) -> ChannelChain:

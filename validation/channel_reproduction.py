@@ -4,8 +4,9 @@ What ``ilcdob reproduce --plant rotorpy --controller own`` runs: rotorpy's multi
 here wrote) on rotorpy's own SE3 position controller, no ilcdob controller (the add-on DOB only when
 asked), the learning signal on a setpoint channel. Per channel:
 
-1. every vehicle's channel is identified on every axis a scenario learns (:func:`~.channel_chain.identify_channel_loops`:
-   two chirp flights per axis, the airframe fitted from the logged commanded acceleration);
+1. every vehicle's channel is identified on every axis a scenario learns
+   (:func:`~.channel_chain.identify_channel_loops`: two chirp flights per axis, the airframe fitted from the
+   logged commanded acceleration);
 2. every scenario is flown (:func:`~.channel_chain.fly_channel_chain`, the scenario's learning order, its
    reference from where the vehicles start) in the paper's disturbance with the paper's law, and in Dryden
    turbulence with the wind law and, in hover for comparison, the paper's.
@@ -299,9 +300,10 @@ class ChannelReproduction:
             f"{s.trial_s:g} s trials, {self.iterations} learning iteration(s); the learning signal on the "
             f"{' or the '.join(s.channels)} channel. Each channel map was identified from two "
             f"{s.identification_s:g} s chirp flights per axis. Disturbances: the paper's (on the command, x) with "
-            f"the paper's law; Dryden turbulence ({s.dryden_wind_20ft:g} m/s at 20 ft, the same frozen field every "
-            "trial) through rotorpy's drag, with the wind law and the paper's. Ratios are RMSE of the learning "
-            f"flight over the same vehicle's flight {base}. Run time {self.elapsed_s / 60:.1f} min. "
+            f"the paper's law; Dryden turbulence ({s.dryden_wind_20ft:g} m/s at 20 ft, the same frozen field of seed "
+            f"{s.dryden_seed} every trial) through rotorpy's drag, with the wind law and, in hover, the paper's. "
+            f"Ratios are RMSE of the learning flight over the same vehicle's flight {base}. "
+            f"Run time {self.elapsed_s / 60:.1f} min. "
             "Regenerate with `ilcdob reproduce --plant rotorpy --controller own --out <dir>` "
             "(needs `pip install 'ilcdob[rotorpy]'`); docs/closed_loop.md explains the law.", "",
             "## Identification (held-out fit, %)", "",

@@ -365,8 +365,8 @@ class _Reproduction:
                                     ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth),
                                     ("--workers", self.workers)) if v is not None]
         if given:
-            raise SpecError(f"`--controller own` takes no {', '.join(given)}: it flies its own vehicles with the paper's "
-                            "law and the wind law, the band chosen from each trial, in one process")
+            raise SpecError(f"`--controller own` takes no {', '.join(given)}: it flies its own vehicles with the "
+                            "paper's law and the wind law, the band chosen from each trial, in one process")
         output.check()
         from ilcdob.validation.channel_reproduction import ChannelSettings, reproduce_channels
 
