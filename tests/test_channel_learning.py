@@ -265,6 +265,7 @@ def test_rotorpy_on_its_own_controller_learns_in_hover(rotorpy_pair):
     assert all(r[0] <= 0.10 for r in wind.values()), (wind, fits)
 
 
+@pytest.mark.slow
 def test_rotorpy_mixed_fleet_with_the_add_on_dob_learns_in_hover(rotorpy_pair):
     """A mixed fleet on rotorpy: its hummingbird flown by ilcdob's PID + DOB (on the airframe identified from its
     SE3 flights), the airframe of our own on its SE3 position setpoint with the add-on DOB (its channel
