@@ -19,6 +19,7 @@ import numpy as np
 
 from .errors import SpecError
 from .names import check_name
+from .uncertainty import ModelStructure, multiplicative_bound
 
 __all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "LimitSpec",
            "SensorSpec", "SystemSpec", "GRAVITY", "check_noise_std",
@@ -461,6 +462,26 @@ class IdentificationSpec:
         cov = check_covariance(self.covariance, n, "identification.covariance")
         object.__setattr__(self, "parameters", params)
         object.__setattr__(self, "covariance", tuple(tuple(float(v) for v in row) for row in cov))
+
+    def bound(self, w: np.ndarray, delay: float) -> np.ndarray:
+        """The fit's multiplicative uncertainty ``|Delta(jw)|`` at 3 standard deviations
+        (:func:`ilcdob.uncertainty.multiplicative_bound`).
+
+        Parameters
+        ----------
+        w : array_like
+            Frequencies, rad/s.
+        delay : float
+            The model's input delay, s.
+
+        Returns
+        -------
+        numpy.ndarray
+            One bound per frequency.
+        """
+        return multiplicative_bound(ModelStructure(self.poles, self.zeros, self.integrators),
+                                    np.asarray(self.parameters), np.asarray(self.covariance), delay,
+                                    self.delay_estimated, w)
 
 
 @dataclass(frozen=True)

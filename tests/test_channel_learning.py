@@ -218,20 +218,12 @@ def rotorpy_pair():
     setpoint, both on rotorpy's SE3 controller, 0.5 mm noise, identified from 15 s chirp flights."""
     pytest.importorskip("rotorpy")
     from ilcdob.validation.channel_chain import identify_channel_loops
-    from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle, shipped_airframe
+    from ilcdob.validation.channel_reproduction import DEFAULT_VEHICLES, ChannelSettings
 
-    ts = 0.01
-    base = shipped_airframe("hummingbird")
-    lab = {**base, "mass": 1.4, "Ixx": 0.012, "Iyy": 0.012, "Izz": 0.022,
-           "rotor_pos": {k: 1.5 * np.asarray(v) for k, v in base["rotor_pos"].items()}}
-
-    def make(name, seed, cmd=None, wind=None):
-        own = name == "lab-quad"
-        return RotorpyVehicle(name, ts, noise_std=5e-4, seed=seed, airframe=lab if own else None,
-                              command_disturbance=cmd, wind=wind,
-                              position_gains=((4, 4, 10), (3, 3, 7)) if own else None)
-
-    loops, fits = identify_channel_loops(make, {"hummingbird": "acceleration", "lab-quad": "position"}, ts,
+    settings = ChannelSettings(vehicles=DEFAULT_VEHICLES[::2])  # hummingbird, lab-quad (its own gains kp 4, 4, 10)
+    assert [v.name for v in settings.vehicles] == ["hummingbird", "lab-quad"] and settings.sensor_noise_std == 5e-4
+    make = settings.make()
+    loops, fits = identify_channel_loops(make, {"hummingbird": "acceleration", "lab-quad": "position"}, settings.ts,
                                          duration=15.0)
     return make, loops, fits
 

@@ -62,7 +62,7 @@ from ilcdob.design.checks.figure import (TE_GAIN_ERROR, TITLE_Y, BodeCurve, draw
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import freqresp
-from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
+from ilcdob.uncertainty import ModelStructure, frequency_response
 
 if TYPE_CHECKING:
     from .campaign.statistics import CampaignResult
@@ -366,11 +366,9 @@ def identified_bounds(fleet: Fleet, w: np.ndarray) -> dict[str, tuple[np.ndarray
         if ident is None:
             continue
         structure = ModelStructure(ident.poles, ident.zeros, ident.integrators)
-        theta = np.asarray(ident.parameters)
         delay = spec.nominal_plant.delay
-        out[spec.name] = (frequency_response(structure, theta, delay, w),
-                          multiplicative_bound(structure, theta, np.asarray(ident.covariance), delay,
-                                               ident.delay_estimated, w))
+        out[spec.name] = (frequency_response(structure, np.asarray(ident.parameters), delay, w),
+                          ident.bound(w, delay))
     return out
 
 

@@ -25,6 +25,7 @@ a constant disturbance (its DOB removed it), and ``L2`` would integrate.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import control as ct
@@ -35,7 +36,7 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.vehicles.channel_loop import ChannelLoop
 
-from .closed_form import LearningFilters, _block, _plant_zeros, _zeros_without_one, matched
+from .closed_form import LearningFilters, _block, _inverse_gd_response, _plant_zeros, _zeros_without_one, matched
 
 __all__ = ["channel_filters", "channel_view", "channel_gf", "learning_channel", "ChannelView"]
 
@@ -137,15 +138,10 @@ def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
     if isinstance(vehicle, LoopSystem):
         src = vehicle.nominal
         q = _block(src, "Q")
-
-        def inverse(w):
-            p, m, c, qq = (_block(src, k).response(w) for k in ("P", "M", "C", "Q"))
-            return 1.0 / p + (m + c) / (1 - qq)
-
         # Gd^-1 = D/(P (1 - Q)): zeros the closed-loop poles; poles the zeros of P_hat and 1 - Q, M's and C's poles
         poles = np.concatenate([_plant_zeros(src), _one_minus_roots(q, vehicle.name)[0],
                                 _block(src, "M").poles, _block(src, "C").poles])
-        return ChannelView(vehicle.name, vehicle.ts, 1.0, q, src.poles(), poles, inverse)
+        return ChannelView(vehicle.name, vehicle.ts, 1.0, q, src.poles(), poles, partial(_inverse_gd_response, src))
     raise SpecError(f"got {type(vehicle).__name__}, expected a ChannelLoop (ilcdob.vehicles.channel_loop) or a "
                     "LoopSystem (ilcdob's PID + DOB)")
 

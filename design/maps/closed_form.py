@@ -48,6 +48,7 @@ becomes an anti-causal pole (stable inversion, :mod:`ilcdob.design.filters.nonca
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import control as ct
@@ -167,11 +168,15 @@ def _zeros_without_one(q: DiscreteBlock, what: str) -> np.ndarray:
     return np.delete(z, i)
 
 
+def _inverse_gd_response(loop: LoopSystem, w: np.ndarray) -> np.ndarray:
+    """``Gd^{-1} = 1/P + (M + C)/(1 - Q)`` of ``loop``'s blocks, evaluated from their responses (delta form)."""
+    p, m, c, q = (_block(loop, k).response(w) for k in ("P", "M", "C", "Q"))
+    return 1.0 / p + (m + c) / (1 - q)
+
+
 def _l1_exact(prev: LoopSystem, nxt: LoopSystem, w: np.ndarray) -> np.ndarray:
     """``-(1 - Q_j) (1/P_hat + (M + C)/(1 - Q_{j-1}))`` evaluated from block responses (delta form)."""
-    q_j = _block(nxt, "Q").response(w)
-    p, m, c, q = (_block(prev, k).response(w) for k in ("P", "M", "C", "Q"))
-    return -(1 - q_j) * (1.0 / p + (m + c) / (1 - q))
+    return -(1 - _block(nxt, "Q").response(w)) * _inverse_gd_response(prev, w)
 
 
 def _l2_exact(prev: LoopSystem, nxt: LoopSystem, w: np.ndarray) -> np.ndarray:
@@ -469,12 +474,7 @@ def inverse_gd_filter(loop: LoopSystem, model: bool = True) -> ZPKFilter:
     src = loop.nominal if model else loop
     poles = np.concatenate([_plant_zeros(src), one_minus_zeros(_block(src, "Q")), _block(src, "M").poles,
                             _block(src, "C").poles])
-
-    def exact(w):
-        p, m, c, q = (_block(src, k).response(w) for k in ("P", "M", "C", "Q"))
-        return 1.0 / p + (m + c) / (1 - q)
-
-    return matched(src.poles(), poles, src.ts, exact, f"Gd^-1 of {loop.name!r}")
+    return matched(src.poles(), poles, src.ts, partial(_inverse_gd_response, src), f"Gd^-1 of {loop.name!r}")
 
 
 def _finite_zeros(sys: ct.StateSpace) -> np.ndarray:

@@ -29,7 +29,7 @@ import numpy as np
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec, SystemSpec
-from ilcdob.uncertainty import ModelStructure, multiplicative_bound
+from ilcdob.uncertainty import ModelStructure
 
 __all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "check_scale", "disturbance_peak", "dense_grid",
            "MAX_DELTA_SAMPLES"]
@@ -327,7 +327,5 @@ def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale:
     ident = spec.identification
     if ident is None:
         return None
-    bnd = scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),
-                                       np.asarray(ident.parameters), np.asarray(ident.covariance),
-                                       spec.nominal_plant.delay, ident.delay_estimated, w)
+    bnd = scale * ident.bound(w, spec.nominal_plant.delay)
     return w, bnd, "identification"

@@ -307,6 +307,13 @@ class _Reproduction:
     def _noise(self) -> dict[str, float]:
         return {} if self.sensor_noise is None else {"sensor_noise_std": self.sensor_noise}
 
+    def _given(self, fleet: str | Path | None, *more: tuple[str, object]) -> list[str]:
+        """The options given that a run flying its own vehicles takes none of: fleet, order, a law other than the
+        paper's, a band other than ``auto``, and ``more`` (option, value) pairs."""
+        opts = (("--fleet", fleet), ("--order", self.order), ("--law", None if self.law == "paper" else self.law),
+                ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth), *more)
+        return [opt for opt, value in opts if value is not None]
+
     def fly_vehicles(self, output: _Output, fleet: str | Path | None) -> Any:
         """``--plant rotorpy``: identify and fly rotorpy's multirotors, write the folder; returns the result.
 
@@ -322,10 +329,7 @@ class _Reproduction:
         SpecError
             A fleet, order, law or band given: the run flies its own vehicles with every law.
         """
-        given = [opt for opt, v in (("--fleet", fleet), ("--order", self.order),
-                                    ("--law", None if self.law == "paper" else self.law),
-                                    ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth))
-                 if v is not None]
+        given = self._given(fleet)
         if given:
             raise SpecError(f"`--plant rotorpy` takes no {', '.join(given)}: it flies its own vehicles with every law "
                             "and the band chosen from each trial")
@@ -360,10 +364,7 @@ class _Reproduction:
         SpecError
             A fleet, order, law, band or workers given.
         """
-        given = [opt for opt, v in (("--fleet", fleet), ("--order", self.order),
-                                    ("--law", None if self.law == "paper" else self.law),
-                                    ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth),
-                                    ("--workers", self.workers)) if v is not None]
+        given = self._given(fleet, ("--workers", self.workers))
         if given:
             raise SpecError(f"`--controller own` takes no {', '.join(given)}: it flies its own vehicles with the "
                             "paper's law and the wind law, the band chosen from each trial, in one process")

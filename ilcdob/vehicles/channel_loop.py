@@ -42,7 +42,6 @@ from ilcdob.discretize import DiscreteBlock, plant_block, q_block
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import STABILITY_MARGIN
 from ilcdob.specs import DOBSpec, IdentificationSpec, PlantSpec
-from ilcdob.uncertainty import ModelStructure, multiplicative_bound
 from .closed_loop import CHANNEL_UNITS, check_channel
 
 __all__ = ["ChannelLoop", "channel_loop"]
@@ -181,9 +180,7 @@ class ChannelLoop:
                             "covariance), so no uncertainty set; identify it (identify_channel_loops)")
         if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
             raise SpecError(f"`scale`: got {scale!r}, expected a multiplier > 0 of the standard deviations")
-        return scale * multiplicative_bound(ModelStructure(ident.poles, ident.zeros, ident.integrators),
-                                            np.asarray(ident.parameters), np.asarray(ident.covariance),
-                                            self.disturbance_map.delay, ident.delay_estimated, w)
+        return scale * ident.bound(w, self.disturbance_map.delay)
 
     def poles(self) -> np.ndarray:
         """Poles of ``Gf`` (z-plane, analytic); ``Gd`` has the add-on DOB's ``Q``'s besides."""

@@ -30,7 +30,8 @@ from ilcdob.errors import SpecError
 
 from .interface import per_axis, trial_samples
 
-__all__ = ["CHANNELS", "CHANNEL_UNITS", "ClosedLoopVehicle", "ClosedLoopTrial", "fly_closed_loop", "check_channel"]
+__all__ = ["CHANNELS", "CHANNEL_UNITS", "ClosedLoopVehicle", "ClosedLoopTrial", "fly_closed_loop", "check_channel",
+           "setpoint_rows"]
 
 #: The setpoint channels a learning signal can enter through (module docstring), in the setpoint's row order.
 CHANNELS = ("position", "velocity", "acceleration")
@@ -56,6 +57,33 @@ def check_channel(channel: object, what: str = "channel") -> str:
         raise SpecError(f"`{what}`: got {channel!r}, expected one of {list(CHANNELS)} (position: a setpoint offset in "
                         "m; velocity, acceleration: feed-forward in m/s, m/s^2)")
     return str(channel)
+
+
+def setpoint_rows(position: object, velocity: object, acceleration: object) -> list[np.ndarray]:
+    """The three rows of one setpoint (:meth:`ClosedLoopVehicle.track`), checked, as new float arrays.
+
+    Parameters
+    ----------
+    position, velocity, acceleration : array_like
+        ``(3,)`` each, m, m/s, m/s^2.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        ``[position, velocity, acceleration]``, each ``(3,)`` (copies: a caller may add to them).
+
+    Raises
+    ------
+    SpecError
+        A row that is not three finite numbers.
+    """
+    rows = []
+    for what, value in (("position", position), ("velocity", velocity), ("acceleration", acceleration)):
+        v = np.array(value, float).reshape(-1)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise SpecError(f"`{what}`: got {value!r}, expected 3 finite values")
+        rows.append(v)
+    return rows
 
 
 @runtime_checkable

@@ -32,20 +32,10 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec
 
-from .closed_loop import CHANNELS, ClosedLoopVehicle, check_channel
+from .closed_loop import CHANNELS, ClosedLoopVehicle, check_channel, setpoint_rows
 from .interface import AXES, Vehicle, axis_controllers
 
 __all__ = ["AddOnDOB", "PaperLoopVehicle"]
-
-
-def _setpoint(position: object, velocity: object, acceleration: object) -> list[np.ndarray]:
-    rows = []
-    for what, value in (("position", position), ("velocity", velocity), ("acceleration", acceleration)):
-        v = np.array(value, float).reshape(-1)
-        if v.shape != (3,) or not np.all(np.isfinite(v)):
-            raise SpecError(f"`{what}`: got {value!r}, expected 3 finite values")
-        rows.append(v)
-    return rows
 
 
 class _Wrapped:
@@ -161,7 +151,7 @@ class AddOnDOB(_Wrapped):
         SpecError
             A row that is not three finite numbers.
         """
-        rows = _setpoint(position, velocity, acceleration)
+        rows = setpoint_rows(position, velocity, acceleration)
         y = self._measured()
         row = CHANNELS.index(self.channel)
         for i, (obs, k) in self._observers.items():
@@ -243,7 +233,7 @@ class PaperLoopVehicle(_Wrapped):
         SpecError
             A row that is not three finite numbers.
         """
-        r, _, a_ff = _setpoint(position, velocity, acceleration)
+        r, _, a_ff = setpoint_rows(position, velocity, acceleration)
         y = self._measured()
         cmd = np.array([c.command(float(r[i]), float(y[i]), feedforward=float(a_ff[i]))
                         for i, c in enumerate(self._ctl)])

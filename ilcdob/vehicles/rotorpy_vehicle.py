@@ -44,7 +44,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from .closed_loop import check_channel
+from .closed_loop import check_channel, setpoint_rows
 
 __all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe"]
 
@@ -261,12 +261,7 @@ class RotorpyVehicle:
         SpecError
             A setpoint that is not three finite numbers per row.
         """
-        rows = []
-        for what, value in (("position", position), ("velocity", velocity), ("acceleration", acceleration)):
-            v = np.asarray(value, float).reshape(-1)
-            if v.shape != (3,) or not np.all(np.isfinite(v)):
-                raise SpecError(f"`{what}`: got {value!r}, expected 3 finite values")
-            rows.append(v)
+        rows = setpoint_rows(position, velocity, acceleration)
         self._advance(rows[0] + np.array([0.0, 0.0, self.altitude]), rows[1], rows[2])
 
     def step(self, command: np.ndarray) -> np.ndarray:
