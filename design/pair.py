@@ -21,14 +21,13 @@ from typing import Any, Callable
 import numpy as np
 from scipy import signal as sps
 
-from ilcdob.vehicles.channel_loop import ChannelLoop
+from ilcdob.channel_loop import CHANNEL_UNITS, ChannelLoop
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.display import html_table
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 from ilcdob.specs import LimitSpec
-from ilcdob.vehicles.closed_loop import CHANNEL_UNITS
 
 from .filters.band import LearningBand, check_bandwidth, choose_band
 from .maps.channel_filters import channel_filters, channel_gf, channel_view, learning_channel
@@ -468,7 +467,7 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     Either may be a vehicle on its own controller, with or without the add-on DOB, or ilcdob's PID + DOB
     loop learning on its acceleration feed-forward (a mixed fleet).
 
-    The learning signal enters the target's channel (:attr:`ilcdob.vehicles.channel_loop.ChannelLoop.channel`) in that
+    The learning signal enters the target's channel (:attr:`ilcdob.channel_loop.ChannelLoop.channel`) in that
     channel's unit; the law is the paper's (the reference's share of the error is learned with the
     disturbance), through the learning band as every design (:mod:`.filters.band`).
 
@@ -485,7 +484,7 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
         Where the disturbance acts (:mod:`.maps.flown`): added to the command as the learning signal is (the
         paper's), an acceleration on the rigid body, or a wind velocity through each airframe's drag (the
         wind law); the last two through the airframe correction ``W`` of the vehicles' identified airframes
-        (:attr:`~ilcdob.vehicles.channel_loop.ChannelLoop.airframe`).
+        (:attr:`~ilcdob.channel_loop.ChannelLoop.airframe`).
 
     Returns
     -------

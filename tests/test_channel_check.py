@@ -19,7 +19,7 @@ from ilcdob.design.maps.channel_filters import channel_filters
 from ilcdob.design.pair import design_channel_pair
 from ilcdob.errors import SpecError
 from ilcdob.specs import DOBSpec, IdentificationSpec, PlantSpec
-from ilcdob.vehicles.channel_loop import channel_loop
+from ilcdob.channel_loop import channel_loop
 
 TS = 0.01
 # a position loop's channel map B/A (3 poles, 1 zero) and its fit's parameters (a2, a1, a0, b1, b0, delay)

@@ -1,4 +1,4 @@
-"""Learning among vehicles on their own controllers (ilcdob.vehicles.channel_loop, ilcdob.design.maps.channel_filters,
+"""Learning among vehicles on their own controllers (ilcdob.channel_loop, ilcdob.design.maps.channel_filters,
 ilcdob.validation.channel_chain).
 
 The filters are held to the Theorem's pair built here without ilcdob code: each map's zero-order-hold
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from ilcdob.vehicles.channel_loop import ChannelLoop, channel_loop
+from ilcdob.channel_loop import ChannelLoop, channel_loop
 from ilcdob.design.maps.channel_filters import channel_filters
 from ilcdob.design.pair import design_channel_pair
 from ilcdob.errors import SpecError, UnstableLoopError

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from ilcdob.errors import SpecError
-from ilcdob.vehicles.closed_loop import ClosedLoopVehicle, check_channel, fly_closed_loop
+from ilcdob.vehicles.closed_loop import ClosedLoopVehicle, fly_closed_loop
+from ilcdob.channel_loop import check_channel
 
 pytest.importorskip("rotorpy")
 

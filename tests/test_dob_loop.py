@@ -4,7 +4,7 @@ The vehicle here is written with scipy alone: an airframe ``1/(s (s + a) (tau s 
 scipy's zero-order hold (``scipy.linalg.expm`` of the augmented matrix), flown by a PD loop on its
 sampled state as rotorpy's SE3 loop is (``a_c = a_ff + kp (r - x) + kd (v_ref - v)``), a disturbance
 added to the command that the vehicle does not log. The DOB is given a wrong airframe model: the
-relation the learning relies on, ``Gd = (1 - Q) Gf / K``, holds whatever the model (ilcdob.vehicles.channel_loop).
+relation the learning relies on, ``Gd = (1 - Q) Gf / K``, holds whatever the model (ilcdob.channel_loop).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ What a lab whose vehicles keep their flight stack's position controller does, on
 
 1. :func:`identify_channel_loops`: per vehicle and axis the channel it learns through is identified from
    two chirp flights on its own controller (:func:`~.channel_id.identify_channel`) and becomes its
-   :class:`~ilcdob.vehicles.channel_loop.ChannelLoop` (``Gd = G_ch / K``, ``K`` the vehicle's channel gain).
+   :class:`~ilcdob.channel_loop.ChannelLoop` (``Gd = G_ch / K``, ``K`` the vehicle's channel gain).
 2. :func:`fly_channel_chain`: every vehicle flies the trial without learning, then the cyclic chain of
    :func:`~.reproduce.learning_chain` passes learning around the order, each learning signal computed
    from the previous flight's measured error by the closed-form design between the two vehicles'
@@ -26,14 +26,14 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ilcdob.vehicles.channel_loop import ChannelLoop, channel_loop
+from ilcdob.channel_loop import ChannelLoop, channel_loop, check_channel
 from ilcdob.design.maps.channel_filters import learning_channel
 from ilcdob.design.pair import PairDesign, design_channel_pair
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import DOBSpec
 from ilcdob.vehicles.dob_loop import AddOnDOB
-from ilcdob.vehicles.closed_loop import ClosedLoopTrial, ClosedLoopVehicle, check_channel, fly_closed_loop
+from ilcdob.vehicles.closed_loop import ClosedLoopTrial, ClosedLoopVehicle, fly_closed_loop
 from ilcdob.vehicles.interface import AXES
 
 from .channel_id import ChannelFit, identify_channel

@@ -19,7 +19,7 @@ wind velocity acts through (the wind law, docs/closed_loop.md). In simulation th
 the true state, so the commanded acceleration carries none of the sensor noise and the output-error
 fit is unbiased; on a real vehicle the estimator's noise reaches it through the loop.
 
-Units: s, m, and the channel's unit (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`).
+Units: s, m, and the channel's unit (:data:`~ilcdob.channel_loop.CHANNEL_UNITS`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,8 @@ from ilcdob.fleet import AXES
 from ilcdob.signals import FlightData, check_grid
 from ilcdob.specs import IdentificationSpec, PlantSpec
 from ilcdob.uncertainty import ModelStructure
-from ilcdob.vehicles.closed_loop import CHANNEL_UNITS, ClosedLoopVehicle, check_channel, fly_closed_loop
+from ilcdob.vehicles.closed_loop import ClosedLoopVehicle, fly_closed_loop
+from ilcdob.channel_loop import CHANNEL_UNITS, check_channel
 from ilcdob.design.maps.flown import rigid_body_split
 
 from .vehicle_chain import fit_candidates

@@ -27,7 +27,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 from ilcdob.specs import DOBSpec
-from ilcdob.vehicles.closed_loop import check_channel
+from ilcdob.channel_loop import check_channel
 
 from .channel_chain import ChannelChain, fly_channel_chain, identify_channel_loops
 from .channel_id import ChannelFit

@@ -12,7 +12,7 @@ source's model error matters; the learner's cancels.
 
 * A vehicle on its own controller carries the uncertainty of its identified channel map,
   ``Gd = Gd_hat (1 + Delta)`` with ``|Delta(jw)| <= W(w)`` (3 sigma of its fit,
-  :meth:`ilcdob.vehicles.channel_loop.ChannelLoop.delta`, or a stated bound), so
+  :meth:`ilcdob.channel_loop.ChannelLoop.delta`, or a stated bound), so
   ``max |T| = |1 - F| + |F| W``: learning helps where ``|F| W < 1 - |1 - F|``, with the Theorem's
   filters (``F = 1``) wherever ``W < 1``.
 * ilcdob's PID + DOB loop carries its plant's, and ``Gd/Gd_hat`` is the Moebius map of
@@ -31,7 +31,7 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
-from ilcdob.vehicles.channel_loop import ChannelLoop
+from ilcdob.channel_loop import ChannelLoop
 
 from ..filters.band import LearningBand
 from ..maps.channel_filters import channel_filters

@@ -1,7 +1,7 @@
 """The Theorem's filters between vehicles that learn through a setpoint channel (paper Sec. III; docs/closed_loop.md).
 
 Every vehicle here is seen through the channel its learning signal enters
-(:mod:`ilcdob.vehicles.channel_loop`): ``Gf = K G`` and ``Gd = (1 - Q) G`` with ``G = P/D`` of its loop,
+(:mod:`ilcdob.channel_loop`): ``Gf = K G`` and ``Gd = (1 - Q) G`` with ``G = P/D`` of its loop,
 ``Q`` the DOB's where it flies one (the add-on DOB, :mod:`ilcdob.vehicles.dob_loop`) and ``1 - Q`` read
 as 1 where it does not. ilcdob's PID + DOB loop is such a vehicle on its acceleration feed-forward
 (``K = 1``; a learning signal ``u`` there is ``-d_f`` of the paper's law). With the ratio
@@ -34,7 +34,7 @@ import numpy as np
 from ilcdob.discretize import DiscreteBlock
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
-from ilcdob.vehicles.channel_loop import ChannelLoop
+from ilcdob.channel_loop import ChannelLoop
 
 from .closed_form import LearningFilters, _block, _inverse_gd_response, _plant_zeros, _zeros_without_one, matched
 
@@ -142,7 +142,7 @@ def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
         poles = np.concatenate([_plant_zeros(src), _one_minus_roots(q, vehicle.name)[0],
                                 _block(src, "M").poles, _block(src, "C").poles])
         return ChannelView(vehicle.name, vehicle.ts, 1.0, q, src.poles(), poles, partial(_inverse_gd_response, src))
-    raise SpecError(f"got {type(vehicle).__name__}, expected a ChannelLoop (ilcdob.vehicles.channel_loop) or a "
+    raise SpecError(f"got {type(vehicle).__name__}, expected a ChannelLoop (ilcdob.channel_loop) or a "
                     "LoopSystem (ilcdob's PID + DOB)")
 
 

@@ -62,7 +62,7 @@ from scipy import signal as sps
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import PlantSpec
-from ilcdob.vehicles.channel_loop import ChannelLoop
+from ilcdob.channel_loop import ChannelLoop
 
 __all__ = ["rigid_body_split", "model_attitude", "airframe_path_filter", "disturbance_path", "check_disturbance",
            "DISTURBANCE_PATHS"]
@@ -176,7 +176,7 @@ def airframe_path_filter(source: LoopSystem | ChannelLoop, target: LoopSystem | 
     ----------
     source : LoopSystem or ChannelLoop
         Loop of vehicle j-1 (the trial learned from), built from its model; a vehicle on its own
-        controller through its identified airframe (:attr:`~ilcdob.vehicles.channel_loop.ChannelLoop.airframe`).
+        controller through its identified airframe (:attr:`~ilcdob.channel_loop.ChannelLoop.airframe`).
     target : LoopSystem or ChannelLoop
         Loop of vehicle j (the one that flies the learning signal).
     wind : bool

@@ -26,37 +26,13 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from ilcdob.channel_loop import CHANNELS, check_channel
 from ilcdob.errors import SpecError
 
 from .interface import per_axis, trial_samples
 
-__all__ = ["CHANNELS", "CHANNEL_UNITS", "ClosedLoopVehicle", "ClosedLoopTrial", "fly_closed_loop", "check_channel",
-           "setpoint_rows"]
+__all__ = ["ClosedLoopVehicle", "ClosedLoopTrial", "fly_closed_loop", "setpoint_rows"]
 
-#: The setpoint channels a learning signal can enter through (module docstring), in the setpoint's row order.
-CHANNELS = ("position", "velocity", "acceleration")
-#: Unit of a learning signal on each channel.
-CHANNEL_UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s^2"}
-
-
-def check_channel(channel: object, what: str = "channel") -> str:
-    """Return ``channel`` if it is one of :data:`CHANNELS`.
-
-    Parameters
-    ----------
-    channel : object
-    what : str
-        Name of the input, for the message.
-
-    Raises
-    ------
-    SpecError
-        Any other value.
-    """
-    if channel not in CHANNELS:
-        raise SpecError(f"`{what}`: got {channel!r}, expected one of {list(CHANNELS)} (position: a setpoint offset in "
-                        "m; velocity, acceleration: feed-forward in m/s, m/s^2)")
-    return str(channel)
 
 
 def setpoint_rows(position: object, velocity: object, acceleration: object) -> list[np.ndarray]:
@@ -136,7 +112,7 @@ class ClosedLoopTrial:
     y_meas : numpy.ndarray
         Measured position, ``N x 3``, m (before the setpoint of the same sample).
     learning : numpy.ndarray
-        Learning signal on the channel, ``N x 3`` (:data:`CHANNEL_UNITS`).
+        Learning signal on the channel, ``N x 3`` (:data:`~ilcdob.channel_loop.CHANNEL_UNITS`).
     channel : str
         Where it entered.
     command : numpy.ndarray or None
@@ -174,7 +150,7 @@ def fly_closed_loop(vehicle: ClosedLoopVehicle, reference: object, *, velocity: 
     velocity, acceleration : array_like or mapping, optional
         The reference's feed-forward, m/s and m/s^2 (default 0: a position setpoint alone).
     learning : array_like or mapping, optional
-        Learning signal on ``channel`` (:data:`CHANNEL_UNITS`), per axis or ``N x 3``; default none.
+        Learning signal on ``channel`` (:data:`~ilcdob.channel_loop.CHANNEL_UNITS`), per axis or ``N x 3``; default none.
     channel : {"position", "velocity", "acceleration"}
         Where ``learning`` enters the setpoint.
     n : int, optional

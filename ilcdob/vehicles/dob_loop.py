@@ -17,7 +17,7 @@ Two ways a DOB joins a vehicle that learns through a setpoint channel
 
 For both, with ``D = 1 - Q + P (M + C)`` of the vehicle's loop ``C``, the learning signal reaches the
 position through ``Gf = K P/D`` and a disturbance added to the command through ``Gd = (1 - Q) P/D``
-(:mod:`ilcdob.vehicles.channel_loop`). Units: s, m, m/s^2, the channel's unit.
+(:mod:`ilcdob.channel_loop`). Units: s, m, m/s^2, the channel's unit.
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.specs import DOBSpec, PIDSpec, PlantSpec
 
-from .closed_loop import CHANNELS, ClosedLoopVehicle, check_channel, setpoint_rows
+from .closed_loop import ClosedLoopVehicle, setpoint_rows
+from ilcdob.channel_loop import CHANNELS, check_channel
 from .interface import AXES, Vehicle, axis_controllers
 
 __all__ = ["AddOnDOB", "PaperLoopVehicle"]

@@ -44,7 +44,8 @@ import numpy as np
 
 from ilcdob.errors import SpecError
 
-from .closed_loop import check_channel, setpoint_rows
+from .closed_loop import setpoint_rows
+from ilcdob.channel_loop import check_channel
 
 __all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe"]
 

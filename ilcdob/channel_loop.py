@@ -27,7 +27,7 @@ vehicle's own loop ``C``: so ``Gd = (1 - Q) Gf / K`` exactly, whatever the airfr
 enters ``D`` only). ``G_ch`` is then identified with the DOB flying, and :attr:`ChannelLoop.dob` holds
 its ``Q``.
 
-Units: s, m, the channel's unit for ``u`` (:data:`~ilcdob.vehicles.closed_loop.CHANNEL_UNITS`), m/s^2 for ``d``.
+Units: s, m, the channel's unit for ``u`` (:data:`CHANNEL_UNITS`), m/s^2 for ``d``.
 """
 
 from __future__ import annotations
@@ -38,13 +38,38 @@ from dataclasses import dataclass, field
 import control as ct
 import numpy as np
 
-from ilcdob.discretize import DiscreteBlock, plant_block, q_block
-from ilcdob.errors import SpecError, UnstableLoopError
-from ilcdob.loop import STABILITY_MARGIN
-from ilcdob.specs import DOBSpec, IdentificationSpec, PlantSpec
-from .closed_loop import CHANNEL_UNITS, check_channel
+from .discretize import DiscreteBlock, plant_block, q_block
+from .errors import SpecError, UnstableLoopError
+from .loop import STABILITY_MARGIN
+from .specs import DOBSpec, IdentificationSpec, PlantSpec
 
-__all__ = ["ChannelLoop", "channel_loop"]
+__all__ = ["CHANNELS", "CHANNEL_UNITS", "check_channel", "ChannelLoop", "channel_loop"]
+
+#: The setpoint channels a learning signal can enter through (module docstring), in the setpoint's row order.
+CHANNELS = ("position", "velocity", "acceleration")
+#: Unit of a learning signal on each channel.
+CHANNEL_UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s^2"}
+
+
+def check_channel(channel: object, what: str = "channel") -> str:
+    """Return ``channel`` if it is one of :data:`CHANNELS`.
+
+    Parameters
+    ----------
+    channel : object
+    what : str
+        Name of the input, for the message.
+
+    Raises
+    ------
+    SpecError
+        Any other value.
+    """
+    if channel not in CHANNELS:
+        raise SpecError(f"`{what}`: got {channel!r}, expected one of {list(CHANNELS)} (position: a setpoint offset in "
+                        "m; velocity, acceleration: feed-forward in m/s, m/s^2)")
+    return str(channel)
+
 
 
 @dataclass(frozen=True)
