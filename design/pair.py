@@ -429,6 +429,10 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
         Unknown method, law, disturbance path or limit policy; ``multi-source``;
         ``exact-reference`` without its reference; a bad band.
     """
+    own = [n for n in (source, target) if isinstance(fleet.loop(n), ChannelLoop)]
+    if own:
+        return _fleet_channel_pair(fleet, source, target, method, own, law=law, band=band, disturbance=disturbance,
+                                   on_limit=on_limit)
     if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
         name, reference, acceleration = ((law.name, law.reference, law.acceleration) if isinstance(law, ExactReference)
                                          else (law, None, None))
@@ -458,6 +462,39 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
     design = replace(design, filters=filters, choose=chooser if request == "auto" else None, path=path,
                      limits=limits, on_limit=on_limit, source_gf=src.nominal.G_f)
     return design_with_band(design, chooser(error=None))
+
+
+def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Method, own: list[str], *,
+                        law: str | ExactReference, band: object, disturbance: str, on_limit: str) -> PairDesign:
+    """:func:`design_pair` for a pair with a vehicle on its own controller (``own``): :func:`design_channel_pair`
+    with the target's limit (its Limit stage on the acceleration channel; in the band's noise budget on every
+    channel).
+
+    Raises
+    ------
+    SpecError
+        A method other than the closed form, a law other than the paper's, a bad limit policy.
+    """
+    chosen = method_named(method)
+    if chosen.name != "closed-form":
+        raise SpecError(f"`method`: got {chosen.name!r}, which designs for ilcdob's PID + DOB loop, and {own} fly "
+                        "their own controller; design such pairs with 'closed-form' (the paper's filters on the "
+                        "identified channel maps, docs/closed_loop.md)")
+    name = law.name if isinstance(law, ExactReference) else check_law(law)
+    if name != DEFAULT_LAW:
+        raise SpecError(f"`law`: got {name!r}; for vehicles on their own controller ({own}) ilcdob learns with the "
+                        "paper's law (the reference's share of the error is learned with the disturbance)")
+    if on_limit not in LIMIT_POLICIES:
+        raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
+    limits = {s.name: s for s in fleet.systems}[target].limits
+    tgt = fleet.loop(target)
+    design = design_channel_pair(fleet.loop(source), tgt, band=band, disturbance=disturbance,
+                                 acceleration_limit=None if limits is None else limits.max_acceleration)
+    if limits is None or learning_channel(tgt) != "acceleration":
+        return design
+    design = replace(design, filters={**design.filters, "limit": Limit.entry(limits, on_limit)}, limits=limits,
+                     on_limit=on_limit)
+    return design_with_band(design, design.band)
 
 
 def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *, band: object = "auto",
@@ -505,11 +542,12 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
         raise SpecError(f"`acceleration_limit`: got {acceleration_limit!r}, expected a limit > 0 m/s^2")
     ch_src, ch_tgt = learning_channel(source), learning_channel(target)
     head = {"method": "closed-form", "law": DEFAULT_LAW, "from": source.name, "to": target.name,
-            "sample_time": source.ts, "channel": ch_tgt}
+            "sample_time": source.ts, "channel": ch_tgt, "source_channel": ch_src}
     made = METHODS["closed-form"].design(DesignInputs(None, source, target, head, lambda: lf))
     path, path_entry = disturbance_path(source, target, disturbance)
+    per = {"m/s": "(m/s)", "m/s^2": "(m/s^2)"}
     filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[ch_tgt]}/m",
-                                         "L2": f"{CHANNEL_UNITS[ch_tgt]}/{CHANNEL_UNITS[ch_src]}"},
+                                         "L2": f"{CHANNEL_UNITS[ch_tgt]}/{per.get(CHANNEL_UNITS[ch_src], 'm')}"},
                "disturbance": path_entry}
     k_j = channel_view(target).gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,

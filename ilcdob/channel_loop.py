@@ -41,9 +41,10 @@ import numpy as np
 from .discretize import DiscreteBlock, plant_block, q_block
 from .errors import SpecError, UnstableLoopError
 from .loop import STABILITY_MARGIN
-from .specs import DOBSpec, IdentificationSpec, PlantSpec
+from .names import check_name
+from .specs import DOBSpec, IdentificationSpec, LimitSpec, PlantSpec, SensorSpec
 
-__all__ = ["CHANNELS", "CHANNEL_UNITS", "check_channel", "ChannelLoop", "channel_loop"]
+__all__ = ["CHANNELS", "CHANNEL_UNITS", "check_channel", "ChannelLoop", "channel_loop", "ChannelSystemSpec"]
 
 #: The setpoint channels a learning signal can enter through (module docstring), in the setpoint's row order.
 CHANNELS = ("position", "velocity", "acceleration")
@@ -202,7 +203,8 @@ class ChannelLoop:
         ident = self.identification
         if ident is None:
             raise SpecError(f"vehicle {self.name!r}: its channel map has no identification (parameters and "
-                            "covariance), so no uncertainty set; identify it (identify_channel_loops)")
+                            "covariance), so no uncertainty set; identify it (`ilcdob identify` on flights exciting its "
+                            "channel, its model.json as `channel_map`) or state a bound (`ilcdob check --bound`)")
         if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
             raise SpecError(f"`scale`: got {scale!r}, expected a multiplier > 0 of the standard deviations")
         return scale * ident.bound(w, self.disturbance_map.delay)
@@ -253,3 +255,77 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
     num = [c / channel_gain for c in channel_map.num]
     return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
                        float(channel_gain), airframe, dob, identification)
+
+
+@dataclass(frozen=True)
+class ChannelSystemSpec:
+    """A fleet's vehicle on its own controller (:mod:`ilcdob.fleet`'s ``channel`` systems): what a fleet file states.
+
+    Attributes
+    ----------
+    name : str
+        Unique name in the fleet (:func:`ilcdob.names.check_name`).
+    channel : {"position", "velocity", "acceleration"}
+        Where the learning signal enters the vehicle's setpoint.
+    channel_map : PlantSpec
+        The identified map from the channel (its unit, :data:`CHANNEL_UNITS`) to the position (m) with the
+        vehicle's own loop closed (and its add-on DOB, with ``dob``): stable, continuous.
+    channel_gain : float
+        ``K``: commanded acceleration (m/s^2) per unit of channel signal (module docstring); 1 on the
+        acceleration channel.
+    airframe : PlantSpec or None
+        Commanded acceleration (m/s^2) -> position (m), identified; needed for the airframe and wind paths
+        and for the add-on DOB.
+    dob : DOBSpec or None
+        The add-on DOB the vehicle flies (None: its own loop alone).
+    identification : IdentificationSpec or None
+        The channel map's fit (its Delta set).
+    limits : LimitSpec or None
+        What the vehicle can fly: bounds the acceleration its learning signal makes it command.
+    sensor : SensorSpec or None
+        Its position sensor's noise.
+    """
+
+    name: str
+    channel: str
+    channel_map: PlantSpec
+    channel_gain: float = 1.0
+    airframe: PlantSpec | None = None
+    dob: DOBSpec | None = None
+    identification: IdentificationSpec | None = None
+    limits: LimitSpec | None = None
+    sensor: SensorSpec | None = None
+
+    def __post_init__(self) -> None:
+        check_name(self.name)
+        check_channel(self.channel)
+        if not isinstance(self.channel_map, PlantSpec):
+            raise SpecError(f"system {self.name!r}: `channel_map`: got {type(self.channel_map).__name__}, expected "
+                            "a PlantSpec (the identified map from the channel to the position)")
+        for key, kind in (("limits", LimitSpec), ("sensor", SensorSpec)):
+            value = getattr(self, key)
+            if value is not None and not isinstance(value, kind):
+                raise SpecError(f"system {self.name!r}: `{key}`: got {type(value).__name__}, expected a "
+                                f"{kind.__name__} or None")
+
+    def loop(self, ts: float) -> ChannelLoop:
+        """The vehicle's :class:`ChannelLoop` at the setpoint period ``ts`` (s) (:func:`channel_loop`).
+
+        Parameters
+        ----------
+        ts : float
+            Setpoint period, s.
+
+        Returns
+        -------
+        ChannelLoop
+
+        Raises
+        ------
+        SpecError
+            A bad gain, airframe or DOB.
+        UnstableLoopError
+            The channel map is not stable.
+        """
+        return channel_loop(self.name, ts, self.channel, self.channel_map, self.channel_gain, self.airframe,
+                            self.dob, self.identification)

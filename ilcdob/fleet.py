@@ -56,6 +56,27 @@ the x axis's::
 ``load_fleet(path, axis="z")`` (``--axis z`` on the command line) is the fleet of that axis,
 each axis learned independently; every system then needs a section for it.
 
+A vehicle that flies its own controller (PX4's, ArduPilot's, a Crazyflie's, rotorpy's SE3) is a
+system with ``channel`` (docs/closed_loop.md): it is described by its identified closed-loop map from
+the learning channel to the position, not by plant, PID and DOB::
+
+    [[system]]
+    name = "lab-quad"
+    channel = "acceleration"               # or "position" (setpoint offset, m), "velocity" (feed-forward, m/s)
+    channel_map = { model = "lab-quad_channel.json" }   # or num/den (+ delay): channel unit -> m, stable
+    channel_gain = 1.0                     # K, m/s^2 per channel unit: 1 on acceleration (default there),
+                                           # the controller's kp on position, its kd on velocity (required)
+    airframe = { model = "lab-quad_airframe.json" }      # optional: commanded acceleration -> position,
+                                           # for --disturbance airframe/wind and the add-on DOB
+    dob = { q_order = 3, q_time_constant = 0.15 }        # optional: the add-on DOB it flies
+    limits = { acceleration = 6.0 }        # optional, as above; sensor too
+
+The channel map's model file gives its ``identification`` (its Delta set, for ``check``). Per-axis
+sections work as for the other systems, with ``channel_map`` required and ``delay``,
+``identification``, ``airframe`` and ``channel_gain`` bound to it. Such systems and ilcdob's own loop
+mix in one fleet; ``ilcdob design`` (closed form, the paper's law), ``check`` and ``learn`` serve them,
+and the commands that simulate ilcdob's loop refuse them (:meth:`Fleet.require_paper_loops`).
+
 A system's ``name`` follows one rule (:func:`ilcdob.names.check_name`): 1 to 64 ASCII
 letters, digits, spaces and ``_ - . +``, starting with a letter or a digit and not ending
 with a space or ``.``; names end up in C symbols, file names and reports, and are data there.
@@ -72,6 +93,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
 
+from .channel_loop import ChannelLoop, ChannelSystemSpec
 from .errors import FleetError, ModelFileError, SpecError, UnstableLoopError
 from .identified import IdentifiedModel, load_model
 from .inputs import parse_toml, read_text
@@ -95,6 +117,12 @@ SAMPLE_TIME_RANGE = (1e-4, 1.0)
 _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
                 "delay": False, "model": False, "noise": False, "identification": False, "uncertainty": False,
                 "limits": False, "sensor": False, "y": False, "z": False}
+#: Keys of a vehicle on its own controller (a system with ``channel``; module docstring).
+_CHANNEL_SYSTEM_KEYS = {"name": True, "channel": True, "channel_map": True, "channel_gain": False, "delay": False,
+                        "airframe": False, "dob": False, "identification": False, "limits": False, "sensor": False,
+                        "y": False, "z": False}
+#: Keys bound to a channel map: an axis section that gives its own map does not inherit them from x.
+_CHANNEL_MAP_KEYS = ("channel_map", "delay", "identification", "airframe", "channel_gain")
 #: The axes a fleet file can describe; x is the top level of each system (module docstring).
 AXES = ("x", "y", "z")
 #: Keys bound to a plant: an axis section that gives its own plant does not inherit them from x.
@@ -112,12 +140,14 @@ _TABLE_KEYS = {
     "uncertainty": {"bound": True},
     "limits": {"tilt": False, "thrust_to_weight": False, "acceleration": False},
     "sensor": {"noise_std": True},
+    "channel_map": {"num": True, "den": True},
+    "airframe": {"num": True, "den": True, "delay": False},
 }
 #: Key of a ``plant``/``model`` table naming a model file instead of giving num/den.
 MODEL_FILE_KEY = "model"
 _SPEC_CLASS = {"plant": PlantSpec, "model": PlantSpec, "controller": PIDSpec, "dob": DOBSpec,
                "noise": NoiseSpec, "identification": IdentificationSpec, "uncertainty": UncertaintySpec,
-               "limits": LimitSpec, "sensor": SensorSpec}
+               "limits": LimitSpec, "sensor": SensorSpec, "channel_map": PlantSpec, "airframe": PlantSpec}
 
 
 @dataclass(frozen=True)
@@ -128,8 +158,9 @@ class Fleet:
     ----------
     sample_time : float
         s.
-    systems : tuple of SystemSpec
-    loops : tuple of LoopSystem
+    systems : tuple of SystemSpec or ChannelSystemSpec
+        ilcdob's PID + DOB loop, or a vehicle on its own controller (module docstring).
+    loops : tuple of LoopSystem or ChannelLoop
         Built, stability-checked loops, one per system.
     source : str
         Where the fleet came from (file path), for messages.
@@ -138,8 +169,8 @@ class Fleet:
     """
 
     sample_time: float
-    systems: tuple[SystemSpec, ...]
-    loops: tuple[LoopSystem, ...]
+    systems: tuple[SystemSpec | ChannelSystemSpec, ...]
+    loops: tuple[LoopSystem | ChannelLoop, ...]
     source: str = "<memory>"
     axis: str = "x"
 
@@ -152,6 +183,13 @@ class Fleet:
 
         rows = []
         for s in self.systems:
+            if isinstance(s, ChannelSystemSpec):
+                p = s.channel_map
+                rows.append([s.name, f"{s.channel} channel: {list(p.num)} / {list(p.den)}", p.delay,
+                             f"own controller, K = {s.channel_gain:g}",
+                             "-" if s.dob is None else f"{s.dob.q_order}, {s.dob.q_time_constant:g} s",
+                             "identified" if s.identification else "-"])
+                continue
             p, c = s.nominal_plant, s.controller
             rows.append([s.name, f"{list(p.num)} / {list(p.den)}", p.delay, f"{c.kp:g} / {c.ki:g} / {c.kd:g}",
                          f"{s.dob.q_order}, {s.dob.q_time_constant:g} s",
@@ -165,7 +203,31 @@ class Fleet:
         """Names of the systems, in file order."""
         return [s.name for s in self.systems]
 
-    def loop(self, name: str) -> LoopSystem:
+    @property
+    def own_controller(self) -> list[str]:
+        """Names of the systems flying their own controller (``channel`` systems), in file order."""
+        return [s.name for s in self.systems if isinstance(s, ChannelSystemSpec)]
+
+    def require_paper_loops(self, what: str) -> None:
+        """Refuse a fleet with a vehicle on its own controller for ``what``, which needs ilcdob's PID + DOB on all.
+
+        Parameters
+        ----------
+        what : str
+            The command or function, for the message.
+
+        Raises
+        ------
+        FleetError
+            Some system is a ``channel`` system (the message names them and what serves them).
+        """
+        own = self.own_controller
+        if own:
+            raise FleetError(f"{self.source}: {what} needs ilcdob's PID + DOB loop on every system, and {own} fly "
+                             "their own controller (`channel` systems): `ilcdob design`, `check` and `learn` serve "
+                             "them; docs/closed_loop.md")
+
+    def loop(self, name: str) -> LoopSystem | ChannelLoop:
         """The loop of one system.
 
         Parameters
@@ -175,7 +237,7 @@ class Fleet:
 
         Returns
         -------
-        LoopSystem
+        LoopSystem or ChannelLoop
             Its built, stability-checked loop.
 
         Raises
@@ -221,25 +283,49 @@ def _model_file(label: str, key: str, sub: dict[str, Any], base_dir: Path | None
         raise FleetError(f"{label}, key `{key}.{MODEL_FILE_KEY}` = {value!r}: {exc}") from exc
 
 
-def _system_from_table(src: str, idx: int, table: Any, base_dir: Path | None = None) -> SystemSpec:
+def _system_from_table(src: str, idx: int, table: Any,
+                       base_dir: Path | None = None) -> SystemSpec | ChannelSystemSpec:
     label = f"{src}: system #{idx + 1}"
     if isinstance(table, dict) and isinstance(table.get("name"), str):
         label = f"{src}: system {quoted(table['name'])}"
-    _check_keys(label, table, _SYSTEM_KEYS)
+    own = isinstance(table, dict) and "channel" in table
+    _check_keys(label, table, _CHANNEL_SYSTEM_KEYS if own else _SYSTEM_KEYS, _KIND_HINT if own else "")
     try:
         check_name(table["name"])
     except SpecError as exc:  # before anything else of the system is read: a name is never a path or code
         raise FleetError(f"{src}: system #{idx + 1}: {exc}") from exc
-    files = {key: _model_file(label, key, table[key], base_dir) for key in ("plant", "model")
+    map_key = "channel_map" if own else "plant"
+    files = {key: _model_file(label, key, table[key], base_dir)
+             for key in (("channel_map", "airframe") if own else ("plant", "model"))
              if isinstance(table.get(key), dict) and MODEL_FILE_KEY in table[key]}
-    if "plant" in files and "delay" in table:
-        raise FleetError(f"{label}, key `delay`: got {table['delay']!r}, but the plant's delay comes from "
-                         f"{table['plant'][MODEL_FILE_KEY]!r} (delay = {files['plant'].delay:g} s); remove `delay`")
-    nominal_key = "model" if "model" in table else "plant"
+    if map_key in files and "delay" in table:
+        raise FleetError(f"{label}, key `delay`: got {table['delay']!r}, but the {map_key.replace('_', ' ')}'s delay "
+                         f"comes from {table[map_key][MODEL_FILE_KEY]!r} (delay = {files[map_key].delay:g} s); "
+                         "remove `delay`")
+    nominal_key = map_key if own or "model" not in table else "model"
     if nominal_key in files and "identification" in table:
         raise FleetError(f"{label}, key `identification`: the identification comes from the model file "
                          f"{table[nominal_key][MODEL_FILE_KEY]!r} of `{nominal_key}`; remove the "
                          "`identification` table")
+    parts = _spec_parts(label, table, files, map_key)
+    if nominal_key in files:
+        parts["identification"] = files[nominal_key].identification_spec(source=table[nominal_key][MODEL_FILE_KEY])
+    try:
+        if own:
+            return ChannelSystemSpec(name=table["name"], channel=table["channel"],
+                                     channel_gain=_channel_gain(label, table), **parts)
+        return SystemSpec(name=table["name"], **parts)
+    except SpecError as exc:  # its message starts with the system's name already
+        raise FleetError(f"{src}: {exc}" if str(exc).startswith("system ") else f"{label}: {exc}") from exc
+
+
+#: Appended to a key error of a vehicle on its own controller: what such a system is.
+_KIND_HINT = (" (a system with `channel` flies its own controller and is described by its identified channel map; "
+              "a system without it flies ilcdob's PID + DOB: plant, controller, dob)")
+
+
+def _spec_parts(label: str, table: dict[str, Any], files: dict[str, IdentifiedModel], map_key: str) -> dict[str, Any]:
+    """The spec of every table key of a system (:data:`_TABLE_KEYS`), model files' plants included."""
     parts: dict[str, Any] = {}
     for key, keys in _TABLE_KEYS.items():
         if key not in table:
@@ -247,23 +333,30 @@ def _system_from_table(src: str, idx: int, table: Any, base_dir: Path | None = N
         if key in files:
             parts[key] = files[key].plant_spec()
             continue
-        alternative = f", or only `{MODEL_FILE_KEY}` (a model.json)" if key in ("plant", "model") else ""
+        plant_like = key in ("plant", "model", "channel_map", "airframe")
+        alternative = f", or only `{MODEL_FILE_KEY}` (a model.json)" if plant_like else ""
         _check_keys(f"{label}, key `{key}`", table[key], keys, alternative)
         kwargs = dict(table[key])
-        if key == "plant":
+        if key == map_key:
             kwargs["delay"] = table.get("delay", 0.0)
         try:
             parts[key] = _SPEC_CLASS[key](**kwargs)
-        except SpecError as exc:
+        except (SpecError, TypeError) as exc:
             raise FleetError(f"{label}, key `{key}`: {exc}") from exc
-        except TypeError as exc:
-            raise FleetError(f"{label}, key `{key}`: {exc}") from exc
-    if nominal_key in files:
-        parts["identification"] = files[nominal_key].identification_spec(source=table[nominal_key][MODEL_FILE_KEY])
-    try:
-        return SystemSpec(name=table["name"], **parts)
-    except SpecError as exc:  # its message starts with the system's name already
-        raise FleetError(f"{src}: {exc}" if str(exc).startswith("system ") else f"{label}: {exc}") from exc
+    return parts
+
+
+def _channel_gain(label: str, table: dict[str, Any]) -> float:
+    """``channel_gain`` of a vehicle on its own controller: required off the acceleration channel."""
+    gain = table.get("channel_gain", 1.0 if table["channel"] == "acceleration" else None)
+    if gain is None:
+        raise FleetError(f"{label}: missing key `channel_gain` on the {table['channel']!r} channel: the "
+                         "acceleration (m/s^2) the vehicle's controller commands per unit of channel signal (its "
+                         "position gain kp on the position channel, its velocity gain kd on the velocity channel; "
+                         "docs/closed_loop.md)")
+    if isinstance(gain, bool) or not isinstance(gain, (int, float)):
+        raise FleetError(f"{label}, key `channel_gain`: got {gain!r}, expected a number > 0")
+    return float(gain)
 
 
 def axis_table(src: str, idx: int, table: Any, axis: str) -> Any:
@@ -312,9 +405,12 @@ def axis_table(src: str, idx: int, table: Any, axis: str) -> Any:
                       ("y", "axis sections do not nest"), ("z", "axis sections do not nest")):
         if key in section:
             raise FleetError(f"{label}, [system.{axis}] key `{key}`: {what}")
-    if "plant" not in section:
-        raise FleetError(f"{label}, [system.{axis}]: missing key `plant` (each axis has its own plant)")
-    return {**{k: v for k, v in flat.items() if k not in _PLANT_KEYS}, **section}
+    own = "channel" in flat or "channel" in section
+    map_key, bound = ("channel_map", _CHANNEL_MAP_KEYS) if own else ("plant", _PLANT_KEYS)
+    if map_key not in section:
+        raise FleetError(f"{label}, [system.{axis}]: missing key `{map_key}` (each axis has its own "
+                         f"{'identified channel map' if own else 'plant'})")
+    return {**{k: v for k, v in flat.items() if k not in bound}, **section}
 
 
 def _check_sample_time(source: str, ts: Any) -> None:
@@ -357,7 +453,7 @@ def fleet_from_dict(data: dict[str, Any], source: str = "<memory>", base_dir: st
     return replace(fleet_from_systems(systems, float(ts), source), axis=axis)
 
 
-def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source: str = "<memory>") -> Fleet:
+def fleet_from_systems(systems: Sequence[SystemSpec | ChannelSystemSpec], sample_time: float, source: str = "<memory>") -> Fleet:
     """A fleet from system specs built in Python: names checked, loops built and stability-checked.
 
     Plants may be python-control systems (``SystemSpec(plant=ct.tf(...), ...)``), or come
@@ -365,7 +461,7 @@ def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source
 
     Parameters
     ----------
-    systems : sequence of SystemSpec
+    systems : sequence of SystemSpec or ChannelSystemSpec
         In learning order (file order).
     sample_time : float
         s (> 0).
@@ -383,8 +479,9 @@ def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source
     if not systems:
         raise FleetError(f"{source}: key `system`: expected one or more systems, got none")
     for i, spec in enumerate(systems):
-        if not isinstance(spec, SystemSpec):
-            raise FleetError(f"{source}: system #{i + 1}: got {type(spec).__name__} {spec!r}, expected a SystemSpec")
+        if not isinstance(spec, (SystemSpec, ChannelSystemSpec)):
+            raise FleetError(f"{source}: system #{i + 1}: got {type(spec).__name__} {spec!r}, expected a SystemSpec "
+                             "or a ChannelSystemSpec")
     ts = float(sample_time)
     names = [s.name for s in systems]
     dup = sorted({n for n in names if names.count(n) > 1})
@@ -392,13 +489,15 @@ def fleet_from_systems(systems: Sequence[SystemSpec], sample_time: float, source
         raise FleetError(f"{source}: key `name`: duplicated system name(s) {dup}")
     loops = []
     for spec in systems:
+        own = isinstance(spec, ChannelSystemSpec)
         try:
-            lp = build_loop(spec, float(ts))
+            lp = spec.loop(ts) if own else build_loop(spec, ts)
             _ = lp.nominal  # the model loop must be stable too: learning filters invert it
         except (UnstableLoopError, SpecError) as exc:
-            named = f"system {spec.name!r}: "
-            text = str(exc).removeprefix(named)  # build_loop names the system already; say it once
-            keys = ", keys `controller`/`dob`/`plant`" if isinstance(exc, UnstableLoopError) else ""
+            text = str(exc).removeprefix(f"system {spec.name!r}: ")  # build_loop names the system already; say it once
+            text = text.removeprefix(f"vehicle {spec.name!r}: ")
+            keys = ("" if not isinstance(exc, UnstableLoopError) else
+                    ", key `channel_map`" if own else ", keys `controller`/`dob`/`plant`")
             raise FleetError(f"{source}: system {spec.name!r}{keys}: {text}") from exc
         loops.append(lp)
     return Fleet(sample_time=ts, systems=tuple(systems), loops=tuple(loops), source=source)

@@ -39,7 +39,7 @@ from ..sets.delta import delta_bound
 from ..sets.worst_case import mask_intervals
 from .theorem import EXACT_TOL, exact_worst_ratio
 
-__all__ = ["ChannelPairCheck", "channel_check"]
+__all__ = ["ChannelPairCheck", "channel_check", "format_channel_table"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,8 @@ class ChannelPairCheck:
         ``F`` on ``w`` (complex).
     worst : numpy.ndarray
         ``max |T|`` on ``w``.
+    band : LearningBand or None
+        The learning band the law flies (None: the Theorem's filters).
     """
 
     source: str
@@ -69,6 +71,7 @@ class ChannelPairCheck:
     bound_source: str
     factor: np.ndarray
     worst: np.ndarray
+    band: LearningBand | None = None
 
     @property
     def worst_ratio(self) -> float:
@@ -88,6 +91,14 @@ class ChannelPairCheck:
     def worse_bands(self) -> list[tuple[float, float]]:
         """The frequency bands (rad/s) where the worst case exceeds ``1 + EXACT_TOL``."""
         return mask_intervals(self.w, self.worst > 1.0 + EXACT_TOL)
+
+    def to_dict(self) -> dict[str, object]:
+        """The check as JSON values: the verdict, the worst case and where, and the curves on ``w`` (rad/s)."""
+        return {"source": self.source, "target": self.target, "holds": self.holds, "worst_ratio": self.worst_ratio,
+                "worst_w_rad_s": self.worst_w, "worse_bands_rad_s": [list(b) for b in self.worse_bands()],
+                "bound_source": self.bound_source,
+                "band": None if self.band is None else self.band.to_dict(),
+                "w": self.w.tolist(), "bound": self.bound.tolist(), "worst": self.worst.tolist()}
 
     def __repr__(self) -> str:
         verdict = "never worse" if self.holds else f"can be worse in {self.worse_bands()} rad/s"
@@ -149,4 +160,31 @@ def channel_check(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSy
         else:
             radius, origin = source.delta(w, scale), "identification"
         worst = np.abs(1.0 - factor) + np.abs(factor) * radius
-    return ChannelPairCheck(source.name, target.name, w, np.asarray(radius, float), origin, factor, worst)
+    return ChannelPairCheck(source.name, target.name, w, np.asarray(radius, float), origin, factor, worst, band)
+
+
+def format_channel_table(checks: list[ChannelPairCheck]) -> str:
+    """Plain-text table of :func:`channel_check` results: per pair the learning band, the Delta set's origin, the
+    largest radius, the exact worst-case ratio and its frequency, and the verdict.
+
+    Parameters
+    ----------
+    checks : list of ChannelPairCheck
+
+    Returns
+    -------
+    str
+        A header, a rule, one row per pair and a legend.
+    """
+    head = (f"{'pair':<24} {'band [rad/s]':>12} {'Delta set':<16} {'max W':>7} {'exact worst':>11} "
+            f"{'worst w':>8}  verdict")
+    rows = [head, "-" * len(head)]
+    for c in checks:
+        cutoff = "off" if c.band is None or c.band.cutoff is None else f"{c.band.cutoff:.4g}"
+        rows.append(f"{c.source + ' -> ' + c.target:<24} {cutoff:>12} {c.bound_source:<16} "
+                    f"{float(np.max(c.bound)):>7.3g} {c.worst_ratio:>11.4g} {c.worst_w:>8.4g}  "
+                    + ("holds" if c.holds else f"FAILS in {', '.join(f'{a:.3g}-{b:.3g}' for a, b in c.worse_bands())}"
+                                              " rad/s"))
+    rows += ["", "exact worst = max |e_j / e'_j| = |1 - F| + |F| W per frequency over the source's Delta set "
+                 f"(|Delta| <= W); holds: <= 1 + {EXACT_TOL:g} at every frequency (docs/closed_loop.md)"]
+    return "\n".join(rows)

@@ -27,16 +27,18 @@ from typing import Any, Sequence
 import numpy as np
 from matplotlib.figure import Figure
 
+from ilcdob.channel_loop import CHANNEL_UNITS, ChannelLoop
 from ilcdob.errors import NumericalError, SpecError, UnstableLoopError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem, build_loop, freqresp
 from ilcdob.specs import PlantSpec
 
 from ..filters.band import LearningBand
+from ..maps.channel_filters import channel_filters, channel_view, learning_channel
 from ..maps.closed_form import LearningFilters, closed_form_filters
 from ..methods import ClosedForm
 
-__all__ = ["BodeCurve", "COINCIDE_RTOL", "TE_GAIN_ERROR", "frequency_grid", "magnitude_db", "wrapped_phase",
+__all__ = ["channel_pair_bode_figure", "BodeCurve", "COINCIDE_RTOL", "TE_GAIN_ERROR", "frequency_grid", "magnitude_db", "wrapped_phase",
            "coinciding", "group_label", "draw_bode", "finish_bode_axes", "mark_band", "with_gain_error",
            "loop_maps", "te_loops", "pair_bode_figure", "minor_log_grid", "decade_label", "TITLE_Y"]
 
@@ -511,6 +513,8 @@ def pair_bode_figure(fleet: Fleet, source: str, target: str, band: LearningBand 
     -------
     matplotlib.figure.Figure
     """
+    if {source, target} & set(fleet.own_controller):
+        return channel_pair_bode_figure(fleet, source, target, band)
     ts = fleet.sample_time
     w = frequency_grid(ts)
     pair = f"{source} -> {target}"
@@ -539,6 +543,16 @@ def pair_bode_figure(fleet: Fleet, source: str, target: str, band: LearningBand 
     fig = Figure(figsize=(15, 10.5), layout="constrained")
     grid = fig.add_gridspec(4, 3)
     slots = {"L1": (0, 0), "L2": (0, 1), "Te1": (2, 0), "Te2": (2, 1), "Omega": (2, 2)}
+    _draw_panels(fig, grid, slots, panels, w, band, ts, legend="Omega")
+    _describe_in(fig, grid[0:2, 2], _describe(source, target, method, basis if src_true is not None else None,
+                                               band, ts))
+    fig.suptitle(f"Learning design {pair}: Bode plots of L1, L2, Te1, Te2 and Omega")
+    return minor_log_grid(fig)
+
+
+def _draw_panels(fig: Figure, grid: Any, slots: dict[str, tuple[int, int]], panels: Sequence[tuple], w: np.ndarray,
+                 band: LearningBand | None, ts: float, legend: str) -> None:
+    """One magnitude/phase pair of axes per panel ``(key, title, curves, why not drawn)`` at ``slots[key]``."""
     first = None
     for key, title, curves, why in panels:
         row, col = slots[key]
@@ -554,13 +568,67 @@ def pair_bode_figure(fleet: Fleet, source: str, target: str, band: LearningBand 
             mag.set_xscale("log")
             mag.set_xlim(w[0], w[-1])
         mark_band([mag, phase], band, ts)
-        finish_bode_axes(mag, phase, title, ts, legend=key == "Omega")
+        finish_bode_axes(mag, phase, title, ts, legend=key == legend)
         mag.tick_params(labelbottom=False)
-    text = fig.add_subplot(grid[0:2, 2])
-    text.set_label("description")
-    text.axis("off")
-    text.text(0.0, 1.0, _describe(source, target, method, basis if src_true is not None else None, band, ts),
-              va="top", ha="left", fontsize=9,
-              family="monospace", transform=text.transAxes)
-    fig.suptitle(f"Learning design {pair}: Bode plots of L1, L2, Te1, Te2 and Omega")
+
+
+def _describe_in(fig: Figure, slot: Any, text: str) -> None:
+    """The figure's description panel: ``text`` in monospace, top left of ``slot``."""
+    ax = fig.add_subplot(slot)
+    ax.set_label("description")
+    ax.axis("off")
+    ax.text(0.0, 1.0, text, va="top", ha="left", fontsize=9, family="monospace", transform=ax.transAxes)
+
+
+def channel_pair_bode_figure(fleet: Fleet, source: str, target: str, band: LearningBand | None = None) -> Figure:
+    """Bode figure of a pair with a vehicle on its own controller (``bode.png`` of ``ilcdob design``): L1, L2 and
+    both vehicles' ``Gd`` (:mod:`ilcdob.design.maps.channel_filters`).
+
+    Parameters
+    ----------
+    fleet : Fleet
+    source, target : str
+        Systems j-1 (learned from) and j (learning); at least one a ``channel`` system.
+    band : LearningBand, optional
+        The design's learning band (None: not marked).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    SpecError
+        A pair the channel design refuses (:func:`~ilcdob.design.maps.channel_filters.channel_filters`).
+    """
+    ts = fleet.sample_time
+    w = frequency_grid(ts)
+    pair = f"{source} -> {target}"
+    src, tgt = fleet.loop(source), fleet.loop(target)
+    lf = channel_filters(src, tgt)
+    units = {name: CHANNEL_UNITS[learning_channel(fleet.loop(name))] for name in (source, target)}
+    gd = [BodeCurve(name, 1.0 / channel_view(fleet.loop(name)).inverse(w), _COLORS[k + 3])
+          for k, name in enumerate(dict.fromkeys([source, target]))]
+    panels = [("L1", f"L1 {pair} (on e_j-1, {units[target]}/m)", [BodeCurve(pair, lf.l1_response(w), _COLORS[0])],
+               None),
+              ("L2", f"L2 {pair} (on u_j-1, {units[target]}/{units[source]})",
+               [BodeCurve(pair, lf.l2_response(w), _COLORS[0])], None),
+              ("Gd", "Gd: disturbance (m/s^2) -> position (m)", gd, None)]
+    fig = Figure(figsize=(12, 9), layout="constrained")
+    grid = fig.add_gridspec(4, 2)
+    _draw_panels(fig, grid, {"L1": (0, 0), "L2": (0, 1), "Gd": (2, 0)}, panels, w, band, ts, legend="Gd")
+    kinds = {name: (f"own controller, {learning_channel(fleet.loop(name))} channel"
+                    if isinstance(fleet.loop(name), ChannelLoop) else "ilcdob's PID + DOB")
+             for name in (source, target)}
+    lines = [f"{source} -> {target}: {target} learns from {source}",
+             *(f"  {name}: {kind}" for name, kind in kinds.items()),
+             "the paper's filters on the identified maps:",
+             "  u_j = L1{e_j-1} + L2{u_j-1}",
+             "  L1 = R_j Gd_j-1^-1,  L2 = R_j / R_j-1",
+             "  R = Gd/Gf = (1 - Q)/K  (1/K without a DOB)",
+             "learning band: off" if band is None or band.cutoff is None else
+             f"learning band: corner {band.cutoff:.4g} rad/s ({band.source})",
+             f"sample time {ts:g} s, Nyquist {np.pi / ts:.4g} rad/s"]
+    _describe_in(fig, grid[2:4, 1], "\n".join(lines))
+    fig.suptitle(f"Learning design {pair}: Bode plots of L1, L2 and Gd")
     return minor_log_grid(fig)

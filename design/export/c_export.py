@@ -83,6 +83,7 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
+from ilcdob.channel_loop import CHANNEL_UNITS
 from ilcdob.errors import SpecError
 from ilcdob.fleet import AXES
 from ilcdob.names import c_comment, c_identifier
@@ -1087,6 +1088,21 @@ def _robust_readme(filters: dict[str, Any], prefix: str) -> list[str]:
             "`cos()` of the C math library (link with `-lm`)."]
 
 
+def _signal_units(filters: dict[str, Any]) -> tuple[str, str, list[str]]:
+    """Units of the source's and the target's learning signal, and the README lines saying where each enters
+    (a pair with a vehicle on its own controller: ``channel`` and ``source_channel`` in ``filters.json``)."""
+    if "channel" not in filters:
+        return "m/s^2", "m/s^2", []
+    ch_tgt, ch_src = filters["channel"], filters.get("source_channel", "acceleration")
+    words = {"position": "an offset of its position setpoint (m)", "velocity": "a velocity feed-forward (m/s)",
+             "acceleration": "an acceleration feed-forward (m/s^2)"}
+    return CHANNEL_UNITS[ch_src], CHANNEL_UNITS[ch_tgt], [
+        "", f"Here d_f is the learning signal on each vehicle's channel: on {filters['from']} {words[ch_src]}, on "
+        f"{filters['to']} {words[ch_tgt]} added to the setpoint its own controller tracks. A vehicle flying "
+        "ilcdob's PID + DOB learns on its acceleration feed-forward: its d_f here is the acceleration added to its "
+        "command, the opposite of the paper's d_f added to the DOB estimate."]
+
+
 def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | None = None) -> str:
     """The ``README.md`` of a design folder holding ``files``.
 
@@ -1105,11 +1121,12 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
         The README text (Markdown).
     """
     src, tgt, ts = filters["from"], filters["to"], float(filters["sample_time"])
+    u_src, u_tgt, channels = _signal_units(filters)
     lines = [f"# Learning design {src} -> {tgt} ({filters['method']})", "",
              f"Written by `ilcdob design`. Sample time Ts = {ts:g} s. Vehicle {tgt} learns from the previous "
              f"vehicle {src}: d_f,j = L1{{e_j-1}} + L2{{d_f,j-1}}"
              + (", through the learning band and corrections below." if code is not None else "."),
-             "", "## Files", ""]
+             *channels, "", "## Files", ""]
     lines += [f"- `{name}`: {_FILE_TEXT.get(name, '')}" for name in files]
     lines += ["", "## Between two flights", ""]
     if code is not None:
@@ -1125,7 +1142,7 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
             law = law.replace("L1{F{H{e}}} + L2{F{H{d_f}}}", "R{F{H{e}}, F{H{d_f}}}").replace("L1{e} + L2{d_f}",
                                                                                             "R{e, d_f}")
         lines += [f"After a flight of {src}, take its recorded tracking error e (m) and the learning signal it "
-                  f"flew, d_f (m/s^2; zeros if none), n samples every {ts:g} s from the start of the trial. Then",
+                  f"flew, d_f ({u_src}; zeros if none), n samples every {ts:g} s from the start of the trial. Then",
                   "",
                   "```c",
                   '#include "filters.h"',
@@ -1134,7 +1151,7 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
                   f"if ({p}learn(e, d_f, d_next, n, work) != 0) {{ /* n == 0 or a NULL pointer */ }}",
                   "```",
                   "",
-                  f"and feed `d_next` forward (m/s^2) on the next flight of {tgt}, sample k at time k Ts. "
+                  f"and feed `d_next` forward ({u_tgt}) on the next flight of {tgt}, sample k at time k Ts. "
                   f"`{p}learn` computes d_next = {law} over the whole trial at once, exactly as "
                   "`ilcdob.design.law.apply_learning` does in Python (to rounding); no allocation, "
                   f"`work` holds `{m}LEARN_WORK(n)` = {code.work or f'2 * (n + 2 * {lp.pad})'} doubles.",

@@ -989,7 +989,7 @@ def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet,
         others["lifted.npz"] = lambda path, a=arrays: np.savez(path, **a)
     if data is not None:
         others["learning_signal.csv"] = FlightData(
-            data.t, {"learning": d_f}, {"learning": "m/s^2"},
+            data.t, {"learning": d_f}, {"learning": signal_unit(design.filters)[0]},
             source=f"learning signal of {target} from {o.trial}").to_csv
     if design.reference is not None:
         others["reference_terms.csv"] = FlightData(
@@ -998,6 +998,25 @@ def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet,
             source=f"reference terms of {source} -> {target} for {o.trial}").to_csv
     others["bode.png"] = pair_bode_figure(flt, source, target, design.band, o.method)
     return others
+
+
+def signal_unit(filters: dict[str, Any]) -> tuple[str, str]:
+    """The unit of the learning signal a design makes (its target's channel; m/s^2 for ilcdob's loop) and that
+    unit as a JSON key suffix (``"m_s2"``, ``"m_s"``, ``"m"``).
+
+    Parameters
+    ----------
+    filters : dict
+        ``filters.json`` content.
+
+    Returns
+    -------
+    tuple of (str, str)
+    """
+    from ilcdob.channel_loop import CHANNEL_UNITS
+
+    unit = CHANNEL_UNITS[filters.get("channel", "acceleration")]
+    return unit, unit.replace("/", "_").replace("^", "")
 
 
 def _learn_from_trial(design: Any, data: Any, trial: str | Path) -> tuple[dict[str, Any], np.ndarray, Any]:
@@ -1018,9 +1037,10 @@ def _learn_from_trial(design: Any, data: Any, trial: str | Path) -> tuple[dict[s
 
     signal = design.learning(data["e"], data["d_f"], learn=robust_learn if design.robust is not None else None)
     d_f = signal.d_f
+    _, key = signal_unit(design.filters)
     info: dict[str, Any] = {"file": str(trial), "samples": len(data),
-                            "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))),
-                                                "rms_m_s2": float(np.sqrt(np.mean(d_f ** 2)))}}
+                            "learning_signal": {f"peak_{key}": float(np.max(np.abs(d_f))),
+                                                f"rms_{key}": float(np.sqrt(np.mean(d_f ** 2)))}}
     if signal.limit is not None:
         info["limit"] = signal.limit.to_dict()
     if not socp:
@@ -1382,6 +1402,7 @@ def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: A
     n = d_f.size
     ts = float(filters["sample_time"])
     axis = filters.get("axis", "x")
+    unit, key = signal_unit(filters)
     prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target), axis)
     summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"),
                "law": "paper",
@@ -1390,16 +1411,17 @@ def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: A
                                    else f"{columns.reference} - {columns.position}"),
                          "learning_flown": columns.learning},
                "computes": "ilcdob.design.law.apply_learning (what the C function <prefix>learn runs), then "
-                           "the acceleration limit",
+                           "the acceleration limit" + ("" if "channel" not in filters else
+                                                     f" (on the {filters['channel']} channel: unit {unit})"),
                "band": {k: (filters.get("band") or {}).get(k) for k in ("cutoff_rad_s", "source", "reason")},
-               "learning_signal": {"peak_m_s2": float(np.max(np.abs(d_f))) if n else 0.0,
-                                   "rms_m_s2": float(np.sqrt(np.mean(d_f ** 2))) if n else 0.0},
+               "learning_signal": {f"peak_{key}": float(np.max(np.abs(d_f))) if n else 0.0,
+                                   f"rms_{key}": float(np.sqrt(np.mean(d_f ** 2))) if n else 0.0},
                "limit": None if report is None else report.to_dict(),
-               "files": {"learning_signal.csv": "time (s), learning (m/s^2)",
-                         "learning_signal.bin": f"{n} little-endian float64 samples, m/s^2",
-                         "learning_signal.h": f"static const double {prefix}df[{n}], m/s^2"},
-               "units": {"learning": "m/s^2", "time": "s"}}
-    files = {"learning_signal.csv": FlightData(data.t, {"learning": d_f}, {"learning": "m/s^2"},
+               "files": {"learning_signal.csv": f"time (s), learning ({unit})",
+                         "learning_signal.bin": f"{n} little-endian float64 samples, {unit}",
+                         "learning_signal.h": f"static const double {prefix}df[{n}], {unit}"},
+               "units": {"learning": unit, "time": "s"}}
+    files = {"learning_signal.csv": FlightData(data.t, {"learning": d_f}, {"learning": unit},
                                                source=f"learning signal of {target} from {Path(trial).name}").to_csv,
              "learning_signal.bin": d_f.astype("<f8").tobytes(), "learning_signal.h": signal_header(prefix, d_f, ts),
              "learning.json": summary}
@@ -1450,6 +1472,8 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     order = list(order) if order else flt.names
     for name in order:
         flt.loop(name)  # unknown names: a clear error
+    if set(order) & set(flt.own_controller):
+        return _check_channel_fleet(out, flt, order, digest, bound=bound, scale=scale, bandwidth=bandwidth, argv=argv)
     deltas = fleet_delta_sets(flt, order, k=samples, bound=bound, scale=scale)
     bands = {(s, t): pair_band(flt, s, t, bandwidth, deltas=deltas) for s, t in learning_pairs(flt.names, order)}
     checks = theorem_check(flt, order, deltas, bands=bands)
@@ -1462,6 +1486,29 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
                                          "condition |Delta| < |1 + P C|/2 is reported beside it (paper_first_order)",
                          "units": {"w": "rad/s", "ratios": "1 (|e_j| / |e'_j| per frequency)",
                                    "delta, bound": "1 (relative model error |P/P_hat - 1|)"},
+                         "pairs": [c.to_dict() for c in checks],
+                         "provenance": _provenance("check", argv, digest).to_dict()})
+    return checks
+
+
+def _check_channel_fleet(out: str | Path | None, flt: Fleet, order: list[str], digest: str, *, bound: float | None,
+                         scale: float, bandwidth: object, argv: Sequence[str] | None) -> list[Any]:
+    """:func:`check_to_json` for a fleet with a vehicle on its own controller: every pair of ``order`` by
+    :func:`ilcdob.design.checks.channel.channel_check`, with the band its design flies."""
+    from ilcdob.design.checks.channel import channel_check
+    from ilcdob.design.checks.theorem import EXACT_TOL, learning_pairs
+    from ilcdob.design.pair import design_pair
+
+    checks = [channel_check(flt.loop(s), flt.loop(t), band=design_pair(flt, s, t, band=bandwidth).band,
+                            scale=scale, bound=bound) for s, t in learning_pairs(flt.names, order)]
+    if out is not None:
+        write_file(out, {"order": order, "verdict": "holds" if all(c.holds for c in checks) else "fails",
+                         "verdict_rule": "improvement guaranteed for a pair when the exact worst case of "
+                                         "|e_j / e'_j| = |1 - F| + |F| W over the source's Delta set |Delta| <= W is "
+                                         f"<= 1 + {EXACT_TOL:g} at every checked frequency (vehicles on their own "
+                                         "controller: the learner's model error cancels)",
+                         "units": {"w": "rad/s", "worst": "1 (|e_j| / |e'_j| per frequency)",
+                                   "bound": "1 (relative error of the source's identified map)"},
                          "pairs": [c.to_dict() for c in checks],
                          "provenance": _provenance("check", argv, digest).to_dict()})
     return checks

@@ -285,11 +285,20 @@ def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     import math
 
+    from ilcdob.design.checks.channel import ChannelPairCheck, format_channel_table
     from ilcdob.design.checks.theorem import EXACT_TOL, format_theorem_table
 
     order = [s.strip() for s in a.order.split(",")] if a.order else None
     checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=_given(a.scale, 1.0),
                               bandwidth=a.bandwidth, argv=argv, axis=a.axis)
+    if checks and isinstance(checks[0], ChannelPairCheck):
+        print(format_channel_table(checks))
+        failing = [f"{c.source} -> {c.target} (exact worst ratio {c.worst_ratio:.4g} at {c.worst_w:.4g} rad/s)"
+                   for c in checks if not c.holds]
+        if failing:
+            raise CheckFailed(f"learning with its band can make the error worse: improvement not guaranteed for "
+                              f"{', '.join(failing)} (exact worst case over the stated set > 1 + {EXACT_TOL:g})")
+        return 0
     print(format_theorem_table(checks))
     disagree = [f"{c.source} -> {c.target}" for c in checks if not c.agrees]
     if disagree:
