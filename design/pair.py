@@ -310,7 +310,18 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
     -------
     dict of str to DeltaSet
         Name -> Delta set.
+
+    Raises
+    ------
+    SpecError
+        A system on its own controller: its Delta set is its channel map's disc, not sampled PID + DOB loops.
     """
+    own = sorted(set(names) & set(fleet.own_controller))
+    if own:
+        raise SpecError(f"{own} fly their own controller: their Delta set is the disc of their identified channel "
+                        "map (ChannelLoop.delta), not sampled PID + DOB loops, so the methods designed over sampled "
+                        "Delta sets (robust, robust-set, fir's margin) cannot serve them; design with closed-form and "
+                        "check it with `ilcdob check`")
     rng = np.random.default_rng(seed)
     return {name: delta_set(next(s for s in fleet.systems if s.name == name), fleet.sample_time, k, rng,
                             scale=scale, bound=bound) for name in names}

@@ -93,7 +93,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
 
-from .channel_loop import ChannelLoop, ChannelSystemSpec
+from .channel_loop import ChannelLoop, ChannelSystemSpec, check_channel
 from .errors import FleetError, ModelFileError, SpecError, UnstableLoopError
 from .identified import IdentifiedModel, load_model
 from .inputs import parse_toml, read_text
@@ -348,6 +348,10 @@ def _spec_parts(label: str, table: dict[str, Any], files: dict[str, IdentifiedMo
 
 def _channel_gain(label: str, table: dict[str, Any]) -> float:
     """``channel_gain`` of a vehicle on its own controller: required off the acceleration channel."""
+    try:
+        check_channel(table["channel"])
+    except SpecError as exc:
+        raise FleetError(f"{label}: {exc}") from exc
     gain = table.get("channel_gain", 1.0 if table["channel"] == "acceleration" else None)
     if gain is None:
         raise FleetError(f"{label}: missing key `channel_gain` on the {table['channel']!r} channel: the "

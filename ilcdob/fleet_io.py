@@ -28,7 +28,8 @@ from .identified import load_model
 from .inputs import parse_toml
 from .specs import DOBSpec, NoiseSpec, PIDSpec, SystemSpec, UncertaintySpec
 
-__all__ = ["fleet_to_toml", "system_table", "system_to_toml", "toml_value", "add_system", "model_reference"]
+__all__ = ["fleet_to_toml", "system_table", "system_to_toml", "toml_value", "add_system", "add_channel_system",
+           "model_reference"]
 
 
 def _toml_string(text: str) -> str:
@@ -292,11 +293,75 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         table["noise"] = {"amplitude": noise.amplitude, "frequency": noise.frequency, "phase": noise.phase}
     if uncertainty is not None:
         table["uncertainty"] = {"bound": uncertainty.bound}
+    return _add_table(path, table, identified.sample_time, sample_time)
+
+
+def add_channel_system(path: str | Path, name: str, model: str | Path, channel: str, *,
+                       channel_gain: float | None = None, airframe: str | Path | None = None,
+                       dob: DOBSpec | None = None, sample_time: float | None = None) -> Fleet:
+    """Add a vehicle on its own controller to a fleet file (:mod:`ilcdob.fleet`'s ``channel`` systems), creating
+    the file if needed; validated, locked and written as :func:`add_system` does.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The fleet TOML file (created when it does not exist; a symbolic link is followed).
+    name : str
+        Name of the new system; must not be in the fleet yet.
+    model : str or pathlib.Path
+        The ``model.json`` of ``ilcdob identify`` fitted from the channel (input) to the position (output) with
+        the vehicle's loop closed: its ``channel_map``.
+    channel : {"position", "velocity", "acceleration"}
+        Where the learning signal enters.
+    channel_gain : float, optional
+        ``K``, m/s^2 per channel unit (required off the acceleration channel: the controller's kp or kd).
+    airframe : str or pathlib.Path, optional
+        The ``model.json`` of the airframe (commanded acceleration -> position).
+    dob : DOBSpec, optional
+        The add-on DOB the vehicle flies (its channel map identified with it flying).
+    sample_time : float, optional
+        As :func:`add_system`.
+
+    Returns
+    -------
+    Fleet
+        The validated fleet as written.
+
+    Raises
+    ------
+    FleetError
+        As :func:`add_system`; a bad channel or gain; nothing is written then.
+    ModelFileError
+        A model file cannot be read or is malformed.
+    ilcdob.atomic.LockTimeoutError
+        As :func:`add_system`.
+    """
+    path = Path(path)
+    if path.is_symlink():
+        path = path.resolve()
+    if not isinstance(name, str) or not name.strip():
+        raise FleetError(f"{path}: `name`: got {name!r}, expected a non-empty string")
+    identified = load_model(model)
+    table: dict[str, Any] = {"name": name, "channel": channel,
+                             "channel_map": {MODEL_FILE_KEY: model_reference(model, path)}}
+    if channel_gain is not None:
+        table["channel_gain"] = channel_gain
+    if airframe is not None:
+        load_model(airframe)
+        table["airframe"] = {MODEL_FILE_KEY: model_reference(airframe, path)}
+    if dob is not None:
+        table["dob"] = {"q_order": dob.q_order, "q_time_constant": dob.q_time_constant}
+    return _add_table(path, table, identified.sample_time, sample_time)
+
+
+def _add_table(path: Path, table: dict[str, Any], model_ts: float, sample_time: float | None) -> Fleet:
+    """Append the ``[[system]]`` ``table`` to the fleet file under its folder's lock (the folder made for a new file
+    removed again when the system is refused)."""
     block = _table_to_toml(table)
     created = make_folders(path.absolute().parent)  # the lock is on the folder: it must exist
     try:
         with locked(path):  # read, validate and write as one step: a concurrent add waits for this one
-            return _append(path, name, block, identified.sample_time, sample_time)
+            return _append(path, table["name"], block, model_ts, sample_time)
     except BaseException:
         remove_folders(created)
         raise

@@ -645,7 +645,10 @@ def reproduce(fleet: Fleet, scenario_ids: list[int] = (1, 2, 3, 4), iterations: 
     ------
     SpecError
         Bad scenario id, ``iterations``, ``law`` or ``order``.
+    FleetError
+        A system on its own controller (:meth:`~ilcdob.fleet.Fleet.require_paper_loops`).
     """
+    fleet.require_paper_loops("reproduce")
     law = check_law(law)
     order = None if order is None else check_order(fleet.names, order)
     noise_std = check_noise_std(sensor_noise_std, "sensor_noise_std")

@@ -581,6 +581,7 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
     """
     if source not in _SOURCES:
         raise SpecError(f"`source`: got {source!r}, expected one of {_SOURCES}")
+    fleet.require_paper_loops("theorem_check (ilcdob.design.checks.channel.channel_check serves such pairs)")
     names = list(fleet.names)
     loops = dict(zip(names, fleet.loops))
     pairs = learning_pairs(names, names if order is None else order)

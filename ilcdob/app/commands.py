@@ -402,6 +402,7 @@ class _Reproduction:
                             "--plant linear")
         bandwidth = check_bandwidth(self.bandwidth, None)
         flt, digest = output.check_and_load(fleet)
+        flt.require_paper_loops("`ilcdob reproduce`")
         check_bandwidth(bandwidth, flt.sample_time)  # a corner, against the fleet's Nyquist frequency
         order = None if self.order is None else check_order(flt.names, self.order, "--order")
         with FigureRenderer(self.figure_workers) as renderer:
@@ -688,6 +689,7 @@ def identify_fleet_to_folder(out: str | Path, *, fleet: str | Path | None = None
 
     output = _Output("identify-fleet", out, overwrite, argv)
     flt, digest = output.check_and_load(fleet)
+    flt.require_paper_loops("`ilcdob identify-fleet`")
     result = identify_fleet(flt, seed=seed, progress=progress)
     output.write(result.files(), digest=digest)
     return result
@@ -1547,6 +1549,7 @@ def compare_to_folder(out: str | Path | None, scenario: int, options: Any, *, fl
 
     output = _Output("compare", out, overwrite, argv)
     flt, digest = output.check_and_load(fleet)  # no folder (out None): the fleet alone
+    flt.require_paper_loops("`ilcdob compare`")
     cmp = compare_designs(flt, scenario, list(methods or DEFAULT_METHODS), options, progress=progress)
     if out is not None:
         from ilcdob.validation.figures import comparison_figure
@@ -1581,6 +1584,7 @@ def extensions_to_folder(out: str | Path, *, fleet: str | Path | None = None, sc
 
     output = _Output("extensions", out, overwrite, argv)
     flt, digest = output.check_and_load(fleet)
+    flt.require_paper_loops("`ilcdob extensions`")
     result = extensions_study(flt, list(scenarios))
     output.write(result.files(out=str(out)), digest=digest)
     return result
@@ -1660,6 +1664,7 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
     output = _Output("campaign", out, overwrite, argv)
     out = output.check({"--fleet": fleet}, resumable=STORE_FILES)  # a link resolved: the store is appended there
     flt, digest = fleet_and_hash(fleet)
+    flt.require_paper_loops("`ilcdob campaign`")
     before = _StoreState.of(out, STORE_FILES)
     try:
         result = run_campaign(flt, options, out, scheduler=scheduler, workers=workers, progress=progress,
@@ -1676,8 +1681,10 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
 
 
 def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controller: Any, dob: Any,
-                 sample_time: float | None = None) -> Fleet:
-    """Add a system flying an identified ``model.json`` to a fleet file (created if needed).
+                 sample_time: float | None = None, channel: str | None = None, channel_gain: float | None = None,
+                 airframe: str | Path | None = None) -> Fleet:
+    """Add a system flying an identified ``model.json`` to a fleet file (created if needed): ilcdob's PID + DOB
+    loop, or with ``channel`` a vehicle on its own controller (:func:`ilcdob.fleet_io.add_channel_system`).
 
     Parameters
     ----------
@@ -1687,20 +1694,30 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
         Name of the new system.
     model : str or Path
         ``model.json`` of ``ilcdob identify``.
-    controller : ilcdob.specs.PIDSpec
-        The system's PID.
-    dob : ilcdob.specs.DOBSpec
-        The system's DOB low-pass.
+    controller : ilcdob.specs.PIDSpec or None
+        The system's PID (None with ``channel``).
+    dob : ilcdob.specs.DOBSpec or None
+        The system's DOB low-pass (with ``channel``: its add-on DOB, or None).
     sample_time : float, optional
         New fleet file: sample time in s (default: the model's).
+    channel : {"position", "velocity", "acceleration"}, optional
+        A vehicle on its own controller learning through this channel; ``model`` is its channel map.
+    channel_gain : float, optional
+        With ``channel``: ``K``, m/s^2 per channel unit.
+    airframe : str or Path, optional
+        With ``channel``: the airframe's ``model.json``.
 
     Returns
     -------
     Fleet
     """
-    from ilcdob.fleet_io import add_system
+    from ilcdob.fleet_io import add_channel_system, add_system
 
-    check_output_path(fleet_file, folder=False, inputs={"--model": model}, option="FLEET.toml")
+    inputs = {"--model": model, **({"--airframe": airframe} if airframe is not None else {})}
+    check_output_path(fleet_file, folder=False, inputs=inputs, option="FLEET.toml")
+    if channel is not None:
+        return add_channel_system(fleet_file, name, model, channel, channel_gain=channel_gain, airframe=airframe,
+                                  dob=dob, sample_time=sample_time)
     return add_system(fleet_file, name, model, controller, dob, sample_time=sample_time)
 
 

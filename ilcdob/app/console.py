@@ -407,13 +407,34 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     path = Path(a.fleet_file)
     created = not path.exists()
     model_ts = load_model(a.model).sample_time
+    pid = {"--kp": a.kp, "--ki": a.ki, "--kd": a.kd, "--derivative-filter": a.derivative_filter}
+    own = {"--channel-gain": a.channel_gain, "--airframe": a.airframe}
+    if a.channel is not None and any(v is not None for v in pid.values()):
+        raise SpecError(f"{', '.join(k for k, v in pid.items() if v is not None)}: a system with --channel flies "
+                        "its own controller, described by its identified channel map; ilcdob's PID gains would be "
+                        "ignored: omit them; nothing written")
+    if a.channel is None and any(v is not None for v in own.values()):
+        raise SpecError(f"{', '.join(k for k, v in own.items() if v is not None)}: only for a vehicle on its own "
+                        "controller (give --channel); nothing written")
+    needed = ([] if a.channel is not None else ["--kp", "--ki", "--kd"]) + ["--q-order", "--q-time-constant"]
+    given = {"--q-order": a.q_order, "--q-time-constant": a.q_time_constant, **pid}
+    missing = [k for k in needed if given[k] is None and (a.channel is None or given["--q-order"] is not None
+                                                         or given["--q-time-constant"] is not None)]
+    if missing:
+        raise SpecError(f"{', '.join(missing)}: required for " + ("the add-on DOB" if a.channel else
+                        "ilcdob's PID + DOB loop (or give --channel for a vehicle on its own controller)")
+                        + "; nothing written")
     try:
-        controller = PIDSpec(a.kp, a.ki, a.kd, a.derivative_filter)
-        dob = DOBSpec(a.q_order, a.q_time_constant)
+        dob = None if a.q_order is None else DOBSpec(a.q_order, a.q_time_constant)
+        controller = None if a.channel else PIDSpec(a.kp, a.ki, a.kd, _given(a.derivative_filter, 0.05))
     except SpecError as exc:
         raise SpecError(f"{path}: system {a.name!r} (--kp/--ki/--kd/--derivative-filter, --q-order/"
                         f"--q-time-constant): {exc}; nothing written") from exc
-    fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time)
+    if a.channel is not None:
+        fleet = uc.add_to_fleet(path, a.name, a.model, None, dob, sample_time=a.sample_time, channel=a.channel,
+                                channel_gain=a.channel_gain, airframe=a.airframe)
+    else:
+        fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time)
     if created:
         origin = "--sample-time" if a.sample_time is not None else f"the sample_time of {a.model}"
         con.note(f"created {path} with sample time {fleet.sample_time:g} s (from {origin})")

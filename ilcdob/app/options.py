@@ -528,12 +528,20 @@ _FLEET_ADD = Command(
     "fleet add", "add a system flying an identified model.json (creates the fleet file if needed)", _FLEET_EXAMPLE, (
         flag("fleet_file", metavar="FLEET.toml", help="fleet file to create or append to"),
         flag("--name", required=True, help="name of the new system"),
-        flag("--model", required=True, help="model.json of `ilcdob identify`"),
-        *(flag(f"--{gain}", type=float, required=True, help=f"PID gain {gain}, {unit}")
+        flag("--model", required=True, help="model.json of `ilcdob identify` (with --channel: fitted from the "
+                                             "channel to the position, the vehicle's own loop closed)"),
+        *(flag(f"--{gain}", type=float, help=f"PID gain {gain}, {unit} (ilcdob's loop: required)")
           for gain, unit in (("kp", "1/s^2"), ("ki", "1/s^3"), ("kd", "1/s"))),
-        flag("--derivative-filter", type=float, default=0.05, help="derivative low-pass time constant, s"),
-        flag("--q-order", type=positive, required=True, help="order of the DOB low-pass Q"),
-        flag("--q-time-constant", type=float, required=True, help="time constant of Q, s"),
+        flag("--derivative-filter", type=float, help="derivative low-pass time constant, s (default 0.05)"),
+        flag("--q-order", type=positive, help="order of the DOB low-pass Q (ilcdob's loop: required; with "
+                                              "--channel: the add-on DOB the vehicle flies)"),
+        flag("--q-time-constant", type=float, help="time constant of Q, s"),
+        flag("--channel", choices=["position", "velocity", "acceleration"],
+             help="a vehicle on its own controller, learning through this setpoint channel (instead of ilcdob's "
+                  "PID + DOB)"),
+        flag("--channel-gain", type=float, help="with --channel: K, m/s^2 commanded per channel unit (the "
+                                                "controller's kp on position, kd on velocity; 1 on acceleration)"),
+        flag("--airframe", help="with --channel: model.json of the airframe, commanded acceleration -> position"),
         flag("--sample-time", type=float, help="new file: sample time, s (default: model's)")),
     describe=False)
 
