@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from ilcdob.errors import SpecError
@@ -45,3 +46,50 @@ def test_a_short_run_writes_its_tables_and_meets_the_acceptance():
     paper = next(r for r in data["runs"] if r["disturbance"] == "paper")
     assert f"{paper['ratios']['lab-quad'][0]:.4f}" in files["README.md"]
     assert files["learning.png"][:8] == b"\x89PNG\r\n\x1a\n"
+
+
+_VEHICLES_FILE = """
+description = "two airframes of a lab"
+[[vehicle]]
+name = "heavy"
+airframe = "hummingbird"
+params = { mass = 2.0, Ixx = 0.03, Iyy = 0.03, Izz = 0.05 }
+position_gains = { kp = [3.0, 3.0, 8.0], kd = [2.6, 2.6, 6.0] }
+
+[[vehicle]]
+name = "crazyflie"
+"""
+
+
+def test_a_vehicles_file_gives_the_labs_airframes(tmp_path):
+    """`--vehicles FILE`: each vehicle's complete rotorpy set is its starting set changed by `params` (the rest
+    rotorpy's own values), its gains as given; bad tables name the file, the vehicle and the key."""
+    pytest.importorskip("rotorpy")
+    from ilcdob.app.commands import reproduce_to_folder
+    from ilcdob.validation.channel_reproduction import load_vehicles
+    from ilcdob.vehicles.rotorpy_vehicle import shipped_airframe
+
+    path = tmp_path / "v.toml"
+    path.write_text(_VEHICLES_FILE)
+    heavy, cf = load_vehicles(path)
+    base = shipped_airframe("hummingbird")
+    changed = {"mass": 2.0, "Ixx": 0.03, "Iyy": 0.03, "Izz": 0.05}
+    assert set(heavy.airframe) == set(base)
+    for key, value in heavy.airframe.items():
+        np.testing.assert_equal(value, changed.get(key, base[key]), err_msg=key)
+    assert heavy.position_gains == ((3.0, 3.0, 8.0), (2.6, 2.6, 6.0))
+    np.testing.assert_equal(cf.airframe, shipped_airframe("crazyflie"))
+    assert cf.position_gains is None
+    for text, match in (('[[vehicle]]\nname = "x"', "key `airframe`: got 'x'"),
+                        ('[[vehicle]]\nname = "a"\nairframe = "hummingbird"\nparams = { massa = 1.0 }',
+                         "vehicle 'a', key `params`: .*\\['massa'\\] are not rotorpy parameters"),
+                        ('[[vehicle]]\nname = "a"\nairframe = "hummingbird"\nposition_gains = { kp = [1, 2], '
+                         'kd = [1, 1, 1] }', "key `position_gains.kp`: got \\[1, 2\\]"),
+                        ('[[vehicle]]\nname = "a"\ncolour = "red"', "unknown key\\(s\\) \\['colour'\\]"),
+                        ('fleet = 1', "expected \\[\\[vehicle\\]\\] tables")):
+        path.write_text(text)
+        with pytest.raises(SpecError, match=match):
+            load_vehicles(path)
+    with pytest.raises(SpecError, match="`--vehicles`: .*--plant rotorpy --controller own"):
+        reproduce_to_folder(tmp_path / "out", vehicles=path)
+    assert not (tmp_path / "out").exists()

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -35,7 +36,7 @@ from .scenarios import scenario
 from .vehicle_chain import dryden_gust, vehicle_reference
 
 __all__ = ["ChannelVehicle", "ChannelSettings", "ChannelRun", "ChannelReproduction", "reproduce_channels",
-           "lab_quad_airframe", "DEFAULT_VEHICLES", "RUNS", "runs_of"]
+           "lab_quad_airframe", "load_vehicles", "DEFAULT_VEHICLES", "RUNS", "runs_of"]
 
 
 def lab_quad_airframe() -> dict[str, Any]:
@@ -70,6 +71,98 @@ class ChannelVehicle:
     name: str
     airframe: str | Mapping[str, Any] | None = None
     position_gains: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+
+
+#: Keys of one ``[[vehicle]]`` table of a vehicles file (:func:`load_vehicles`); True: required.
+_VEHICLE_KEYS = {"name": True, "airframe": False, "params": False, "position_gains": False}
+
+
+def load_vehicles(path: str | Path) -> tuple[ChannelVehicle, ...]:
+    """A lab's airframes for the run, from a TOML file (``reproduce --controller own --vehicles FILE``)::
+
+        description = "our fleet"            # optional
+        [[vehicle]]
+        name = "heavy"
+        airframe = "hummingbird"             # the rotorpy set to start from (default: name, if rotorpy ships it)
+        params = { mass = 2.0, Ixx = 0.03, Iyy = 0.03, Izz = 0.05 }    # changes to it, rotorpy's keys and SI units
+        position_gains = { kp = [4.0, 4.0, 10.0], kd = [3.0, 3.0, 7.0] }   # SE3 position loop (default rotorpy's)
+
+    ``params`` may replace nested values whole (``rotor_pos = { r1 = [0.2, 0.2, 0], ... }``, m).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+
+    Returns
+    -------
+    tuple of ChannelVehicle
+        In file order, each with its complete parameter set.
+
+    Raises
+    ------
+    SpecError
+        An unreadable file, unknown or missing keys, a bad name, an airframe rotorpy does not ship, a parameter no
+        rotorpy set has, or gains that are not three positive numbers each; the message names the file, the
+        vehicle and the key.
+    """
+    from ilcdob.inputs import parse_toml, read_text
+    from ilcdob.names import check_name
+    from ilcdob.vehicles.rotorpy_vehicle import ROTORPY_VEHICLES, airframe_parameters, shipped_airframe
+
+    path = Path(path)
+    data = parse_toml(read_text(path, "vehicles file", error=SpecError, hint="a vehicles file is TOML text"), path,
+                      "vehicles file", error=SpecError)
+    unknown = sorted(set(data) - {"description", "vehicle"})
+    tables = data.get("vehicle")
+    if unknown or not isinstance(tables, list) or not tables:
+        raise SpecError(f"{path}: expected [[vehicle]] tables (and an optional `description`)"
+                        + (f"; unknown key(s) {unknown}" if unknown else ""))
+    out = []
+    for i, table in enumerate(tables):
+        label = f"{path}: vehicle #{i + 1}"
+        if not isinstance(table, dict):
+            raise SpecError(f"{label}: expected a table")
+        bad = sorted(set(table) - set(_VEHICLE_KEYS))
+        if bad or "name" not in table:
+            raise SpecError(f"{label}: " + (f"unknown key(s) {bad}; " if bad else "missing key `name`; ")
+                            + f"valid keys are {sorted(_VEHICLE_KEYS)}")
+        try:
+            name = check_name(table["name"])
+        except SpecError as exc:
+            raise SpecError(f"{label}: {exc}") from None
+        label = f"{path}: vehicle {name!r}"
+        base = table.get("airframe", name)
+        if base not in ROTORPY_VEHICLES:
+            raise SpecError(f"{label}, key `airframe`: got {base!r}, expected a parameter set rotorpy ships "
+                            f"({sorted(ROTORPY_VEHICLES)}) to start from, changed by `params`")
+        params = table.get("params", {})
+        if not isinstance(params, dict):
+            raise SpecError(f"{label}, key `params`: got {params!r}, expected a table of rotorpy parameters")
+        try:
+            airframe = airframe_parameters({**shipped_airframe(base), **params})
+        except SpecError as exc:
+            raise SpecError(f"{label}, key `params`: {exc}") from None
+        out.append(ChannelVehicle(name, airframe, _gains(label, table.get("position_gains"))))
+    return tuple(out)
+
+
+def _gains(label: str, table: Any) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+    """``position_gains = { kp = [...], kd = [...] }`` as ``(kp, kd)``; None when not given."""
+    if table is None:
+        return None
+    if not isinstance(table, dict) or set(table) != {"kp", "kd"}:
+        raise SpecError(f"{label}, key `position_gains`: got {table!r}, expected {{ kp = [x, y, z], kd = [x, y, z] }} "
+                        "(1/s^2, 1/s)")
+    gains = []
+    for key in ("kp", "kd"):
+        v = table[key]
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(g, (int, float)) and not isinstance(g, bool) and np.isfinite(g) and g > 0
+                           for g in v)):
+            raise SpecError(f"{label}, key `position_gains.{key}`: got {v!r}, expected three gains > 0 (x, y, z)")
+        gains.append(tuple(float(g) for g in v))
+    return gains[0], gains[1]
 
 
 #: The run's vehicles (module docstring); ``"lab-quad"``'s airframe is :func:`lab_quad_airframe`'s.
@@ -268,7 +361,8 @@ class ChannelReproduction:
             "plant": "rotorpy", "controller": "own", "iterations": self.iterations, "elapsed_s": self.elapsed_s,
             "settings": {"vehicles": [{"name": v.name, "airframe": v.airframe if isinstance(v.airframe, str) or
                                        v.airframe is None else "own parameter set",
-                                       "position_gains": v.position_gains} for v in s.vehicles],
+                                       **_airframe_summary(v), "position_gains": v.position_gains}
+                                      for v in s.vehicles],
                          "channels": list(s.channels), "sample_time": s.ts, "sensor_noise_std": s.sensor_noise_std,
                          "trial_s": s.trial_s, "identification_s": s.identification_s,
                          "dob": None if s.dob is None else {"q_order": s.dob.q_order,
@@ -304,8 +398,13 @@ class ChannelReproduction:
             f"{s.dryden_seed} every trial) through rotorpy's drag, with the wind law and, in hover, the paper's. "
             f"Ratios are RMSE of the learning flight over the same vehicle's flight {base}. "
             f"Run time {self.elapsed_s / 60:.1f} min. "
-            "Regenerate with `ilcdob reproduce --plant rotorpy --controller own --out <dir>` "
+            "Regenerate with `ilcdob reproduce --plant rotorpy --controller own --out <dir>` (`--vehicles FILE` "
+            "for a lab's airframes) "
             "(needs `pip install 'ilcdob[rotorpy]'`); docs/closed_loop.md explains the law.", "",
+            "## Vehicles", "",
+            "| vehicle | parameter set | mass (kg) | Ixx, Iyy, Izz (kg m^2) | arm (m) | kp (1/s^2) | kd (1/s) |",
+            "|---|---|---|---|---|---|---|",
+            *(_vehicle_row(v) for v in s.vehicles), "",
             "## Identification (held-out fit, %)", "",
             "| channel | vehicle | axis | channel map | airframe | drag (1/s) |", "|---|---|---|---|---|---|"]
         for ch, per in self.fits.items():
@@ -379,6 +478,26 @@ class ChannelReproduction:
             plt.close(fig)
             out["learning.png"] = buf.getvalue()
         return out
+
+
+def _airframe_summary(v: ChannelVehicle) -> dict[str, Any]:
+    """Mass (kg), inertias (kg m^2) and mean arm (m, rotor distance from the centre) of a run's vehicle."""
+    from ilcdob.vehicles.rotorpy_vehicle import airframe_parameters
+
+    a = airframe_parameters(lab_quad_airframe() if v.airframe == "lab-quad" else
+                            v.name if v.airframe is None else v.airframe)
+    arm = float(np.mean([np.linalg.norm(np.asarray(r, float)[:2]) for r in a["rotor_pos"].values()]))
+    return {"mass_kg": float(a["mass"]), "inertia_kg_m2": [float(a[k]) for k in ("Ixx", "Iyy", "Izz")], "arm_m": arm}
+
+
+def _vehicle_row(v: ChannelVehicle) -> str:
+    """The README's row of a vehicle."""
+    a = _airframe_summary(v)
+    base = v.airframe if isinstance(v.airframe, str) else ("rotorpy's" if v.airframe is None else "own")
+    gains = ("rotorpy's", "rotorpy's") if v.position_gains is None else tuple(
+        ", ".join(f"{g:g}" for g in k) for k in v.position_gains)
+    return (f"| {v.name} | {base} | {a['mass_kg']:.3g} | {', '.join(f'{i:.3g}' for i in a['inertia_kg_m2'])} | "
+            f"{a['arm_m']:.3g} | {gains[0]} | {gains[1]} |")
 
 
 def _axes(sid: int) -> tuple[str, ...]:

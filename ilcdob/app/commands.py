@@ -198,7 +198,7 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
                         argv: Sequence[str] | None = None, order: Sequence[str] | None = None,
                         sensor_noise: float | None = None, bandwidth: object = "auto",
                         workers: int | None = None, figure_workers: int | None = None,
-                        controller: str = "ilcdob") -> Any:
+                        controller: str = "ilcdob", vehicles: str | Path | None = None) -> Any:
     """Run the paper's scenarios on a fleet and write the reproduction folder (paper Sec. IV).
 
     Parameters
@@ -246,16 +246,28 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         Who flies the vehicles' position loop: ilcdob's PID + DOB, or (``plant="rotorpy"`` only) rotorpy's own
         SE3 controller with the learning on a setpoint channel (:mod:`ilcdob.validation.channel_reproduction`;
         no fleet file, law, order, band or workers).
+    vehicles : str or Path, optional
+        With ``controller="own"``: a TOML file of the run's airframes
+        (:func:`ilcdob.validation.channel_reproduction.load_vehicles`; default rotorpy's and one of ours).
 
     Returns
     -------
     ReproductionResult or ChannelReproduction
+
+    Raises
+    ------
+    SpecError
+        Bad settings, or options the chosen plant and controller take none of (``vehicles`` without
+        ``controller="own"``).
     """
+    if vehicles is not None and controller != "own":
+        raise SpecError(f"`--vehicles`: got {str(vehicles)!r}; a vehicles file gives the airframes of "
+                        "--plant rotorpy --controller own (other runs fly a fleet: --fleet)")
     run = _Reproduction(list(scenarios), iterations, plant, seed, law, figures, order, sensor_noise, bandwidth,
                         workers, figure_workers, progress, controller).checked()
     output = _Output("reproduce", out, overwrite, argv)
     if run.controller == "own":
-        return run.fly_own(output, fleet)
+        return run.fly_own(output, fleet, vehicles)
     return run.fly_vehicles(output, fleet) if plant == "rotorpy" else run.fly_fleet(output, fleet)
 
 
@@ -344,7 +356,7 @@ class _Reproduction:
         output.write(content, law=res.law)
         return res
 
-    def fly_own(self, output: _Output, fleet: str | Path | None) -> Any:
+    def fly_own(self, output: _Output, fleet: str | Path | None, vehicles: str | Path | None = None) -> Any:
         """``--plant rotorpy --controller own``: identify rotorpy's vehicles' channels and fly the scenarios on their
         own SE3 controllers (:func:`~ilcdob.validation.channel_reproduction.reproduce_channels`), write the folder.
 
@@ -354,6 +366,9 @@ class _Reproduction:
             The reproduction folder.
         fleet : str or Path or None
             Must be None: the vehicles are the run's.
+        vehicles : str or Path, optional
+            The run's airframes (:func:`~ilcdob.validation.channel_reproduction.load_vehicles`; default rotorpy's
+            and one of ours).
 
         Returns
         -------
@@ -368,11 +383,12 @@ class _Reproduction:
         if given:
             raise SpecError(f"`--controller own` takes no {', '.join(given)}: it flies its own vehicles with the "
                             "paper's law and the wind law, the band chosen from each trial, in one process")
-        output.check()
-        from ilcdob.validation.channel_reproduction import ChannelSettings, reproduce_channels
+        output.check({} if vehicles is None else {"--vehicles": vehicles})
+        from ilcdob.validation.channel_reproduction import ChannelSettings, load_vehicles, reproduce_channels
 
-        settings = ChannelSettings(dryden_seed=self.seed, **({} if self.sensor_noise is None else
-                                                             {"sensor_noise_std": self.sensor_noise}))
+        chosen = {} if vehicles is None else {"vehicles": load_vehicles(vehicles)}
+        settings = ChannelSettings(dryden_seed=self.seed, **chosen, **({} if self.sensor_noise is None else
+                                                                       {"sensor_noise_std": self.sensor_noise}))
         res = reproduce_channels(self.scenarios, self.iterations, settings, progress=self.progress)
         output.write(res.files(self.figures), law="paper")
         return res

@@ -175,7 +175,7 @@ def _reproduce(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                                  plant=a.plant, seed=a.seed, law=a.law, figures=not a.no_figures,
                                  overwrite=a.overwrite, progress=con.progress, argv=argv, order=a.order,
                                  sensor_noise=a.sensor_noise, bandwidth=a.bandwidth, workers=a.workers,
-                                 controller=a.controller)
+                                 controller=a.controller, vehicles=a.vehicles)
     if a.controller == "own":
         con.note(f"wrote {a.out} ({time.perf_counter() - start:.1f} s, the vehicles' own controllers)")
         for r in res.runs:

@@ -47,7 +47,7 @@ from ilcdob.errors import SpecError
 from .closed_loop import setpoint_rows
 from ilcdob.channel_loop import check_channel
 
-__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe"]
+__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe", "airframe_parameters"]
 
 #: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.044, 0.5
 #: and 1.0 kg, arm 4.3, 4.3, 17 and 24 cm; their drag differs in kind (rotor drag only; rotor drag and translational
@@ -77,8 +77,24 @@ def shipped_airframe(name: str) -> dict:
     return copy.deepcopy(importlib.import_module(f"rotorpy.vehicles.{ROTORPY_VEHICLES[name]}").quad_params)
 
 
-def _airframe(airframe: object) -> dict:
-    """The parameter set of a shipped name or of a lab's own complete mapping (checked against the shipped keys)."""
+def airframe_parameters(airframe: object) -> dict:
+    """The parameter set of a shipped name or of a lab's own complete mapping, checked against the shipped keys.
+
+    Parameters
+    ----------
+    airframe : str or mapping
+        A key of :data:`ROTORPY_VEHICLES`, or a complete rotorpy parameter set (SI units).
+
+    Returns
+    -------
+    dict
+        A copy of the set.
+
+    Raises
+    ------
+    SpecError
+        An unknown name, a set missing a key every shipped set has, or a key no shipped set has.
+    """
     if isinstance(airframe, str):
         if airframe not in ROTORPY_VEHICLES:
             raise SpecError(f"`airframe`: got {airframe!r}, expected one of {sorted(ROTORPY_VEHICLES)} or a "
@@ -163,7 +179,7 @@ class RotorpyVehicle:
             if fn is not None and not callable(fn):
                 raise SpecError(f"`{what}`: got {type(fn).__name__}, expected a callable of time (s) returning (3,)")
         multirotor, se3 = _rotorpy()
-        base = _airframe(name if airframe is None else airframe)
+        base = airframe_parameters(name if airframe is None else airframe)
         unknown = sorted(set(params or {}) - set(base) - _SE3_GAINS)
         if unknown:
             raise SpecError(f"`params`: {unknown} are not parameters of the {name!r} airframe (it has "
