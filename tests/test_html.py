@@ -451,3 +451,33 @@ def test_bound_only_delta_sets_refuse_what_needs_samples(fleet):
         theorem_check(fleet, None, sets, source="samples")
     with pytest.raises(SpecError, match=r"`names`: got \['UAV1', 'UAV9'\], expected system names of the fleet"):
         bound_delta_sets(fleet, ["UAV1", "UAV9"])
+
+
+OWN_CONTROLLER = Path(__file__).parents[1] / "reports" / "own_controller"
+
+
+def test_the_report_shows_a_run_on_the_vehicles_own_controllers(tmp_path):
+    """The committed own-controller run (reports/own_controller) in the report: its section holds every vehicle,
+    every acceptance row with its verdict and every learning ratio of results.json as the report formats it, and
+    its figure; a results.json missing a field the section reads is refused by key."""
+    html = build_report([OWN_CONTROLLER])
+    data = json.loads((OWN_CONTROLLER / "results.json").read_text())
+    start = html.index('<h2 id="own"')
+    section = html[start:html.find("<h2 ", start + 1)]
+    text = re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", section))
+    for v in data["settings"]["vehicles"]:
+        assert f" {v['name']} " in text
+    for row in data["acceptance"]:  # formatted as the report's tables do: 4 significant digits
+        cells = [escape(row["what"]), f"{row['value']:.4g}", f"{row['limit']:.4g}", "yes" if row["passed"] else "NO"]
+        assert "<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>" in section, row
+    first = data["runs"][0]
+    name = first["order"][0]
+    assert f"{first['ratios'][name][0]:.4g}" in text
+    assert "data:image/png;base64," in section
+    broken = tmp_path / "own"
+    shutil.copytree(OWN_CONTROLLER, broken)
+    (broken / "manifest.json").unlink()
+    del data["runs"][0]["ratios"]
+    (broken / "results.json").write_text(json.dumps(data))
+    with pytest.raises(ReportError, match='key "runs\\[0\\].ratios"'):
+        build_report([broken])

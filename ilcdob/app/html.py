@@ -21,6 +21,10 @@ Inputs, detected by file name in each folder
     ``bode_te.png``, ``identified_models.png``). Sections: the fleet and its identified
     models, the Bode figures, RMSE table and bars, error and disturbance-estimate time series
     per scenario (one section per plant), and the Theorem check.
+``results.json`` with ``"controller": "own"`` (``ilcdob reproduce --plant rotorpy --controller own``)
+    Vehicles on their own controllers (:meth:`ChannelReproduction.to_dict`): settings, vehicles,
+    identification, learning ratios per scenario, channel, disturbance and law, the acceptance rows and
+    ``learning.png``: one section.
 ``compare.json`` (``ilcdob compare``) and ``campaign.json`` (``ilcdob campaign``)
     Rendered generically, so their schemas can evolve: scalars at the top level become a
     key/value table, and every *method table* found anywhere in the document becomes an
@@ -169,6 +173,8 @@ class ReportInputs:
         Parsed ``results.json``, ``compare.json`` and ``campaign.json`` files.
     provenance : tuple of str
         Per folder, what wrote it (:func:`check_folder`).
+    own : tuple of JsonInput
+        Parsed ``results.json`` files of vehicles on their own controllers (``"controller": "own"``).
     """
 
     folders: tuple[Path, ...]
@@ -176,6 +182,7 @@ class ReportInputs:
     compare: tuple[JsonInput, ...] = ()
     campaign: tuple[JsonInput, ...] = ()
     provenance: tuple[str, ...] = ()
+    own: tuple[JsonInput, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -376,6 +383,43 @@ def _check_results(path: Path, data: Any) -> None:
                          f"({longest}: its longest rmse_learning list)")
 
 
+def _check_own_results(path: Path, data: Any) -> None:
+    """The fields of an own-controller ``results.json`` the report reads
+    (:meth:`ilcdob.validation.channel_reproduction.ChannelReproduction.to_dict`), typed as its writer writes them."""
+    s = _Schema(path)
+    settings = s.obj(data.get("settings"), "settings")
+    for i, v in enumerate(s.seq(settings.get("vehicles"), "settings.vehicles", "vehicle objects")):
+        where = f"settings.vehicles[{i}]"
+        s.text(s.obj(v, where).get("name"), f"{where}.name")
+        for key in ("mass_kg", "arm_m"):
+            s.real(v.get(key), f"{where}.{key}", null=True, positive=True)  # null: written before they were
+    for key in ("sample_time", "sensor_noise_std", "trial_s"):
+        s.real(settings.get(key), f"settings.{key}")
+    for ch, per in s.obj(data.get("identification"), "identification").items():
+        for name, axes in s.obj(per, _key("identification", ch)).items():
+            for ax, fit in s.obj(axes, _key(f"identification.{ch}", name)).items():
+                where = _key(f"identification.{ch}.{name}", ax)
+                s.real(s.obj(fit, where).get("held_out_fit_percent"), f"{where}.held_out_fit_percent")
+                s.real(fit.get("airframe_fit_percent"), f"{where}.airframe_fit_percent", null=True)
+    for i, r in enumerate(s.seq(data.get("runs"), "runs", "run objects")):
+        where = f"runs[{i}]"
+        s.integer(s.obj(r, where).get("scenario"), f"{where}.scenario", least=0)
+        for key in ("channel", "disturbance", "law"):
+            s.text(r.get(key), f"{where}.{key}")
+        order = s.texts(r.get("order"), f"{where}.order")
+        base, ratios = s.obj(r.get("rmse_no_learning"), f"{where}.rmse_no_learning"), s.obj(r.get("ratios"),
+                                                                                               f"{where}.ratios")
+        for name in order:
+            s.real(base.get(name), _key(f"{where}.rmse_no_learning", name))
+            s.reals(ratios.get(name), _key(f"{where}.ratios", name))
+    for i, row in enumerate(s.seq(data.get("acceptance"), "acceptance", "acceptance rows")):
+        where = f"acceptance[{i}]"
+        s.text(s.obj(row, where).get("what"), f"{where}.what")
+        s.real(row.get("value"), f"{where}.value")
+        s.real(row.get("limit"), f"{where}.limit")
+        s.flag(row.get("passed"), f"{where}.passed")
+
+
 def _check_fleet_table(path: Path, data: Any) -> None:
     """``fleet.json`` (:func:`report_files`): source, sample time, a header and rows of texts."""
     s = _Schema(path)
@@ -501,7 +545,7 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
     if not dirs:
         raise ReportError("`dirs`: got no folder; pass at least one output folder of "
                           + ", ".join(f"`{c.split(' ')[0]} {c.split(' ')[1]}`" for c in KNOWN_FILES.values()))
-    found: dict[str, list[JsonInput]] = {name: [] for name in KNOWN_FILES}
+    found: dict[str, list[JsonInput]] = {name: [] for name in (*KNOWN_FILES, "own")}
     folders, provenance = [], []
     expected = ", ".join(KNOWN_FILES)
     for d in dirs:
@@ -522,11 +566,13 @@ def discover_inputs(dirs: list[str | Path]) -> ReportInputs:
         provenance.append(check_folder(folder))
         for name in present:
             path = folder / name
-            data = _read_checked(path, _check_results if name == "results.json" else _check_methods)
-            found[name].append(JsonInput(folder, path, data))
+            data = _read_json(path)
+            own = name == "results.json" and isinstance(data, dict) and data.get("controller") == "own"
+            (_check_own_results if own else _check_results if name == "results.json" else _check_methods)(path, data)
+            found["own" if own else name].append(JsonInput(folder, path, data))
         folders.append(folder)
     return ReportInputs(tuple(folders), tuple(found["results.json"]), tuple(found["compare.json"]),
-                        tuple(found["campaign.json"]), tuple(provenance))
+                        tuple(found["campaign.json"]), tuple(provenance), tuple(found["own"]))
 
 
 def check_folder(folder: Path) -> str:
@@ -1214,7 +1260,7 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     sections = [_fleet_section(inputs.results, fleet_tables, reproduce_cmd),
                 _bode_section(inputs.results, reproduce_cmd),
                 *(_plant_section_of(inputs.results, plant) for plant in PLANTS),
-                _theorem_section(inputs.results, theorems, reproduce_cmd),
+                _theorem_section(inputs.results, theorems, reproduce_cmd), _own_section(list(inputs.own)),
                 _compare_section(inputs.compare), _campaign_section(inputs.campaign)]
     return _document(sections, list(inputs.provenance), options.title)
 
@@ -1272,6 +1318,48 @@ def _theorem_section(results: list[JsonInput], theorems: list[Any], expected: st
             srcs.append(str(res.folder / "theorem.json"))
     return _Section("theorem", "Theorem check", "\n".join(body), srcs,
                     f"{expected}, naming a fleet with identified models")
+
+
+def _own_html(j: JsonInput) -> str:
+    """One own-controller run: its settings, vehicles, identification, learning ratios, acceptance and figure."""
+    d, s = j.data, j.data["settings"]
+    parts = [f"<h3>{html_text(str(j.folder))}</h3>",
+             _table(["setting", "value"], [["channels", ", ".join(map(str, s.get("channels", [])))],
+                                           ["setpoint period (s)", _fmt(s["sample_time"])],
+                                           ["position noise (mm)", _fmt(1e3 * s["sensor_noise_std"])],
+                                           ["trial (s)", _fmt(s["trial_s"])],
+                                           ["add-on DOB", "-" if s.get("dob") is None else _fmt(s["dob"])]], "meta"),
+             _table(["vehicle", "mass (kg)", "arm (m)", "kp (1/s^2)", "kd (1/s)"],
+                    [[v["name"], _cell("", v.get("mass_kg")), _cell("", v.get("arm_m")),
+                      *(("rotorpy's", "rotorpy's") if v.get("position_gains") is None else
+                        (", ".join(_fmt(g) for g in k) for k in v["position_gains"]))] for v in s["vehicles"]]),
+             _table(["channel", "vehicle", "axis", "channel map held-out fit (%)", "airframe held-out fit (%)"],
+                    [[ch, name, ax, _fmt(f["held_out_fit_percent"]), _cell("", f.get("airframe_fit_percent"))]
+                     for ch, per in d["identification"].items() for name, axes in per.items()
+                     for ax, f in axes.items()])]
+    width = max((len(v) for r in d["runs"] for v in r["ratios"].values()), default=0)
+    parts.append(_table(["scenario", "disturbance", "law", "channel", "vehicle", "no learning (mm)",
+                         *(f"iteration {i + 1}" for i in range(width))],
+                        [[str(r["scenario"]), r["disturbance"], r["law"], r["channel"], name,
+                          _fmt(1e3 * r["rmse_no_learning"][name]), *(_fmt(v) for v in r["ratios"][name])]
+                         for r in d["runs"] for name in r["order"]]))
+    parts.append(_table(["acceptance figure", "measured", "limit", "met"],
+                        [[row["what"], _fmt(row["value"]), _fmt(row["limit"]), "yes" if row["passed"] else "NO"]
+                         for row in d["acceptance"]]))
+    parts.append(_file_figure(j.folder, "learning.png", "Learning over iterations: RMSE over the same vehicle's "
+                              "flight without learning (log scale), per disturbance and law"))
+    return "\n".join(parts)
+
+
+def _own_section(own: list[JsonInput]) -> _Section:
+    """Vehicles flying their own controllers: every own-controller results.json."""
+    return _Section(
+        "own", "Vehicles on their own controllers (rotorpy)",
+        "<p>rotorpy's multirotors fly rotorpy's SE3 controller; each channel map is identified from chirp flights "
+        "and the learning signal enters a setpoint channel. Ratios are RMSE of the learning flight over the same "
+        "vehicle's flight without learning (&lt; 1: learning helped).</p>\n" + "\n".join(_own_html(j) for j in own)
+        if own else "", [str(j.path) for j in own],
+        "results.json with \"controller\": \"own\" from `ilcdob reproduce --plant rotorpy --controller own --out DIR`")
 
 
 def _compare_section(compare: list[JsonInput]) -> _Section:
