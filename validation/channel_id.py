@@ -41,7 +41,7 @@ from ilcdob.design.maps.flown import rigid_body_split
 from .vehicle_chain import fit_candidates
 
 __all__ = ["CHANNEL_STRUCTURES", "AIRFRAME_STRUCTURES", "CHIRP_AMPLITUDE", "ChannelFit", "identify_channel",
-           "channel_flight", "MakeClosedLoop"]
+           "channel_flight", "MakeClosedLoop", "GainCheck", "check_channel_gain"]
 
 #: Candidate structures of a channel map, fewest free parameters first: the vehicle's loop holds its position,
 #: so no integrator; a second-order position loop (2 poles), with its attitude lag (3), with the zero its
@@ -209,3 +209,96 @@ def _command_flight(flight: FlightData) -> FlightData:
     """The flight as the airframe's data: the commanded acceleration as its input ``u``."""
     return FlightData(flight.t, {"u": flight.signals["command"], "y": flight.signals["y"]},
                       {"u": "m/s^2", "y": "m"}, source=f"{flight.source}, commanded acceleration")
+
+
+@dataclass(frozen=True)
+class GainCheck:
+    """Whether a setpoint channel's fit is its acceleration channel's times a constant ``K`` (:func:`check_channel_gain`).
+
+    Attributes
+    ----------
+    w : numpy.ndarray
+        Frequencies, rad/s.
+    mismatch : numpy.ndarray
+        ``|G_setpoint / (K G_acceleration) - 1|`` on ``w``.
+    bound : numpy.ndarray
+        What the two fits' uncertainty allows there: the sum of their 3-sigma bounds (times ``slack``).
+    gain : float
+        The ``K`` checked.
+    """
+
+    w: np.ndarray
+    mismatch: np.ndarray
+    bound: np.ndarray
+    gain: float
+
+    @property
+    def holds(self) -> bool:
+        """The constant ``K`` is within the fits' uncertainty at every frequency checked."""
+        return bool(np.all(self.mismatch <= self.bound))
+
+    @property
+    def worst_w(self) -> float:
+        """Where the mismatch is largest against its bound, rad/s."""
+        return float(self.w[int(np.argmax(self.mismatch - self.bound))])
+
+    def __repr__(self) -> str:
+        k = int(np.argmax(self.mismatch - self.bound))
+        return (f"<GainCheck K = {self.gain:g}: {'holds' if self.holds else 'FAILS'}; at {self.w[k]:.3g} rad/s "
+                f"mismatch {self.mismatch[k]:.3g} against {self.bound[k]:.3g}>")
+
+
+def _response(plant: PlantSpec, w: np.ndarray) -> np.ndarray:
+    s = 1j * w
+    return np.polyval(plant.num, s) / np.polyval(plant.den, s) * np.exp(-s * plant.delay)
+
+
+def check_channel_gain(setpoint: ChannelFit, acceleration: ChannelFit, gain: float, w: np.ndarray | None = None,
+                       slack: float = 1.0) -> GainCheck:
+    """Check on data the assumption of a setpoint channel: ``G_setpoint = K G_acceleration`` with a constant ``K``.
+
+    A single position/velocity loop (rotorpy's SE3, a Crazyflie's Mellinger controller without its integral)
+    passes a setpoint offset to the command through ``kp`` (or ``kd``) alone, so its position-channel fit is its
+    acceleration-channel fit times ``K`` at every frequency. A cascade (PX4, ArduPilot: a position P over a
+    velocity PID) does not: its ``K`` depends on frequency, and ``Gd = G_setpoint / K`` is wrong; such a vehicle
+    learns on its acceleration channel (docs/closed_loop.md, "Identifying the channel map").
+
+    Parameters
+    ----------
+    setpoint, acceleration : ChannelFit
+        The same vehicle's and axis's fits on a setpoint channel and on the acceleration channel.
+    gain : float
+        The ``K`` assumed (> 0).
+    w : array_like, optional
+        Frequencies, rad/s (default: 60 log-spaced over the chirps' band, 0.05 to 2 Hz).
+    slack : float
+        Multiplier (> 0) of the bound the fits' uncertainty allows.
+
+    Returns
+    -------
+    GainCheck
+
+    Raises
+    ------
+    SpecError
+        Fits of other vehicles or axes, channels other than a setpoint's and the acceleration, fits without an
+        identification, a bad gain, slack or grid.
+    """
+    if (setpoint.name, setpoint.axis) != (acceleration.name, acceleration.axis):
+        raise SpecError(f"`acceleration`: a fit of {acceleration.name!r} axis {acceleration.axis}, expected the same "
+                        f"vehicle and axis as `setpoint` ({setpoint.name!r} axis {setpoint.axis})")
+    if setpoint.channel == "acceleration" or acceleration.channel != "acceleration":
+        raise SpecError(f"`setpoint`, `acceleration`: got channels {setpoint.channel!r} and {acceleration.channel!r}, "
+                        "expected a position or velocity fit and an acceleration fit")
+    for what, value in (("gain", gain), ("slack", slack)):
+        if isinstance(value, bool) or not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+            raise SpecError(f"`{what}`: got {value!r}, expected a number > 0")
+    if setpoint.identification is None or acceleration.identification is None:
+        raise SpecError("`setpoint`, `acceleration`: both fits need their identification (covariance) for the bound")
+    w = np.geomspace(2 * np.pi * _F_LOW, 2 * np.pi * _F_HIGH, 60) if w is None else np.asarray(w, float)
+    if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w) & (w > 0)):
+        raise SpecError("`w`: expected frequencies > 0 rad/s")
+    ratio = _response(setpoint.plant, w) / (gain * _response(acceleration.plant, w))
+    bound = slack * (setpoint.identification.bound(w, setpoint.plant.delay)
+                     + acceleration.identification.bound(w, acceleration.plant.delay))
+    return GainCheck(w, np.abs(ratio - 1.0), bound, float(gain))
