@@ -277,11 +277,7 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         Another process kept the fleet file's folder locked for
         :data:`ilcdob.atomic.LOCK_TIMEOUT_S`.
     """
-    path = Path(path)
-    if path.is_symlink():  # edit the file the link points to (the link stays); model paths are relative to it
-        path = path.resolve()
-    if not isinstance(name, str) or not name.strip():
-        raise FleetError(f"{path}: `name`: got {name!r}, expected a non-empty string")
+    path = _fleet_target(path, name)
     identified = load_model(model)
     table: dict[str, Any] = {"name": name, "plant": {MODEL_FILE_KEY: model_reference(model, path)},
                              "controller": {"kp": controller.kp, "ki": controller.ki, "kd": controller.kd,
@@ -336,11 +332,7 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
     ilcdob.atomic.LockTimeoutError
         As :func:`add_system`.
     """
-    path = Path(path)
-    if path.is_symlink():
-        path = path.resolve()
-    if not isinstance(name, str) or not name.strip():
-        raise FleetError(f"{path}: `name`: got {name!r}, expected a non-empty string")
+    path = _fleet_target(path, name)
     identified = load_model(model)
     table: dict[str, Any] = {"name": name, "channel": channel,
                              "channel_map": {MODEL_FILE_KEY: model_reference(model, path)}}
@@ -352,6 +344,17 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
     if dob is not None:
         table["dob"] = {"q_order": dob.q_order, "q_time_constant": dob.q_time_constant}
     return _add_table(path, table, identified.sample_time, sample_time)
+
+
+def _fleet_target(path: str | Path, name: object) -> Path:
+    """The fleet file a system is added to (a symbolic link followed: the file it points to is edited, the link
+    stays, and model paths are relative to that file), after checking the new system's ``name`` is given."""
+    path = Path(path)
+    if path.is_symlink():
+        path = path.resolve()
+    if not isinstance(name, str) or not name.strip():
+        raise FleetError(f"{path}: `name`: got {name!r}, expected a non-empty string")
+    return path
 
 
 def _add_table(path: Path, table: dict[str, Any], model_ts: float, sample_time: float | None) -> Fleet:

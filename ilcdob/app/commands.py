@@ -1496,17 +1496,22 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
     bands = {(s, t): pair_band(flt, s, t, bandwidth, deltas=deltas) for s, t in learning_pairs(flt.names, order)}
     checks = theorem_check(flt, order, deltas, bands=bands)
     if out is not None:
-        write_file(out, {"order": order,
-                         "verdict": "holds" if all(c.holds_exact for c in checks) else "fails",
-                         "verdict_rule": "improvement guaranteed for a pair when the exact worst case of "
-                                         "|e_j / e'_j| over |Delta| <= W (and for a stated plant's Delta) is <= 1 + "
-                                         f"{EXACT_TOL:g} at every checked frequency; the paper's first-order "
-                                         "condition |Delta| < |1 + P C|/2 is reported beside it (paper_first_order)",
-                         "units": {"w": "rad/s", "ratios": "1 (|e_j| / |e'_j| per frequency)",
-                                   "delta, bound": "1 (relative model error |P/P_hat - 1|)"},
-                         "pairs": [c.to_dict() for c in checks],
-                         "provenance": _provenance("check", argv, digest).to_dict()})
+        _write_check(out, order, all(c.holds_exact for c in checks), checks, argv, digest,
+                     rule="improvement guaranteed for a pair when the exact worst case of |e_j / e'_j| over "
+                          "|Delta| <= W (and for a stated plant's Delta) is <= 1 + "
+                          f"{EXACT_TOL:g} at every checked frequency; the paper's first-order "
+                          "condition |Delta| < |1 + P C|/2 is reported beside it (paper_first_order)",
+                     units={"w": "rad/s", "ratios": "1 (|e_j| / |e'_j| per frequency)",
+                            "delta, bound": "1 (relative model error |P/P_hat - 1|)"})
     return checks
+
+
+def _write_check(out: str | Path, order: list[str], holds: bool, checks: list[Any], argv: Sequence[str] | None,
+                 digest: str | None, *, rule: str, units: dict[str, str]) -> None:
+    """The JSON file of ``ilcdob check``: order, verdict and its rule, units, every pair, provenance."""
+    write_file(out, {"order": order, "verdict": "holds" if holds else "fails", "verdict_rule": rule, "units": units,
+                     "pairs": [c.to_dict() for c in checks],
+                     "provenance": _provenance("check", argv, digest).to_dict()})
 
 
 def _check_channel_fleet(out: str | Path | None, flt: Fleet, order: list[str], digest: str, *, bound: float | None,
@@ -1520,15 +1525,12 @@ def _check_channel_fleet(out: str | Path | None, flt: Fleet, order: list[str], d
     checks = [channel_check(flt.loop(s), flt.loop(t), band=design_pair(flt, s, t, band=bandwidth).band,
                             scale=scale, bound=bound) for s, t in learning_pairs(flt.names, order)]
     if out is not None:
-        write_file(out, {"order": order, "verdict": "holds" if all(c.holds for c in checks) else "fails",
-                         "verdict_rule": "improvement guaranteed for a pair when the exact worst case of "
-                                         "|e_j / e'_j| = |1 - F| + |F| W over the source's Delta set |Delta| <= W is "
-                                         f"<= 1 + {EXACT_TOL:g} at every checked frequency (vehicles on their own "
-                                         "controller: the learner's model error cancels)",
-                         "units": {"w": "rad/s", "worst": "1 (|e_j| / |e'_j| per frequency)",
-                                   "bound": "1 (relative error of the source's identified map)"},
-                         "pairs": [c.to_dict() for c in checks],
-                         "provenance": _provenance("check", argv, digest).to_dict()})
+        _write_check(out, order, all(c.holds for c in checks), checks, argv, digest,
+                     rule="improvement guaranteed for a pair when the exact worst case of |e_j / e'_j| = |1 - F| + "
+                          f"|F| W over the source's Delta set |Delta| <= W is <= 1 + {EXACT_TOL:g} at every checked "
+                          "frequency (vehicles on their own controller: the learner's model error cancels)",
+                     units={"w": "rad/s", "worst": "1 (|e_j| / |e'_j| per frequency)",
+                            "bound": "1 (relative error of the source's identified map)"})
     return checks
 
 
