@@ -484,17 +484,24 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
     Raises
     ------
     SpecError
-        A method other than the closed form, a law other than the paper's, a bad limit policy.
+        A method other than the closed form, the multi-source law, exact-reference without its reference or
+        the target's reference map, a bad limit policy.
     """
     chosen = method_named(method)
     if chosen.name != "closed-form":
         raise SpecError(f"`method`: got {chosen.name!r}, which designs for ilcdob's PID + DOB loop, and {own} fly "
                         "their own controller; design such pairs with 'closed-form' (the paper's filters on the "
                         "identified channel maps, docs/closed_loop.md)")
-    name = law.name if isinstance(law, ExactReference) else check_law(law)
-    if name != DEFAULT_LAW:
-        raise SpecError(f"`law`: got {name!r}; for vehicles on their own controller ({own}) ilcdob learns with the "
-                        "paper's law (the reference's share of the error is learned with the disturbance)")
+    if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
+        name, reference = (law.name, law.reference) if isinstance(law, ExactReference) else (law, None)
+        _check_law_request(fleet, source, target, name, reference)
+        for lp in (fleet.loop(source), fleet.loop(target)):  # before the design: the law's own input
+            if isinstance(lp, ChannelLoop):
+                lp.G_r  # noqa: B018 - raises where the reference map is not known
+        design = _fleet_channel_pair(fleet, source, target, method, own, law=DEFAULT_LAW, band=band,
+                                     disturbance=disturbance, on_limit=on_limit)
+        return with_law(design, fleet, source, target, name, reference,
+                        law.acceleration if isinstance(law, ExactReference) else None)
     if on_limit not in LIMIT_POLICIES:
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
     limits = {s.name: s for s in fleet.systems}[target].limits
@@ -628,10 +635,13 @@ def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: st
     if design.law != DEFAULT_LAW:
         raise SpecError(f"`design`: already learns with law {design.law!r}; give a design made with the paper's law")
     _check_law_request(fleet, source, target, law, reference)
-    terms = reference_terms(fleet.loop(source), fleet.loop(target), reference, acceleration)
+    src, tgt = fleet.loop(source), fleet.loop(target)
+    terms = reference_terms(src, tgt, reference, acceleration)
+    maps = {lp.name: lp.reference_source for lp in (src, tgt) if isinstance(lp, ChannelLoop)}
     filters = {**design.filters, "law": law,
                "reference_terms": {**terms.to_dict(),
                                    "rule": "d_f,j = learning{e_{j-1} - e_ref,{j-1}, d_f,{j-1}} + correction "
-                                           "(reference_terms.csv: e_ref_source in m, correction in m/s^2)",
+                                           f"(reference_terms.csv: e_ref_source in m, correction in {terms.unit})",
+                                   **({"reference_maps": maps} if maps else {}),
                                    "law": LAW_DESCRIPTIONS[law]}}
     return replace(design, filters=filters, law=law, reference=terms)

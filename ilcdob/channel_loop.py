@@ -27,6 +27,12 @@ vehicle's own loop ``C``: so ``Gd = (1 - Q) Gf / K`` exactly, whatever the airfr
 enters ``D`` only). ``G_ch`` is then identified with the DOB flying, and :attr:`ChannelLoop.dob` holds
 its ``Q``.
 
+``T`` is the reference map: the reference ``r`` (m) the vehicle is sent -> its position, as the flight stack
+flies it (whatever it feeds forward of ``r``'s derivatives). Only the ``exact-reference`` law uses it
+(:mod:`ilcdob.design.maps.reference`); it is identified from flights of the reference alone
+(:attr:`ChannelLoop.reference_map`), and on the position channel it defaults to the channel's own map
+(an offset added to the position setpoint is flown as the setpoint is).
+
 Units: s, m, the channel's unit for ``u`` (:data:`CHANNEL_UNITS`), m/s^2 for ``d``.
 """
 
@@ -73,6 +79,17 @@ def check_channel(channel: object, what: str = "channel") -> str:
 
 
 
+def _stable_block(plant: PlantSpec, ts: float, name: str, what: str) -> DiscreteBlock:
+    """``plant`` sampled (:func:`plant_block`), refused unless all its poles are inside the unit circle."""
+    block = plant_block(plant, ts)
+    bad = block.poles[np.abs(block.poles) >= STABILITY_MARGIN]
+    if bad.size:
+        raise UnstableLoopError(f"vehicle {name!r}: its {what} has poles {np.round(bad, 6)} on or outside the unit "
+                                "circle; a vehicle on its own controller must hold its position (identify the "
+                                "closed loop, not the airframe)")
+    return block
+
+
 @dataclass(frozen=True)
 class ChannelLoop:
     """One vehicle axis on its own controller (module docstring).
@@ -101,6 +118,9 @@ class ChannelLoop:
     identification : IdentificationSpec or None
         The channel fit's parameters and covariance (:attr:`ilcdob.validation.channel_id.ChannelFit.identification`):
         its Delta set (:meth:`delta`).
+    reference_map : PlantSpec or None
+        ``T`` (module docstring): reference (m) -> position (m), continuous, identified; None: on the position
+        channel the channel map ``K Gd`` (:attr:`G_r`), elsewhere not known.
     """
 
     name: str
@@ -111,7 +131,8 @@ class ChannelLoop:
     airframe: PlantSpec | None = None
     dob: DOBSpec | None = None
     identification: IdentificationSpec | None = None
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    reference_map: PlantSpec | None = None
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         check_channel(self.channel)
@@ -129,6 +150,9 @@ class ChannelLoop:
         if self.identification is not None and not isinstance(self.identification, IdentificationSpec):
             raise SpecError(f"`identification`: got {type(self.identification).__name__}, expected an "
                             "IdentificationSpec (the channel fit's parameters and covariance) or None")
+        if self.reference_map is not None and not isinstance(self.reference_map, PlantSpec):
+            raise SpecError(f"`reference_map`: got {type(self.reference_map).__name__}, expected a PlantSpec "
+                            "(reference -> position, identified) or None")
         if self.dob is not None and not isinstance(self.dob, DOBSpec):
             raise SpecError(f"`dob`: got {type(self.dob).__name__}, expected a DOBSpec (the add-on DOB's Q) or None")
         if self.dob is not None and self.airframe is None:
@@ -137,17 +161,13 @@ class ChannelLoop:
         if self.channel == "acceleration" and k != 1.0:
             raise SpecError(f"`channel_gain`: got {k!r} on the acceleration channel, where the learning signal "
                             "is added where a disturbance acts: it must be 1")
-        bad = self.block.poles[np.abs(self.block.poles) >= STABILITY_MARGIN]
-        if bad.size:
-            raise UnstableLoopError(f"vehicle {self.name!r}: its disturbance map has poles {np.round(bad, 6)} on "
-                                    "or outside the unit circle; a vehicle on its own controller must hold its "
-                                    "position (identify the closed loop, not the airframe)")
+        self._cache["block"] = _stable_block(self.disturbance_map, self.ts, self.name, "disturbance map")
+        if self.reference_map is not None:
+            self.G_r  # noqa: B018 - built now: an unstable reference map is refused with the vehicle
 
     @property
     def block(self) -> DiscreteBlock:
         """``Gd`` sampled with a zero-order hold, with its analytic poles and zeros (:func:`plant_block`)."""
-        if "block" not in self._cache:
-            self._cache["block"] = plant_block(self.disturbance_map, self.ts)
         return self._cache["block"]
 
     @property
@@ -173,6 +193,31 @@ class ChannelLoop:
         """``Gf = K Gd``: learning signal (channel unit) -> position (m), discrete."""
         s = self.block.sys
         return ct.ss(s.A, s.B, self.channel_gain * s.C, self.channel_gain * s.D, s.dt)
+
+    @property
+    def G_r(self) -> ct.StateSpace:
+        """``T``: reference (m) -> position (m), discrete (module docstring).
+
+        Raises
+        ------
+        SpecError
+            No reference map off the position channel.
+        """
+        if "G_r" not in self._cache:
+            if self.reference_map is not None:
+                self._cache["G_r"] = _stable_block(self.reference_map, self.ts, self.name, "reference map").sys
+            elif self.channel == "position":
+                self._cache["G_r"] = self.G_f
+            else:
+                raise SpecError(f"vehicle {self.name!r}: its reference map (reference -> position as its flight "
+                                f"stack flies it) is not known on the {self.channel!r} channel; identify it from a "
+                                "flight of the reference alone and give it as `reference_map` (docs/closed_loop.md)")
+        return self._cache["G_r"]
+
+    @property
+    def reference_source(self) -> str:
+        """Where :attr:`G_r` comes from: ``"identified"`` or ``"channel map"``."""
+        return "identified" if self.reference_map is not None else "channel map"
 
     @property
     def nominal(self) -> "ChannelLoop":
@@ -216,7 +261,8 @@ class ChannelLoop:
 
 def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0,
                  airframe: PlantSpec | None = None, dob: DOBSpec | None = None,
-                 identification: IdentificationSpec | None = None) -> ChannelLoop:
+                 identification: IdentificationSpec | None = None,
+                 reference_map: PlantSpec | None = None) -> ChannelLoop:
     """The loop of a vehicle from its identified channel map ``G_ch`` (channel -> position).
 
     ``Gd = G_ch / K``, times ``1 - Q`` with the add-on DOB (module docstring).
@@ -238,6 +284,8 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         The add-on DOB the vehicle flew ``channel_map``'s flights with (:attr:`ChannelLoop.dob`).
     identification : IdentificationSpec, optional
         The fit's parameters and covariance (:attr:`ChannelLoop.identification`).
+    reference_map : PlantSpec, optional
+        ``T``, reference -> position, identified (:attr:`ChannelLoop.reference_map`).
 
     Returns
     -------
@@ -254,7 +302,7 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
         raise SpecError(f"`channel_gain`: got {channel_gain!r}, expected a gain > 0")
     num = [c / channel_gain for c in channel_map.num]
     return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
-                       float(channel_gain), airframe, dob, identification)
+                       float(channel_gain), airframe, dob, identification, reference_map)
 
 
 @dataclass(frozen=True)
@@ -284,6 +332,8 @@ class ChannelSystemSpec:
         What the vehicle can fly: bounds the acceleration its learning signal makes it command.
     sensor : SensorSpec or None
         Its position sensor's noise.
+    reference_map : PlantSpec or None
+        ``T``, reference (m) -> position (m), identified (:attr:`ChannelLoop.reference_map`).
     """
 
     name: str
@@ -295,6 +345,7 @@ class ChannelSystemSpec:
     identification: IdentificationSpec | None = None
     limits: LimitSpec | None = None
     sensor: SensorSpec | None = None
+    reference_map: PlantSpec | None = None
 
     def __post_init__(self) -> None:
         check_name(self.name)
@@ -328,4 +379,4 @@ class ChannelSystemSpec:
             The channel map is not stable.
         """
         return channel_loop(self.name, ts, self.channel, self.channel_map, self.channel_gain, self.airframe,
-                            self.dob, self.identification)
+                            self.dob, self.identification, self.reference_map)

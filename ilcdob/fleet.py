@@ -69,13 +69,16 @@ the learning channel to the position, not by plant, PID and DOB::
     airframe = { model = "lab-quad_airframe.json" }      # optional: commanded acceleration -> position,
                                            # for --disturbance airframe/wind and the add-on DOB
     dob = { q_order = 3, q_time_constant = 0.15 }        # optional: the add-on DOB it flies
+    reference_map = { model = "lab-quad_reference.json" } # optional: reference -> position, for the
+                                           # exact-reference law (default on position: channel_map)
     limits = { acceleration = 6.0 }        # optional, as above; sensor too
 
 The channel map's model file gives its ``identification`` (its Delta set, for ``check``). Per-axis
 sections work as for the other systems, with ``channel_map`` required and ``delay``,
-``identification``, ``airframe`` and ``channel_gain`` bound to it. Such systems and ilcdob's own loop
-mix in one fleet; ``ilcdob design`` (closed form, the paper's law), ``check`` and ``learn`` serve them,
-and the commands that simulate ilcdob's loop refuse them (:meth:`Fleet.require_paper_loops`).
+``identification``, ``airframe``, ``channel_gain`` and ``reference_map`` bound to it. Such systems and
+ilcdob's own loop mix in one fleet; ``ilcdob design`` (closed form; the paper's or the exact-reference
+law), ``check`` and ``learn`` serve them, and the commands that simulate ilcdob's loop refuse them
+(:meth:`Fleet.require_paper_loops`).
 
 A system's ``name`` follows one rule (:func:`ilcdob.names.check_name`): 1 to 64 ASCII
 letters, digits, spaces and ``_ - . +``, starting with a letter or a digit and not ending
@@ -120,9 +123,9 @@ _SYSTEM_KEYS = {"name": True, "plant": True, "controller": True, "dob": True,
 #: Keys of a vehicle on its own controller (a system with ``channel``; module docstring).
 _CHANNEL_SYSTEM_KEYS = {"name": True, "channel": True, "channel_map": True, "channel_gain": False, "delay": False,
                         "airframe": False, "dob": False, "identification": False, "limits": False, "sensor": False,
-                        "y": False, "z": False}
+                        "reference_map": False, "y": False, "z": False}
 #: Keys bound to a channel map: an axis section that gives its own map does not inherit them from x.
-_CHANNEL_MAP_KEYS = ("channel_map", "delay", "identification", "airframe", "channel_gain")
+_CHANNEL_MAP_KEYS = ("channel_map", "delay", "identification", "airframe", "channel_gain", "reference_map")
 #: The axes a fleet file can describe; x is the top level of each system (module docstring).
 AXES = ("x", "y", "z")
 #: Keys bound to a plant: an axis section that gives its own plant does not inherit them from x.
@@ -142,12 +145,14 @@ _TABLE_KEYS = {
     "sensor": {"noise_std": True},
     "channel_map": {"num": True, "den": True},
     "airframe": {"num": True, "den": True, "delay": False},
+    "reference_map": {"num": True, "den": True, "delay": False},
 }
 #: Key of a ``plant``/``model`` table naming a model file instead of giving num/den.
 MODEL_FILE_KEY = "model"
 _SPEC_CLASS = {"plant": PlantSpec, "model": PlantSpec, "controller": PIDSpec, "dob": DOBSpec,
                "noise": NoiseSpec, "identification": IdentificationSpec, "uncertainty": UncertaintySpec,
-               "limits": LimitSpec, "sensor": SensorSpec, "channel_map": PlantSpec, "airframe": PlantSpec}
+               "limits": LimitSpec, "sensor": SensorSpec, "channel_map": PlantSpec, "airframe": PlantSpec,
+               "reference_map": PlantSpec}
 
 
 @dataclass(frozen=True)
@@ -296,7 +301,7 @@ def _system_from_table(src: str, idx: int, table: Any,
         raise FleetError(f"{src}: system #{idx + 1}: {exc}") from exc
     map_key = "channel_map" if own else "plant"
     files = {key: _model_file(label, key, table[key], base_dir)
-             for key in (("channel_map", "airframe") if own else ("plant", "model"))
+             for key in (("channel_map", "airframe", "reference_map") if own else ("plant", "model"))
              if isinstance(table.get(key), dict) and MODEL_FILE_KEY in table[key]}
     if map_key in files and "delay" in table:
         raise FleetError(f"{label}, key `delay`: got {table['delay']!r}, but the {map_key.replace('_', ' ')}'s delay "
@@ -333,7 +338,7 @@ def _spec_parts(label: str, table: dict[str, Any], files: dict[str, IdentifiedMo
         if key in files:
             parts[key] = files[key].plant_spec()
             continue
-        plant_like = key in ("plant", "model", "channel_map", "airframe")
+        plant_like = key in ("plant", "model", "channel_map", "airframe", "reference_map")
         alternative = f", or only `{MODEL_FILE_KEY}` (a model.json)" if plant_like else ""
         _check_keys(f"{label}, key `{key}`", table[key], keys, alternative)
         kwargs = dict(table[key])

@@ -294,7 +294,8 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
 
 def add_channel_system(path: str | Path, name: str, model: str | Path, channel: str, *,
                        channel_gain: float | None = None, airframe: str | Path | None = None,
-                       dob: DOBSpec | None = None, sample_time: float | None = None) -> Fleet:
+                       dob: DOBSpec | None = None, sample_time: float | None = None,
+                       reference_map: str | Path | None = None) -> Fleet:
     """Add a vehicle on its own controller to a fleet file (:mod:`ilcdob.fleet`'s ``channel`` systems), creating
     the file if needed; validated, locked and written as :func:`add_system` does.
 
@@ -317,6 +318,8 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
         The add-on DOB the vehicle flies (its channel map identified with it flying).
     sample_time : float, optional
         As :func:`add_system`.
+    reference_map : str or pathlib.Path, optional
+        The ``model.json`` of the reference map (reference -> position as the flight stack flies it).
 
     Returns
     -------
@@ -338,9 +341,10 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
                              "channel_map": {MODEL_FILE_KEY: model_reference(model, path)}}
     if channel_gain is not None:
         table["channel_gain"] = channel_gain
-    if airframe is not None:
-        load_model(airframe)
-        table["airframe"] = {MODEL_FILE_KEY: model_reference(airframe, path)}
+    for key, file in (("airframe", airframe), ("reference_map", reference_map)):
+        if file is not None:
+            load_model(file)
+            table[key] = {MODEL_FILE_KEY: model_reference(file, path)}
     if dob is not None:
         table["dob"] = {"q_order": dob.q_order, "q_time_constant": dob.q_time_constant}
     return _add_table(path, table, identified.sample_time, sample_time)

@@ -999,8 +999,8 @@ _FILE_TEXT = {
                 "closed-form filters L1 and L2, its error propagation Te1 and Te2 under a stated model error, and "
                 "Omega (disturbance -> DOB estimate) of both vehicles, with the learning band marked",
     "reference_terms.csv": "exact-reference law: the previous vehicle's model reference error e_ref_source (m), "
-                           "removed from its error before L1, and the correction (m/s^2) added to the learning "
-                           "signal, for the given trial's reference",
+                           "removed from its error before L1, and the correction (in the learning signal's unit, "
+                           "m/s^2 on ilcdob's loop) added to the learning signal, for the given trial's reference",
     "README.md": "this file",
 }
 

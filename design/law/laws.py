@@ -47,10 +47,12 @@ from typing import Callable
 
 import numpy as np
 
+from ilcdob.channel_loop import CHANNEL_UNITS, ChannelLoop
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.signals import as_signal
 
+from ..maps.channel_filters import learning_channel
 from ..maps.reference import inverse_gf_filter, reference_error
 
 __all__ = ["LAWS", "DEFAULT_LAW", "LAW_DESCRIPTIONS", "check_law", "ExactReference", "law_for",
@@ -143,13 +145,17 @@ class ReferenceTerms:
     source_error : numpy.ndarray, m
         ``e_ref,{j-1}``: the error system j-1's model makes flying the reference without
         disturbance or learning; removed from its trial error before the learning filter.
-    correction : numpy.ndarray, m/s^2
+    correction : numpy.ndarray, in ``unit``
         ``Gf_hat_j^{-1}{e_ref,j}``: added to system j's learning signal, cancelling its own
         reference error.
+    unit : str
+        The learning signal's unit: m/s^2 for the paper's loop, the channel's for a vehicle on its own
+        controller (:data:`ilcdob.channel_loop.CHANNEL_UNITS`).
     """
 
     source_error: np.ndarray
     correction: np.ndarray
+    unit: str = "m/s^2"
 
     def error_in(self, e_prev: object) -> np.ndarray:
         """System j-1's error with its reference term removed.
@@ -205,16 +211,21 @@ class ReferenceTerms:
         """Summary for ``filters.json`` (the signals themselves go to a CSV)."""
         return {"samples": int(self.source_error.size),
                 "source_error_rms_m": float(np.sqrt(np.mean(self.source_error ** 2))),
-                "correction_rms_m_s2": float(np.sqrt(np.mean(self.correction ** 2)))}
+                f"correction_rms_{self.unit.replace('/', '_').replace('^', '')}":
+                    float(np.sqrt(np.mean(self.correction ** 2)))}
 
 
-def reference_terms(source: LoopSystem, target: LoopSystem, r: object,
+def reference_terms(source: LoopSystem | ChannelLoop, target: LoopSystem | ChannelLoop, r: object,
                     a_ref: object | None = None) -> ReferenceTerms:
     """The reference terms of ``source`` (j-1) -> ``target`` (j) for reference ``r`` (module docstring).
 
+    Where either flies its own controller the pair learns through the target's channel
+    (:mod:`~ilcdob.design.maps.channel_filters`): the correction is in that channel's unit and sign (for
+    ilcdob's loop as the target, its acceleration feed-forward ``-d_f``; :mod:`~ilcdob.design.maps.reference`).
+
     Parameters
     ----------
-    source, target : LoopSystem
+    source, target : LoopSystem or ChannelLoop
         Systems j-1 and j (their models are used).
     r : array, m
         Reference position of the trial, sampled at the fleet's sample time.
@@ -232,11 +243,16 @@ def reference_terms(source: LoopSystem, target: LoopSystem, r: object,
     if a_ref is not None:
         a_ref = as_signal(a_ref, "acceleration", r.size)
     else:
-        ff = [lp.name for lp in (source, target) if lp.spec.controller.acceleration_feedforward]
+        ff = [lp.name for lp in (source, target)
+              if isinstance(lp, LoopSystem) and lp.spec.controller.acceleration_feedforward]
         if ff:
             raise SpecError(f"`acceleration`: systems {ff} feed the reference acceleration forward "
                             "(controller.acceleration_feedforward), so their reference error depends on it; give the "
                             "reference acceleration (m/s^2), e.g. an `acceleration` column in the trial CSV")
     e_src = reference_error(source, r, a_ref)
     e_tgt = e_src if target is source else reference_error(target, r, a_ref)
-    return ReferenceTerms(source_error=e_src, correction=inverse_gf_filter(target).apply(e_tgt, "e_ref"))
+    correction = inverse_gf_filter(target).apply(e_tgt, "e_ref")
+    if not any(isinstance(lp, ChannelLoop) for lp in (source, target)):
+        return ReferenceTerms(source_error=e_src, correction=correction)
+    sign = 1.0 if isinstance(target, ChannelLoop) else -1.0  # ilcdob's loop learns on -d_f there
+    return ReferenceTerms(e_src, sign * correction, CHANNEL_UNITS[learning_channel(target)])

@@ -11,7 +11,13 @@ reconstructed disturbance and is missing from what system j must cancel. Kept ex
 (the Theorem's derivation, paper Sec. III, with the reference term kept;
 ``G_f,j^{-1} = -D_j / P_hat_j = -(1 - Q_j)/P_hat_j - (M_j + C_j)`` applied non-causally with
 the same stable inversion as ``L1``). With exact models and no noise the learning flight of
-system j has zero error, on any trajectory. This is the ``exact-reference`` learning law of
+system j has zero error, on any trajectory.
+
+A vehicle on its own controller (:class:`~ilcdob.channel_loop.ChannelLoop`) has ``e_ref = r - T{r}`` with
+its reference map ``T`` (:attr:`~ilcdob.channel_loop.ChannelLoop.G_r`: what the flight stack feeds
+forward of ``r`` is inside it, so there is no ``a_ref`` term), and its ``G_f`` is its channel's
+(channel -> position, :mod:`ilcdob.channel_loop`); the terms are then in the learner's channel unit and
+sign (:func:`~ilcdob.design.law.laws.reference_terms`). This is the ``exact-reference`` learning law of
 :mod:`ilcdob.design.law.laws` (``law="exact-reference"`` in ``reproduce``, ``design_pair``,
 ``compare_designs`` and campaigns).
 """
@@ -20,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ilcdob.channel_loop import ChannelLoop
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
@@ -29,14 +36,15 @@ from ..filters.noncausal import ZPKFilter
 __all__ = ["reference_error", "inverse_gf_filter", "ExactReferenceLearning"]
 
 
-def reference_error(loop: LoopSystem, r: object, a_ref: object | None = None) -> np.ndarray:
+def reference_error(loop: LoopSystem | ChannelLoop, r: object, a_ref: object | None = None) -> np.ndarray:
     """Error of ``loop``'s model flying reference ``r`` (m) without disturbance or learning, m.
 
-    ``e_ref = r - G_r{r} + G_f{a_ref}`` with the model's maps (module docstring).
+    ``e_ref = r - G_r{r} + G_f{a_ref}`` with the model's maps; ``r - T{r}`` for a vehicle on its own
+    controller (module docstring).
 
     Parameters
     ----------
-    loop : LoopSystem
+    loop : LoopSystem or ChannelLoop
         The system (its model, ``loop.nominal``, is flown).
     r : array_like
         Position reference, m.
@@ -48,24 +56,32 @@ def reference_error(loop: LoopSystem, r: object, a_ref: object | None = None) ->
     -------
     numpy.ndarray
         ``e_ref``, m, same length as ``r``.
+
+    Raises
+    ------
+    SpecError
+        A vehicle on its own controller whose reference map is not known (:attr:`ChannelLoop.G_r`).
     """
-    src = loop.nominal
     r = as_signal(r, "r")
+    if isinstance(loop, ChannelLoop):
+        return r - simulate_map(loop.G_r, r)
+    src = loop.nominal
     e = r - simulate_map(src.G_r, r)
     if a_ref is not None and loop.spec.controller.acceleration_feedforward:
         e = e + simulate_map(src.G_f, as_signal(a_ref, "a_ref", r.size))
     return e
 
 
-def inverse_gf_filter(loop: LoopSystem) -> ZPKFilter:
+def inverse_gf_filter(loop: LoopSystem | ChannelLoop) -> ZPKFilter:
     """``G_f^{-1} = -D / P_hat`` of ``loop``'s model, for non-causal application.
 
     Zeros: the closed-loop poles; poles: zeros of P_hat (the ZOH sampling zero outside the unit
-    circle becomes anti-causal) and the poles of Q, M and C.
+    circle becomes anti-causal) and the poles of Q, M and C. For a vehicle on its own controller:
+    ``(K Gd)^{-1}`` of its channel, from its sampled disturbance map's poles and zeros.
 
     Parameters
     ----------
-    loop : LoopSystem
+    loop : LoopSystem or ChannelLoop
         The system whose model's learning map ``G_f`` is inverted.
 
     Returns
@@ -74,6 +90,10 @@ def inverse_gf_filter(loop: LoopSystem) -> ZPKFilter:
         ``G_f^{-1}``, with its gain matched to the block formula
         (:func:`~ilcdob.design.maps.closed_form.matched`).
     """
+    if isinstance(loop, ChannelLoop):
+        blk, k = loop.block, loop.channel_gain
+        zeros = blk.zeros if blk.zeros is not None else np.zeros(0, complex)
+        return matched(blk.poles, zeros, loop.ts, lambda w: 1.0 / (k * blk.response(w)), f"Gf^-1 of {loop.name!r}")
     src = loop.nominal
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)
     poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], np.linalg.eigvals(src.Q.A),

@@ -1012,7 +1012,7 @@ def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet,
     if design.reference is not None:
         others["reference_terms.csv"] = FlightData(
             data.t, {"e_ref_source": design.reference.source_error, "correction": design.reference.correction},
-            {"e_ref_source": "m", "correction": "m/s^2"},
+            {"e_ref_source": "m", "correction": design.reference.unit},
             source=f"reference terms of {source} -> {target} for {o.trial}").to_csv
     others["bode.png"] = pair_bode_figure(flt, source, target, design.band, o.method)
     return others
@@ -1700,7 +1700,7 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
 
 def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controller: Any, dob: Any,
                  sample_time: float | None = None, channel: str | None = None, channel_gain: float | None = None,
-                 airframe: str | Path | None = None) -> Fleet:
+                 airframe: str | Path | None = None, reference_map: str | Path | None = None) -> Fleet:
     """Add a system flying an identified ``model.json`` to a fleet file (created if needed): ilcdob's PID + DOB
     loop, or with ``channel`` a vehicle on its own controller (:func:`ilcdob.fleet_io.add_channel_system`).
 
@@ -1724,6 +1724,8 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
         With ``channel``: ``K``, m/s^2 per channel unit.
     airframe : str or Path, optional
         With ``channel``: the airframe's ``model.json``.
+    reference_map : str or Path, optional
+        With ``channel``: the reference map's ``model.json`` (reference -> position).
 
     Returns
     -------
@@ -1731,11 +1733,12 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
     """
     from ilcdob.fleet_io import add_channel_system, add_system
 
-    inputs = {"--model": model, **({"--airframe": airframe} if airframe is not None else {})}
+    inputs = {"--model": model, **{k: v for k, v in (("--airframe", airframe), ("--reference-map", reference_map))
+                                   if v is not None}}
     check_output_path(fleet_file, folder=False, inputs=inputs, option="FLEET.toml")
     if channel is not None:
         return add_channel_system(fleet_file, name, model, channel, channel_gain=channel_gain, airframe=airframe,
-                                  dob=dob, sample_time=sample_time)
+                                  dob=dob, sample_time=sample_time, reference_map=reference_map)
     return add_system(fleet_file, name, model, controller, dob, sample_time=sample_time)
 
 

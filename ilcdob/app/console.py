@@ -408,7 +408,7 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     created = not path.exists()
     model_ts = load_model(a.model).sample_time
     pid = {"--kp": a.kp, "--ki": a.ki, "--kd": a.kd, "--derivative-filter": a.derivative_filter}
-    own = {"--channel-gain": a.channel_gain, "--airframe": a.airframe}
+    own = {"--channel-gain": a.channel_gain, "--airframe": a.airframe, "--reference-map": a.reference_map}
     if a.channel is not None and any(v is not None for v in pid.values()):
         raise SpecError(f"{', '.join(k for k, v in pid.items() if v is not None)}: a system with --channel flies "
                         "its own controller, described by its identified channel map; ilcdob's PID gains would be "
@@ -432,7 +432,7 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                         f"--q-time-constant): {exc}; nothing written") from exc
     if a.channel is not None:
         fleet = uc.add_to_fleet(path, a.name, a.model, None, dob, sample_time=a.sample_time, channel=a.channel,
-                                channel_gain=a.channel_gain, airframe=a.airframe)
+                                channel_gain=a.channel_gain, airframe=a.airframe, reference_map=a.reference_map)
     else:
         fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time)
     if created:

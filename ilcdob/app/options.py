@@ -545,6 +545,9 @@ _FLEET_ADD = Command(
         flag("--channel-gain", type=float, help="with --channel: K, m/s^2 commanded per channel unit (the "
                                                 "controller's kp on position, kd on velocity; 1 on acceleration)"),
         flag("--airframe", help="with --channel: model.json of the airframe, commanded acceleration -> position"),
+        flag("--reference-map", help="with --channel: model.json of the reference map, reference -> position as "
+                                     "the flight stack flies it (the exact-reference law; default on the position "
+                                     "channel: the channel map)"),
         flag("--sample-time", type=float, help="new file: sample time, s (default: model's)")),
     describe=False)
 
