@@ -36,7 +36,7 @@ from .maps.finite_horizon import finite_horizon_ratio
 from .law import LawContext, LearningLaw, Stage
 from .law.designed import Designed
 from .law.limit import Limit
-from .sets.delta import DeltaSet, delta_bound, delta_set
+from .sets.delta import DeltaSet, channel_delta_set, delta_bound, delta_set
 from .maps.flown import check_disturbance, disturbance_path
 from .law.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTerms, check_law, reference_terms
 from .law.limit import LIMIT_POLICIES, LimitReport
@@ -311,20 +311,16 @@ def fleet_delta_sets(fleet: Fleet, names: list[str], k: int = 8, bound: float | 
     dict of str to DeltaSet
         Name -> Delta set.
 
-    Raises
-    ------
-    SpecError
-        A system on its own controller: its Delta set is its channel map's disc, not sampled PID + DOB loops.
+    Notes
+    -----
+    A system on its own controller gets its sampled channel maps
+    (:func:`~ilcdob.design.sets.delta.channel_delta_set`).
     """
-    own = sorted(set(names) & set(fleet.own_controller))
-    if own:
-        raise SpecError(f"{own} fly their own controller: their Delta set is the disc of their identified channel "
-                        "map (ChannelLoop.delta), not sampled PID + DOB loops, so the methods designed over sampled "
-                        "Delta sets (robust, robust-set, fir's margin) cannot serve them; design with closed-form and "
-                        "check it with `ilcdob check`")
     rng = np.random.default_rng(seed)
-    return {name: delta_set(next(s for s in fleet.systems if s.name == name), fleet.sample_time, k, rng,
-                            scale=scale, bound=bound) for name in names}
+    own = set(fleet.own_controller)
+    return {name: channel_delta_set(fleet.loop(name), k, rng, scale=scale, bound=bound) if name in own else
+            delta_set(next(s for s in fleet.systems if s.name == name), fleet.sample_time, k, rng, scale=scale,
+                      bound=bound) for name in names}
 
 
 def _sos_gain(sos: np.ndarray | None, w: np.ndarray, ts: float) -> np.ndarray:
@@ -484,14 +480,16 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
     Raises
     ------
     SpecError
-        A method other than the closed form, the multi-source law, exact-reference without its reference or
-        the target's reference map, a bad limit policy.
+        A method other than the closed form or the robust SOCP (the latter between two vehicles on their own
+        controller), the multi-source law, exact-reference without its reference or the target's reference map,
+        a bad limit policy.
     """
     chosen = method_named(method)
-    if chosen.name != "closed-form":
+    if chosen.name not in CHANNEL_METHODS:
         raise SpecError(f"`method`: got {chosen.name!r}, which designs for ilcdob's PID + DOB loop, and {own} fly "
-                        "their own controller; design such pairs with 'closed-form' (the paper's filters on the "
-                        "identified channel maps, docs/closed_loop.md)")
+                        f"their own controller; design such pairs with {' or '.join(map(repr, CHANNEL_METHODS))} "
+                        "(the paper's filters on the identified channel maps, or the per-trial SOCP over their "
+                        "sampled fits; docs/closed_loop.md)")
     if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
         name, reference = (law.name, law.reference) if isinstance(law, ExactReference) else (law, None)
         _check_law_request(fleet, source, target, name, reference)
@@ -506,7 +504,11 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
     limits = {s.name: s for s in fleet.systems}[target].limits
     tgt = fleet.loop(target)
-    design = design_channel_pair(fleet.loop(source), tgt, band=band, disturbance=disturbance,
+    deltas = chosen.deltas
+    if chosen.needs_delta_sets and deltas is None:
+        deltas = fleet_delta_sets(fleet, [source, target])
+    design = design_channel_pair(fleet.loop(source), tgt, method=chosen, deltas=deltas, band=band,
+                                 disturbance=disturbance,
                                  acceleration_limit=None if limits is None else limits.max_acceleration)
     if limits is None or learning_channel(tgt) != "acceleration":
         return design
@@ -515,9 +517,15 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
     return design_with_band(design, design.band)
 
 
-def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *, band: object = "auto",
-                        acceleration_limit: float | None = None, disturbance: str = "command") -> PairDesign:
-    """The closed-form design between two vehicles learning through a setpoint channel (:mod:`.maps.channel_filters`).
+#: The methods that design a pair with a vehicle on its own controller (:func:`design_channel_pair`).
+CHANNEL_METHODS = ("closed-form", "robust")
+
+
+def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *,
+                        method: str | Method = "closed-form", deltas: dict[str, DeltaSet] | None = None,
+                        band: object = "auto", acceleration_limit: float | None = None,
+                        disturbance: str = "command") -> PairDesign:
+    """The design between two vehicles learning through a setpoint channel (:mod:`.maps.channel_filters`).
 
     Either may be a vehicle on its own controller, with or without the add-on DOB, or ilcdob's PID + DOB
     loop learning on its acceleration feed-forward (a mixed fleet).
@@ -530,6 +538,12 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     ----------
     source, target : ChannelLoop or LoopSystem
         Vehicles j-1 and j (a LoopSystem: its model's maps).
+    method : {"closed-form", "robust"} or Method
+        The Theorem's filters, or the per-trial SOCP over both vehicles' sampled channel maps
+        (:mod:`.methods.robust`; two vehicles on their own controller).
+    deltas : dict of str to DeltaSet, optional
+        The robust method's sampled maps by vehicle (default: the method's own, else 8 per vehicle drawn
+        from each fit, :func:`~.sets.delta.channel_delta_set`).
     band : "auto", float or None
         As :func:`design_pair`; ``"auto"`` chooses the corner per trial from the source's error and, with
         ``acceleration_limit``, the noise the filter passes (in the acceleration it makes the target command).
@@ -548,29 +562,48 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     Raises
     ------
     SpecError
-        Not vehicles, other sample times, a target without a DOB after a source with one, a bad band, limit or
-        disturbance; off the command, an airframe missing or without a rigid body to split off, or a drag too
-        small to learn the wind from.
+        Not vehicles, other sample times, a target without a DOB after a source with one, a bad band, limit,
+        method or disturbance; off the command, an airframe missing or without a rigid body to split off, or a
+        drag too small to learn the wind from; the robust method with ilcdob's loop in the pair or a vehicle
+        without an identification.
     """
     check_disturbance(disturbance)
+    chosen = method_named(method)
+    if chosen.name not in CHANNEL_METHODS:
+        raise SpecError(f"`method`: got {chosen.name!r}, expected one of {list(CHANNEL_METHODS)} for vehicles on "
+                        "their own controller")
     lf = channel_filters(source, target)
     request = check_bandwidth(band, source.ts)
     if acceleration_limit is not None and not (isinstance(acceleration_limit, (int, float))
                                                and np.isfinite(acceleration_limit) and acceleration_limit > 0):
         raise SpecError(f"`acceleration_limit`: got {acceleration_limit!r}, expected a limit > 0 m/s^2")
     ch_src, ch_tgt = learning_channel(source), learning_channel(target)
-    head = {"method": "closed-form", "law": DEFAULT_LAW, "from": source.name, "to": target.name,
+    head = {"method": chosen.name, "law": DEFAULT_LAW, "from": source.name, "to": target.name,
             "sample_time": source.ts, "channel": ch_tgt, "source_channel": ch_src}
-    made = METHODS["closed-form"].design(DesignInputs(None, source, target, head, lambda: lf))
+    if chosen.needs_delta_sets:
+        mixed = [lp.name for lp in (source, target) if not isinstance(lp, ChannelLoop)]
+        if mixed:
+            raise SpecError(f"`method`: {chosen.name!r} between a vehicle on its own controller and ilcdob's PID + "
+                            f"DOB loop ({mixed}) is not built; design this pair with 'closed-form'")
+        deltas = chosen.deltas or deltas
+        if deltas is None:
+            rng = np.random.default_rng(0)
+            deltas = {lp.name: channel_delta_set(lp, 8, rng) for lp in (source, target)}
+        missing = [lp.name for lp in (source, target) if lp.name not in deltas]
+        if missing:
+            raise SpecError(f"`deltas`: no sampled maps of {missing} for the {chosen.name} method (draw them with "
+                            "ilcdob.design.sets.delta.channel_delta_set)")
+    made = chosen.design(DesignInputs(None, source, target, head, lambda: lf, deltas=deltas))
     path, path_entry = disturbance_path(source, target, disturbance)
     per = {"m/s": "(m/s)", "m/s^2": "(m/s^2)"}
-    filters = {**made.filters, "units": {"L1": f"{CHANNEL_UNITS[ch_tgt]}/m",
-                                         "L2": f"{CHANNEL_UNITS[ch_tgt]}/{per.get(CHANNEL_UNITS[ch_src], 'm')}"},
-               "disturbance": path_entry}
+    unit = CHANNEL_UNITS[ch_tgt]
+    units = ({"L1": f"{unit}/m", "L2": f"{unit}/{per.get(CHANNEL_UNITS[ch_src], 'm')}"} if "L1" in made.filters
+             else {"learning": unit})
+    filters = {**made.filters, "units": units, "disturbance": path_entry}
     k_j = channel_view(target).gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
                       l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)) * _sos_gain(path, w, source.ts))
-    design = PairDesign("closed-form", filters, made.core, source_gf=channel_gf(source), path=path,
+    design = PairDesign(chosen.name, filters, made.core, robust=made.robust, source_gf=channel_gf(source), path=path,
                         choose=chooser if request == "auto" else None)
     return design_with_band(design, chooser(error=None))
 

@@ -193,6 +193,22 @@ def test_the_command_line_learns_between_vehicles_on_their_own_controller(lab, t
     assert _flown_ratio(target, t, d, u_c) <= 0.1
 
 
+def test_the_robust_socp_designs_over_the_identified_fits(lab, tmp_path):
+    """`ilcdob design --method robust --samples 4 --trial`: five hypotheses per vehicle pair drawn from the two
+    fits' covariances; the true target flies the signal with <= 0.1 of its error without learning (the
+    acceptance's iteration-1 figure)."""
+    t, d, e = _trial("heavy")
+    trial = tmp_path / "trial.csv"
+    np.savetxt(trial, np.c_[t, e, np.zeros_like(t)], delimiter=",", header="time,error,learning", comments="")
+    out = tmp_path / "robust"
+    assert main(["design", "--fleet", str(lab / "fleet.toml"), "--from", "heavy", "--to", "racer", "--method",
+                 "robust", "--samples", "4", "--trial", str(trial), "--out", str(out), "--quiet"]) == 0
+    filters = json.loads((out / "filters.json").read_text())
+    assert filters["models"] == 5 and filters["delta_set"] == {"heavy": "identification", "racer": "identification"}
+    u = np.loadtxt(out / "learning_signal.csv", delimiter=",", skiprows=2)[:, 1]
+    assert _flown_ratio("racer", t, d, u) <= 0.1
+
+
 _DRIVER = r"""
 #include <stdio.h>
 #include <stdlib.h>

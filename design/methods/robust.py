@@ -31,6 +31,14 @@ program is handed to Clarabel as data assembled once with scipy.sparse, only ``b
 trial -- what cvxpy's DPP path does, without its compilation, whose memory grows as
 parameters x variables (> 24 GB at K = 5, N = 1000; cvxpy issues #886, #1622).
 
+Vehicles on their own controller (:class:`~ilcdob.channel_loop.ChannelLoop`, docs/closed_loop.md): their
+samples are drawn channel maps (:func:`~ilcdob.design.sets.delta.channel_delta_set`), ``d_f`` is the
+learning signal on the target's channel and ``Gf_k`` its channel map. Under hypothesis ``k`` the source's
+reconstructed disturbance, mapped through the target's ``Gd_k``, is ``e0_k = Gf_{j,k}{u_k}`` with ``u_k``
+the Theorem's signal for that pair of maps (``L1_k e + L2_k u_{j-1}``,
+:func:`~ilcdob.design.maps.channel_filters.channel_filters`): ``Gd_j Gd_{j-1}^{-1} = Gf_j L1``, which
+also cancels the add-on DOBs' ``1 - Q`` zero at ``z = 1`` as the closed form does.
+
 Infeasible ``rho``: the smallest feasible ``rho`` is found by bisection, each step certified by
 the simulated ratios, and reported with the binding models. Near that edge Clarabel may stop
 with ``InsufficientProgress``; the bisection then tells infeasibility from solver trouble.
@@ -49,9 +57,11 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from ilcdob.channel_loop import ChannelLoop
 from ilcdob.errors import IlcdobError, SignalError, SpecError
 from ilcdob.loop import LoopSystem, freqresp
 
+from ..maps.channel_filters import channel_filters
 from ..maps.closed_form import reconstruct_disturbance, simulate_map
 from ..filters.reduction import reduced_realisation
 
@@ -547,9 +557,10 @@ class RobustPairDesigner:
 
     Parameters
     ----------
-    sources, targets : sequence of LoopSystem
+    sources, targets : sequence of LoopSystem, or of ChannelLoop
         Equal-length lists of sampled loops of systems j-1 and j (e.g. the nominal loop first,
-        then ``DeltaSet.loops``).
+        then ``DeltaSet.loops``): ilcdob's loops, or vehicles on their own controller (module
+        docstring; a pair mixing the two kinds is refused).
     options : RobustOptions, optional
     relax : bool
         If the requested rho is infeasible, design at the smallest feasible rho found by
@@ -562,6 +573,13 @@ class RobustPairDesigner:
         if not self.sources or len(self.sources) != len(self.targets):
             raise SpecError(f"`sources`/`targets`: got {len(self.sources)} and {len(self.targets)} loops, "
                             "expected the same number (>= 1) of paired samples")
+        kinds = {isinstance(lp, ChannelLoop) for lp in (*self.sources, *self.targets)}
+        if len(kinds) > 1:
+            raise SpecError("`sources`/`targets`: a robust pair of a vehicle on its own controller and ilcdob's PID + "
+                            "DOB loop is not built (their learning signals enter different points); design it with "
+                            "the closed form")
+        self.channel = kinds == {True}
+        self._pairs: list | None = None
         self.options = options if options is not None else RobustOptions()
         self.relax = bool(relax)
         self._designers: dict[int, RobustDesigner] = {}
@@ -579,8 +597,13 @@ class RobustPairDesigner:
         Returns
         -------
         numpy.ndarray
-            ``-Gd_{j,k}{d_rec,k}`` for every hypothesis ``k`` (docs/theory.md section 3).
+            ``-Gd_{j,k}{d_rec,k}`` for every hypothesis ``k`` (docs/theory.md section 3; vehicles on their own
+            controller: the module docstring).
         """
+        if self.channel:
+            if self._pairs is None:  # the Theorem's filters under every hypothesis, built once
+                self._pairs = [channel_filters(src, tgt) for src, tgt in zip(self.sources, self.targets)]
+            return np.array([simulate_map(lf.target.G_f, lf.apply(e_prev, df_prev)) for lf in self._pairs])
         return np.array([-simulate_map(tgt.G_d, reconstruct_disturbance(src, e_prev, df_prev, model=False))
                          for src, tgt in zip(self.sources, self.targets)])
 

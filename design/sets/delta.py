@@ -26,13 +26,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ilcdob.channel_loop import ChannelLoop, channel_loop
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import LoopSystem, build_loop, freqresp
-from ilcdob.specs import PlantSpec, SystemSpec
+from ilcdob.specs import IdentificationSpec, PlantSpec, SystemSpec
 from ilcdob.uncertainty import ModelStructure
 
-__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "delta_bound", "check_scale", "disturbance_peak", "dense_grid",
-           "MAX_DELTA_SAMPLES"]
+__all__ = ["TAU_RANGE", "DeltaSet", "delta_set", "channel_delta_set", "delta_bound", "check_scale", "disturbance_peak",
+           "dense_grid", "MAX_DELTA_SAMPLES"]
 
 #: Time constants of the high-pass errors of a fleet bound (s): log-uniform in this range.
 TAU_RANGE = (0.01, 1.0)
@@ -49,10 +50,11 @@ class DeltaSet:
     ----------
     system : str
         The system's name.
-    nominal : LoopSystem
-        The loop with the model as plant.
-    loops : tuple of LoopSystem
-        One loop per sampled true plant (model unchanged).
+    nominal : LoopSystem or ChannelLoop
+        The loop with the model as plant (a vehicle on its own controller: its identified channel map).
+    loops : tuple of LoopSystem or ChannelLoop
+        One loop per sampled true plant (model unchanged), or per sampled channel map
+        (:func:`channel_delta_set`).
     w : array, rad/s
     bound : array
         ``|Delta(jw)|`` bound on ``w`` (3 sigma for identified models).
@@ -63,8 +65,8 @@ class DeltaSet:
     """
 
     system: str
-    nominal: LoopSystem
-    loops: tuple[LoopSystem, ...]
+    nominal: LoopSystem | ChannelLoop
+    loops: tuple[LoopSystem | ChannelLoop, ...]
     w: np.ndarray
     bound: np.ndarray
     rejected: int
@@ -78,7 +80,8 @@ class DeltaSet:
                 f"{self.rejected} rejected>")
 
     def deltas(self, w: np.ndarray | None = None) -> np.ndarray:
-        """Multiplicative model errors ``Delta_k(e^{jw Ts}) = P_k / P_hat - 1`` of every sample.
+        """Multiplicative model errors ``Delta_k(e^{jw Ts}) = P_k / P_hat - 1`` of every sample (of the channel
+        map, ``Gf_k / Gf_hat - 1``, for a vehicle on its own controller).
 
         Parameters
         ----------
@@ -91,25 +94,29 @@ class DeltaSet:
             Complex, ``K x len(w)``.
         """
         w = self.w if w is None else np.asarray(w, float)
-        p_hat = freqresp(self.nominal.P, w)
-        return np.array([freqresp(lp.P, w) / p_hat - 1 for lp in self.loops])
+
+        def model(lp):
+            return lp.G_f if isinstance(lp, ChannelLoop) else lp.P
+
+        p_hat = freqresp(model(self.nominal), w)
+        return np.array([freqresp(model(lp), w) / p_hat - 1 for lp in self.loops])
 
 
-def _identified_samples(spec: SystemSpec, k: int, rng: np.random.Generator, scale: float):
-    ident = spec.identification
+def _identified_samples(ident: IdentificationSpec, delay: float, rng: np.random.Generator, scale: float):
+    """Plants with parameters drawn from the fit's ``N(theta, scale^2 Cov)`` (``delay``: the fit's)."""
     structure = ModelStructure(ident.poles, ident.zeros, ident.integrators)
     theta = np.asarray(ident.parameters)
     cov = np.asarray(ident.covariance) * scale**2
-    mean = np.concatenate([theta, [spec.nominal_plant.delay]]) if ident.delay_estimated else theta
+    mean = np.concatenate([theta, [delay]]) if ident.delay_estimated else theta
     while True:
         x = rng.multivariate_normal(mean, cov, method="svd")
-        th, d = (x[:-1], max(0.0, float(x[-1]))) if ident.delay_estimated else (x, spec.nominal_plant.delay)
+        th, d = (x[:-1], max(0.0, float(x[-1]))) if ident.delay_estimated else (x, delay)
         den, num = structure.split(th)
         yield PlantSpec(tuple(num), tuple(den), d)
 
 
-def _bound_samples(spec: SystemSpec, bound: float, k: int, rng: np.random.Generator):
-    model = spec.nominal_plant
+def _bound_samples(model: PlantSpec, bound: float, rng: np.random.Generator):
+    """Plants ``(1 + Delta) model`` with a gain or first-order high-pass ``Delta``, ``|Delta| <= bound``."""
     while True:
         r = bound * rng.uniform(-1.0, 1.0)
         if rng.uniform() < 0.5:  # gain error
@@ -175,9 +182,9 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
                         "fleet file, or pass bound=<relative error, e.g. 0.2>")
     w, bnd, source = found
     if source == "fleet bound":
-        gen = _bound_samples(spec, float(bnd[0]), k, rng)
+        gen = _bound_samples(spec.nominal_plant, float(bnd[0]), rng)
     else:
-        gen = _identified_samples(spec, k, rng, scale)
+        gen = _identified_samples(spec.identification, spec.nominal_plant.delay, rng, scale)
     loops, rejected = [], 0
     model = spec.nominal_plant
     peak = _PeakMeter(nominal) if margin > 0 else None
@@ -196,6 +203,75 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
             raise SpecError(f"system {spec.name!r}: {rejected} sampled plants gave {kept}; the "
                             "uncertainty is too large for this controller (lower `scale` or `bound`)")
     return DeltaSet(spec.name, nominal, tuple(loops), w, bnd, rejected, source)
+
+
+def channel_delta_set(loop: ChannelLoop, k: int = 8, rng: np.random.Generator | None = None, scale: float = 1.0,
+                      bound: float | None = None, w: np.ndarray | None = None,
+                      max_rejections: int = 200) -> DeltaSet:
+    """Draw ``k`` plausible true channel maps of a vehicle on its own controller (docs/closed_loop.md, "The
+    uncertainty set and the check").
+
+    The vehicle is its identified channel map ``G_ch`` (:mod:`ilcdob.channel_loop`): a sample is a map with
+    parameters drawn from the fit's ``N(theta, scale^2 Cov)``, or with ``bound`` a map ``(1 + Delta) G_ch``
+    with a gain or first-order high-pass error ``|Delta| <= bound`` (as :func:`delta_set` draws a plant), its
+    loop rebuilt with the same channel, gain, airframe and add-on DOB. ``Gd`` and ``Gf`` share the error
+    (``Gf = K Gd``); samples whose map is unstable are redrawn.
+
+    Parameters
+    ----------
+    loop : ChannelLoop
+        The vehicle as identified.
+    k : int
+        Number of samples (1 to :data:`MAX_DELTA_SAMPLES`).
+    rng : numpy.random.Generator
+        Seeded generator (default ``default_rng(0)``).
+    scale : float
+        Multiplier of the identified standard deviations (1 with ``bound``).
+    bound : float, optional
+        A common multiplicative bound in (0, 1) instead of the identification.
+    w : array, optional
+        Frequencies of the bound, rad/s (default: :func:`delta_bound`'s).
+    max_rejections : int
+        Unstable draws allowed before the set is refused.
+
+    Returns
+    -------
+    DeltaSet
+        ``nominal`` the vehicle, ``loops`` the sampled ones, ``bound`` the 3-sigma (times ``scale``) or stated
+        bound on ``w``.
+
+    Raises
+    ------
+    SpecError
+        ``k`` out of range, a bad ``scale`` or ``bound``, no identification and no bound, or too many
+        unstable draws.
+    """
+    if k < 1 or k > MAX_DELTA_SAMPLES:
+        raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}")
+    check_scale(scale, bound)
+    rng = np.random.default_rng(0) if rng is None else rng
+    w = np.logspace(-2, np.log10(0.999 * np.pi / loop.ts), 200) if w is None else np.asarray(w, float)
+    g_ch = PlantSpec(tuple(np.asarray(loop.disturbance_map.num) * loop.channel_gain), loop.disturbance_map.den,
+                     loop.disturbance_map.delay)
+    if bound is not None:
+        if not (np.isfinite(bound) and 0 < bound < 1):
+            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+        gen, bnd, source = _bound_samples(g_ch, float(bound), rng), np.full(w.size, float(bound)), "fleet bound"
+    else:
+        bnd = loop.delta(w, scale)  # raises without an identification
+        gen, source = _identified_samples(loop.identification, g_ch.delay, rng, scale), "identification"
+    loops, rejected = [], 0
+    while len(loops) < k:
+        try:
+            loops.append(channel_loop(loop.name, loop.ts, loop.channel, next(gen), loop.channel_gain, loop.airframe,
+                                      loop.dob, loop.identification, loop.reference_map))
+            continue
+        except (UnstableLoopError, SpecError):
+            rejected += 1
+        if rejected > max_rejections:
+            raise SpecError(f"vehicle {loop.name!r}: {rejected} sampled channel maps were unstable; the uncertainty "
+                            "is too large for this fit (lower `scale` or `bound`)")
+    return DeltaSet(loop.name, loop, tuple(loops), w, bnd, rejected, source)
 
 
 def dense_grid(ts: float, n: int = 20000) -> np.ndarray:
