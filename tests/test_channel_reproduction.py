@@ -90,6 +90,6 @@ def test_a_vehicles_file_gives_the_labs_airframes(tmp_path):
         path.write_text(text)
         with pytest.raises(SpecError, match=match):
             load_vehicles(path)
-    with pytest.raises(SpecError, match="`--vehicles`: .*--plant rotorpy --controller own"):
+    with pytest.raises(SpecError, match="`--vehicles`: .*the linear and nonlinear plants fly a fleet"):
         reproduce_to_folder(tmp_path / "out", vehicles=path)
     assert not (tmp_path / "out").exists()

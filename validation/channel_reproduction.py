@@ -78,14 +78,15 @@ _VEHICLE_KEYS = {"name": True, "airframe": False, "params": False, "position_gai
 
 
 def load_vehicles(path: str | Path) -> tuple[ChannelVehicle, ...]:
-    """A lab's airframes for the run, from a TOML file (``reproduce --controller own --vehicles FILE``)::
+    """A lab's airframes for a rotorpy run, from a TOML file (``reproduce --plant rotorpy --vehicles FILE``)::
 
         description = "our fleet"            # optional
         [[vehicle]]
         name = "heavy"
         airframe = "hummingbird"             # the rotorpy set to start from (default: name, if rotorpy ships it)
         params = { mass = 2.0, Ixx = 0.03, Iyy = 0.03, Izz = 0.05 }    # changes to it, rotorpy's keys and SI units
-        position_gains = { kp = [4.0, 4.0, 10.0], kd = [3.0, 3.0, 7.0] }   # SE3 position loop (default rotorpy's)
+        position_gains = { kp = [4.0, 4.0, 10.0], kd = [3.0, 3.0, 7.0] }   # SE3 position loop (default rotorpy's;
+                                                                            # --controller own only)
 
     ``params`` may replace nested values whole (``rotor_pos = { r1 = [0.2, 0.2, 0], ... }``, m).
 
@@ -481,13 +482,12 @@ class ChannelReproduction:
 
 
 def _airframe_summary(v: ChannelVehicle) -> dict[str, Any]:
-    """Mass (kg), inertias (kg m^2) and mean arm (m, rotor distance from the centre) of a run's vehicle."""
-    from ilcdob.vehicles.rotorpy_vehicle import airframe_parameters
+    """Mass (kg), inertias (kg m^2) and mean arm (m) of a run's vehicle
+    (:func:`~ilcdob.vehicles.rotorpy_vehicle.airframe_summary`)."""
+    from ilcdob.vehicles.rotorpy_vehicle import airframe_summary
 
-    a = airframe_parameters(lab_quad_airframe() if v.airframe == "lab-quad" else
+    return airframe_summary(lab_quad_airframe() if v.airframe == "lab-quad" else
                             v.name if v.airframe is None else v.airframe)
-    arm = float(np.mean([np.linalg.norm(np.asarray(r, float)[:2]) for r in a["rotor_pos"].values()]))
-    return {"mass_kg": float(a["mass"]), "inertia_kg_m2": [float(a[k]) for k in ("Ixx", "Iyy", "Izz")], "arm_m": arm}
 
 
 def _vehicle_row(v: ChannelVehicle) -> str:

@@ -78,7 +78,8 @@ class VehicleSettings:
     Attributes
     ----------
     vehicles : tuple of str
-        rotorpy parameter sets (:data:`~ilcdob.vehicles.rotorpy_vehicle.ROTORPY_VEHICLES`), at least two.
+        Names of rotorpy parameter sets (:data:`~ilcdob.vehicles.rotorpy_vehicle.ROTORPY_VEHICLES`) or of
+        ``airframes``, at least two.
     ts : float
         Outer-loop sample time, s.
     sensor_noise_std : float
@@ -96,6 +97,10 @@ class VehicleSettings:
         (:data:`PX4_ROTOR_DRAG`).
     workers : int
         Processes flying the scenarios (>= 1).
+    airframes : dict of str to dict
+        A lab's own airframes by vehicle name: complete rotorpy parameter sets
+        (:func:`~ilcdob.vehicles.rotorpy_vehicle.airframe_parameters`; ``reproduce --vehicles FILE``,
+        :func:`~ilcdob.validation.channel_reproduction.load_vehicles`). ``params`` does not apply to them.
     """
 
     vehicles: tuple[str, ...] = ROTORPY_FLEET
@@ -107,15 +112,16 @@ class VehicleSettings:
     disturbances: tuple[str, ...] = ("paper", "wind", "dryden")
     params: dict[str, dict] = field(default_factory=lambda: {"px4": dict(PX4_ROTOR_DRAG)})
     workers: int = 1
+    airframes: dict[str, dict] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from ilcdob.vehicles.rotorpy_vehicle import ROTORPY_VEHICLES
 
         names = tuple(self.vehicles)
-        bad = [n for n in names if n not in ROTORPY_VEHICLES]
+        bad = [n for n in names if n not in ROTORPY_VEHICLES and n not in self.airframes]
         if len(names) < 2 or bad or len(set(names)) != len(names):
             raise SpecError(f"`vehicles`: got {list(names)}, expected two or more distinct names of "
-                            f"{sorted(ROTORPY_VEHICLES)}")
+                            f"{sorted(ROTORPY_VEHICLES)} or of `airframes` ({sorted(self.airframes)})")
         object.__setattr__(self, "vehicles", names)
         dist = tuple(dict.fromkeys(("paper", *self.disturbances)))
         if any(d not in DISTURBANCES for d in dist):
@@ -152,8 +158,9 @@ class VehicleSettings:
         """
         from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
 
-        return RotorpyVehicle(name, self.ts, command_disturbance=command, wind=wind,
-                              noise_std=self.sensor_noise_std, seed=seed, params=self.params.get(name))
+        own = self.airframes.get(name)
+        return RotorpyVehicle(name, self.ts, command_disturbance=command, wind=wind, noise_std=self.sensor_noise_std,
+                              seed=seed, **({"airframe": own} if own is not None else {"params": self.params.get(name)}))
 
 
 def _fly(settings: VehicleSettings, systems: list, sc: Scenario, disturbance: str,
@@ -235,6 +242,10 @@ class VehicleReproduction(ReproductionResult):
         s = self.settings
         data["settings"] = {"vehicles": list(s.vehicles), "wind_gain_m_s_per_m_s2": s.wind_gain,
                             "dryden_wind_20ft_m_s": s.dryden_wind_20ft, "dryden_seed": s.dryden_seed}
+        if s.airframes:
+            from ilcdob.vehicles.rotorpy_vehicle import airframe_summary
+
+            data["settings"]["airframes"] = {n: airframe_summary(a) for n, a in s.airframes.items()}
         data["identification"] = {name: {"structure": _structure(f), "held_out_fit_percent": f.fits,
                                          "num": list(f.plant.num), "den": list(f.plant.den)}
                                   for name, f in self.fits.items()}
@@ -245,12 +256,17 @@ class VehicleReproduction(ReproductionResult):
 
     def markdown_plant(self) -> list[str]:
         """The description, identification, tables of every disturbance and law, and the acceptance (Markdown)."""
+        from ilcdob.vehicles.rotorpy_vehicle import airframe_summary
+
         s = self.settings
         lines = [
             f"**Plant: rotorpy.** rotorpy's multirotors ({', '.join(s.vehicles)}; its rotor aerodynamics, motors "
             f"and geometric attitude control, nothing of ilcdob's vehicle models"
             + "".join(f"; {name} with {', '.join(f'{k} = {v:g}' for k, v in p.items())}"
-                      for name, p in s.params.items() if name in s.vehicles and p)
+                      for name, p in s.params.items() if name in s.vehicles and name not in s.airframes and p)
+            + "".join(f"; {name} an airframe of the run's own ({a['mass_kg']:.3g} kg, inertias "
+                      f"{', '.join(f'{i:.3g}' for i in a['inertia_kg_m2'])} kg m^2, arm {a['arm_m']:.3g} m)"
+                      for name, a in ((n, airframe_summary(s.airframes[n])) for n in s.vehicles if n in s.airframes))
             + ") fly every trial; ilcdob's outer "
             f"loop (PID + DOB + learning signal, x axis; y and z held by their PIDs) runs at {s.ts} s with "
             f"{1e3 * s.sensor_noise_std:g} mm of white position-sensor noise. Models identified from still-air "
@@ -262,7 +278,7 @@ class VehicleReproduction(ReproductionResult):
             + ("rotorpy's PX4 parameter set has no rotor drag (k_d = 0), so its flights in still air show no drag "
                "and the wind law cannot learn from it; it is given rotor drag as every real rotor has "
                "(`PX4_ROTOR_DRAG` in `ilcdob.validation.vehicle_reproduction`). "
-               if "px4" in s.vehicles and s.params.get("px4") == PX4_ROTOR_DRAG else "")
+               if "px4" in s.vehicles and "px4" not in s.airframes and s.params.get("px4") == PX4_ROTOR_DRAG else "")
             + "The table below and the figures are the paper's disturbance with the paper's law; the "
             "full tables follow. Regenerate with `ilcdob reproduce --plant rotorpy --out <dir>` (needs "
             "`pip install 'ilcdob[rotorpy]'`).",

@@ -247,8 +247,9 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
         SE3 controller with the learning on a setpoint channel (:mod:`ilcdob.validation.channel_reproduction`;
         no fleet file, law, order, band or workers).
     vehicles : str or Path, optional
-        With ``controller="own"``: a TOML file of the run's airframes
-        (:func:`ilcdob.validation.channel_reproduction.load_vehicles`; default rotorpy's and one of ours).
+        With ``plant="rotorpy"``: a TOML file of the run's airframes
+        (:func:`ilcdob.validation.channel_reproduction.load_vehicles`; default rotorpy's and, with
+        ``controller="own"``, one of ours); ``position_gains`` only with ``controller="own"``.
 
     Returns
     -------
@@ -257,18 +258,36 @@ def reproduce_to_folder(out: str | Path, *, fleet: str | Path | None = None, sce
     Raises
     ------
     SpecError
-        Bad settings, or options the chosen plant and controller take none of (``vehicles`` without
-        ``controller="own"``).
+        Bad settings, or options the chosen plant and controller take none of (``vehicles`` off rotorpy).
     """
-    if vehicles is not None and controller != "own":
+    if vehicles is not None and plant != "rotorpy":
         raise SpecError(f"`--vehicles`: got {str(vehicles)!r}; a vehicles file gives the airframes of "
-                        "--plant rotorpy --controller own (other runs fly a fleet: --fleet)")
+                        "--plant rotorpy (the linear and nonlinear plants fly a fleet: --fleet)")
     run = _Reproduction(list(scenarios), iterations, plant, seed, law, figures, order, sensor_noise, bandwidth,
                         workers, figure_workers, progress, controller).checked()
     output = _Output("reproduce", out, overwrite, argv)
     if run.controller == "own":
         return run.fly_own(output, fleet, vehicles)
-    return run.fly_vehicles(output, fleet) if plant == "rotorpy" else run.fly_fleet(output, fleet)
+    return run.fly_vehicles(output, fleet, vehicles) if plant == "rotorpy" else run.fly_fleet(output, fleet)
+
+
+def _vehicle_airframes(path: str | Path) -> dict[str, Any]:
+    """``VehicleSettings`` fields of a vehicles file for ilcdob's controller: the names and complete airframes.
+
+    Raises
+    ------
+    SpecError
+        A vehicle with ``position_gains``: ilcdob's PID flies the position loop (rotorpy's SE3 only its attitude).
+    """
+    from ilcdob.validation.channel_reproduction import load_vehicles
+
+    chosen = load_vehicles(path)
+    gains = [v.name for v in chosen if v.position_gains is not None]
+    if gains:
+        raise SpecError(f"{path}: vehicles {gains} give `position_gains`, but with --controller ilcdob ilcdob's PID + "
+                        "DOB flies the position loop and rotorpy's SE3 controller only the attitude; remove them, or "
+                        "fly --controller own")
+    return {"vehicles": tuple(v.name for v in chosen), "airframes": {v.name: v.airframe for v in chosen}}
 
 
 @dataclass(frozen=True)
@@ -326,7 +345,7 @@ class _Reproduction:
                 ("--bandwidth", None if self.bandwidth == "auto" else self.bandwidth), *more)
         return [opt for opt, value in opts if value is not None]
 
-    def fly_vehicles(self, output: _Output, fleet: str | Path | None) -> Any:
+    def fly_vehicles(self, output: _Output, fleet: str | Path | None, vehicles: str | Path | None = None) -> Any:
         """``--plant rotorpy``: identify and fly rotorpy's multirotors, write the folder; returns the result.
 
         Parameters
@@ -335,21 +354,26 @@ class _Reproduction:
             The reproduction folder.
         fleet : str or Path or None
             Must be None: the vehicles are rotorpy's.
+        vehicles : str or Path, optional
+            The run's airframes (:func:`~ilcdob.validation.channel_reproduction.load_vehicles`; default rotorpy's
+            crazyflie, hummingbird and PX4 set).
 
         Raises
         ------
         SpecError
-            A fleet, order, law or band given: the run flies its own vehicles with every law.
+            A fleet, order, law or band given: the run flies its own vehicles with every law; a vehicles file with
+            ``position_gains`` (ilcdob's PID flies the position loop).
         """
         given = self._given(fleet)
         if given:
             raise SpecError(f"`--plant rotorpy` takes no {', '.join(given)}: it flies its own vehicles with every law "
                             "and the band chosen from each trial")
-        output.check()
+        output.check({} if vehicles is None else {"--vehicles": vehicles})
         from ilcdob.validation.figures import FigureRenderer
         from ilcdob.validation.vehicle_reproduction import VehicleSettings, reproduce_vehicles
 
-        settings = VehicleSettings(dryden_seed=self.seed, workers=self.workers or 1, **self._noise())
+        chosen = {} if vehicles is None else _vehicle_airframes(vehicles)
+        settings = VehicleSettings(dryden_seed=self.seed, workers=self.workers or 1, **chosen, **self._noise())
         res = reproduce_vehicles(self.scenarios, self.iterations, settings, progress=self.progress)
         with FigureRenderer(self.figure_workers) as renderer:
             content = _report(res, self.figures, renderer)

@@ -379,8 +379,8 @@ _REPRODUCE = Command(
              help="who flies the position loop: ilcdob's PID + DOB, or (--plant rotorpy) the vehicles' own SE3 "
                   "controller, learning through a setpoint channel (acceleration and position)"),
         flag("--vehicles", metavar="FILE.toml",
-             help="with --controller own: your airframes ([[vehicle]] tables: name, airframe to start from, params, "
-                  "position_gains; ilcdob.validation.channel_reproduction.load_vehicles)"),
+             help="with --plant rotorpy: your airframes ([[vehicle]] tables: name, airframe to start from, params "
+                  "and, with --controller own, position_gains; ilcdob.validation.channel_reproduction.load_vehicles)"),
         SEED.but(type=int, help="seed of the sensor noise (rotorpy: of the Dryden turbulence)"),
         WORKERS.but(help="processes flying the scenarios, --plant rotorpy only (default 1)"),
         flag("--sensor-noise", type=float, help="white position-sensor noise of every flight, m (default: 0 linear, "

@@ -47,7 +47,7 @@ from ilcdob.errors import SpecError
 from .closed_loop import setpoint_rows
 from ilcdob.channel_loop import check_channel
 
-__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe", "airframe_parameters"]
+__all__ = ["RotorpyVehicle", "ROTORPY_VEHICLES", "shipped_airframe", "airframe_parameters", "airframe_summary"]
 
 #: ilcdob's names of the parameter sets rotorpy ships (module ``rotorpy.vehicles.<value>``): mass 0.03, 0.044, 0.5
 #: and 1.0 kg, arm 4.3, 4.3, 17 and 24 cm; their drag differs in kind (rotor drag only; rotor drag and translational
@@ -114,6 +114,24 @@ def airframe_parameters(airframe: object) -> dict:
     if unknown:
         raise SpecError(f"`airframe`: {unknown} are not rotorpy parameters (known: {sorted(known)})")
     return copy.deepcopy(dict(airframe))
+
+
+def airframe_summary(airframe: object) -> dict:
+    """Mass (kg), inertias (kg m^2) and mean arm (m, rotor distance from the centre) of an airframe.
+
+    Parameters
+    ----------
+    airframe : str or mapping
+        As :func:`airframe_parameters`.
+
+    Returns
+    -------
+    dict
+        ``mass_kg``, ``inertia_kg_m2`` (Ixx, Iyy, Izz), ``arm_m``.
+    """
+    a = airframe_parameters(airframe)
+    arm = float(np.mean([np.linalg.norm(np.asarray(r, float)[:2]) for r in a["rotor_pos"].values()]))
+    return {"mass_kg": float(a["mass"]), "inertia_kg_m2": [float(a[k]) for k in ("Ixx", "Iyy", "Izz")], "arm_m": arm}
 
 
 def _rotorpy():
