@@ -220,6 +220,12 @@ class ChannelLoop:
         return "identified" if self.reference_map is not None else "channel map"
 
     @property
+    def integrates(self) -> bool:
+        """Whether the loop integrates: its disturbance map has a zero fixed at ``s = 0`` (a cascade's velocity
+        integral, identified with ``--zero-at-origin``; :mod:`ilcdob.identification.origin_zero`)."""
+        return len(self.disturbance_map.num) > 1 and self.disturbance_map.num[-1] == 0
+
+    @property
     def nominal(self) -> "ChannelLoop":
         """The loop the learning assumes: the identified one itself."""
         return self

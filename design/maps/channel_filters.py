@@ -17,6 +17,11 @@ advance), taken from the blocks' analytic poles and zeros (:func:`ilcdob.discret
 the PID + DOB loop as :func:`~.closed_form.inverse_gd_filter` takes them) and checked against
 ``R_j / Gd_{j-1}(e^{jwTs})`` (:func:`~.closed_form.matched`).
 
+A loop that integrates (a cascade's velocity integral; :attr:`~ilcdob.channel_loop.ChannelLoop.integrates`) has
+``Gd`` vanishing at ``z = 1`` too: ``L1`` then holds an integrator, run from rest over the trial (the source's
+error carries a constant disturbance only through its start transient, as with a DOB), and a learner that
+integrates itself does not see the constant part of its signal.
+
 ``1 - Q`` vanishes at ``z = 1``. Where both vehicles fly a DOB the common root cancels analytically; a
 vehicle without a DOB cannot learn from one with a DOB this way: that source's error holds no trace of
 a constant disturbance (its DOB removed it), and ``L2`` would integrate.
@@ -38,7 +43,8 @@ from ilcdob.channel_loop import ChannelLoop
 
 from .closed_form import LearningFilters, _block, _inverse_gd_response, _plant_zeros, _zeros_without_one, matched
 
-__all__ = ["channel_filters", "channel_view", "channel_gf", "learning_channel", "ChannelView"]
+__all__ = ["channel_filters", "channel_view", "channel_gf", "learning_channel", "ChannelView", "channel_map_zeros",
+           "SLOWEST_ZERO"]
 
 
 @dataclass(frozen=True)
@@ -107,6 +113,45 @@ def _one_minus_roots(q: DiscreteBlock | None, name: str) -> tuple[np.ndarray, np
     return _zeros_without_one(q, f"vehicle {name!r}"), np.asarray(q.poles, complex)
 
 
+#: Slowest right-half-plane zero (rad/s) a vehicle's map may have: slower, it is taken for the zero at s = 0 of a
+#: loop that integrates, placed a little off by the fit (its inverse would look ahead for hours).
+SLOWEST_ZERO = 0.01
+
+
+def channel_map_zeros(vehicle: ChannelLoop) -> np.ndarray:
+    """The sampled disturbance map's zeros, the one at ``z = 1`` exact where the loop integrates (module docstring
+    of :mod:`ilcdob.identification.origin_zero`).
+
+    Parameters
+    ----------
+    vehicle : ChannelLoop
+
+    Returns
+    -------
+    numpy.ndarray
+        Zeros in the z-plane (complex).
+
+    Raises
+    ------
+    SpecError
+        A real zero outside the unit circle slower than :data:`SLOWEST_ZERO` rad/s: a zero at ``s = 0`` the fit
+        placed a little off.
+    """
+    blk = vehicle.block
+    zeros = np.array(blk.zeros if blk.zeros is not None else [], complex)
+    if vehicle.integrates and zeros.size:
+        zeros[np.argmin(np.abs(zeros - 1))] = 1.0
+    slow = zeros[(np.abs(zeros.imag) < 1e-12) & (zeros.real > 1 + 1e-8)
+                 & (np.log(np.maximum(zeros.real, 1.0)) / vehicle.ts < SLOWEST_ZERO)]
+    if slow.size:
+        s = float(np.log(slow.real.min()) / vehicle.ts)
+        raise SpecError(f"vehicle {vehicle.name!r}: its identified map has a zero at s = +{s:.3g} rad/s (time constant "
+                        f"{1 / s:.3g} s), which the learning filter would invert with hours of look-ahead: the zero at "
+                        "s = 0 of a loop that integrates (a cascade's velocity integral), placed a little off by the "
+                        "fit; identify the map with `ilcdob identify --zeros 1 --zero-at-origin` (docs/closed_loop.md)")
+    return zeros
+
+
 def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
     """A vehicle's :class:`ChannelView`: a vehicle on its own controller, or ilcdob's PID + DOB loop on its
     acceleration feed-forward (its model's maps).
@@ -126,7 +171,7 @@ def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
     """
     if isinstance(vehicle, ChannelLoop):
         blk, q = vehicle.block, vehicle.q
-        zeros = blk.zeros if blk.zeros is not None else np.zeros(0, complex)
+        zeros = channel_map_zeros(vehicle)
         om_zeros, q_poles = _one_minus_roots(q, vehicle.name)
 
         def inverse(w):

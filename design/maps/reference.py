@@ -30,6 +30,7 @@ from ilcdob.channel_loop import ChannelLoop
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
+from .channel_filters import channel_map_zeros
 from .closed_form import LearningFilters, matched, simulate_map
 from ..filters.noncausal import ZPKFilter
 
@@ -92,8 +93,7 @@ def inverse_gf_filter(loop: LoopSystem | ChannelLoop) -> ZPKFilter:
     """
     if isinstance(loop, ChannelLoop):
         blk, k = loop.block, loop.channel_gain
-        zeros = blk.zeros if blk.zeros is not None else np.zeros(0, complex)
-        return matched(blk.poles, zeros, loop.ts, lambda w: 1.0 / (k * blk.response(w)), f"Gf^-1 of {loop.name!r}")
+        return matched(blk.poles, channel_map_zeros(loop), loop.ts, lambda w: 1.0 / (k * blk.response(w)), f"Gf^-1 of {loop.name!r}")
     src = loop.nominal
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)
     poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], np.linalg.eigvals(src.Q.A),

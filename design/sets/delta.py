@@ -108,8 +108,10 @@ def _identified_samples(ident: IdentificationSpec, delay: float, rng: np.random.
     theta = np.asarray(ident.parameters)
     cov = np.asarray(ident.covariance) * scale**2
     mean = np.concatenate([theta, [delay]]) if ident.delay_estimated else theta
+    fixed = np.diag(cov) == 0  # parameters the fit holds fixed (a zero at s = 0) stay exactly at their value
     while True:
         x = rng.multivariate_normal(mean, cov, method="svd")
+        x[fixed] = mean[fixed]
         th, d = (x[:-1], max(0.0, float(x[-1]))) if ident.delay_estimated else (x, delay)
         den, num = structure.split(th)
         yield PlantSpec(tuple(num), tuple(den), d)

@@ -582,7 +582,8 @@ class IdentifyInputs(LogClock):
 
 def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, structure: Any, options: Any, out: str | Path,
                      *, validate: Sequence[str | Path] = (), plot: str | Path | None = None,
-                     progress: Progress | None = None, argv: Sequence[str] | None = None) -> Any:
+                     progress: Progress | None = None, argv: Sequence[str] | None = None,
+                     zero_at_origin: bool = False) -> Any:
     """Fit a continuous-time transfer function to flight files and write ``model.json``.
 
     Parameters
@@ -608,6 +609,8 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
         ``progress(done, total, what)``.
     argv : sequence of str, optional
         Command line, recorded in the model file.
+    zero_at_origin : bool
+        Fix one zero of the chosen fit at s = 0 (:func:`ilcdob.identification.origin_zero.with_zero_at_origin`).
 
     Returns
     -------
@@ -619,7 +622,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     ------
     SpecError
         A window of ``inputs.segment`` holds fewer samples than the fit needs
-        (:func:`ilcdob.identification.tfest.min_samples`).
+        (:func:`ilcdob.identification.tfest.min_samples`); ``zero_at_origin`` where the data refuse it.
     """
     from ilcdob.identification.plots import fit_figures
     from ilcdob.identification.tfest import min_samples, tfest
@@ -642,6 +645,10 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     fits = [tfest(est_data, "u", "y", st, options, validation=val_data or None, progress=progress)
             for st in structures]
     est = compare_orders(fits, sum(len(fd) for fd in est_data)) if len(fits) > 1 else fits[0]
+    if zero_at_origin:
+        from ilcdob.identification.origin_zero import with_zero_at_origin
+
+        est = with_zero_at_origin(est, est_data, val_data)
     prov = _provenance("identify", argv)
     data = est.to_dict()
     data["signals"] = {"input": inputs.input, "output": inputs.output}

@@ -218,7 +218,7 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
         warnings.filterwarnings("ignore", message="tfest stopped", category=RuntimeWarning)
         est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out,
                                                       validate=a.validate, plot=a.plot, progress=con.progress,
-                                                      argv=argv)
+                                                      argv=argv, zero_at_origin=a.zero_at_origin)
     if a.segment is not None:
         con.note(f"--segment {a.segment:g} s: {len(est_data)} estimation and {len(val_data)} held-out windows, "
                  "each fitted with its own initial condition")

@@ -403,6 +403,10 @@ _IDENTIFY = Command(
                   "best held-out fit; without --validate the lowest AIC)"),
         flag("--zeros", type=int, default=0, help="number of zeros"),
         flag("--integrators", type=int, default=0, help="poles fixed at s = 0"),
+        flag("--zero-at-origin", action="store_true",
+             help="one of the zeros fixed at s = 0: the map of a loop that integrates (a cascade's velocity "
+                  "integral on the acceleration channel); refused where the fit's b0 is beyond 5 standard "
+                  "deviations of 0"),
         flag("--delay", default="0", help="input delay in s, or 'auto' to estimate it"),
         flag("--max-delay", type=float, help="upper bound of the delay search, s (default: a tenth of the shortest "
                                              "file)"),
