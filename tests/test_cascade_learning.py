@@ -21,6 +21,7 @@ from ilcdob.app.cli import main
 from ilcdob.errors import SpecError
 from ilcdob.fleet import fleet_from_dict, load_fleet
 from ilcdob.design.pair import design_pair
+from lti_truth import chirp, fly
 
 TS = 0.01  # s
 NOISE = 5e-4  # m
@@ -36,15 +37,7 @@ def _map(kpp: float, kpv: float, kiv: float, drag: float, lag: float) -> ct.Tran
     return ct.minreal(s / (s ** 2 * (s + drag) * (lag * s + 1) + (kpv * s + kiv) * (kpp + s)), verbose=False)
 
 
-def _fly(sys: ct.TransferFunction, t: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return ct.forced_response(ct.c2d(ct.ss(sys), TS, "zoh"), t, u).outputs
 
-
-def _chirp(t: np.ndarray, seed: int) -> np.ndarray:
-    """A log chirp 0.05 -> 15 rad/s (m/s^2) plus a little white excitation."""
-    w0, w1, dur = 0.05, 15.0, t[-1]
-    phase = w0 * dur / np.log(w1 / w0) * (np.exp(t / dur * np.log(w1 / w0)) - 1)
-    return 2.0 * np.sin(phase) + 0.4 * np.random.default_rng(seed).standard_normal(t.size)
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +49,8 @@ def lab(tmp_path_factory) -> Path:
     for k, (name, gains) in enumerate(CASCADES.items()):
         files = []
         for flight in range(2):
-            u = _chirp(t, 10 * k + flight)
-            y = _fly(_map(**gains), t, u) + NOISE * np.random.default_rng(50 + 10 * k + flight).standard_normal(t.size)
+            u = chirp(t, 2.0, 10 * k + flight, w0=0.05)
+            y = fly(_map(**gains), t, u) + NOISE * np.random.default_rng(50 + 10 * k + flight).standard_normal(t.size)
             files.append(root / f"{name}_{flight}.csv")
             np.savetxt(files[-1], np.c_[t, u, y], delimiter=",", header="time,u,y", comments="")
         assert main(["identify", str(files[0]), "--validate", str(files[1]), "--input", "u", "--output", "y",
@@ -93,7 +86,7 @@ def test_cascades_learn_from_each_other(lab, tmp_path, source, target):
     zero the same fits leave it at s = +1.9e-5 rad/s and the design is refused (the next test)."""
     t = np.arange(0.0, 30.0, TS)
     d = 0.3 + 0.5 * np.sin(0.94 * t) + 0.2 * np.sin(1.41 * t + 0.5)
-    e = -_fly(_map(**CASCADES[source]), t, d) + NOISE * np.random.default_rng(7).standard_normal(t.size)
+    e = -fly(_map(**CASCADES[source]), t, d) + NOISE * np.random.default_rng(7).standard_normal(t.size)
     trial = tmp_path / "trial.csv"
     np.savetxt(trial, np.c_[t, e, np.zeros_like(t)], delimiter=",", header="time,error,learning", comments="")
     design, learned = tmp_path / "design", tmp_path / "learned"
@@ -103,8 +96,8 @@ def test_cascades_learn_from_each_other(lab, tmp_path, source, target):
                  "--out", str(learned), "--quiet"]) == 0
     u = np.loadtxt(learned / "learning_signal.csv", delimiter=",", skiprows=2)[:, 1]
     g = _map(**CASCADES[target])
-    base = _fly(g, t, d)
-    ratio = np.sqrt(np.mean((base + _fly(g, t, u)) ** 2)) / np.sqrt(np.mean(base ** 2))
+    base = fly(g, t, d)
+    ratio = np.sqrt(np.mean((base + fly(g, t, u)) ** 2)) / np.sqrt(np.mean(base ** 2))
     assert ratio <= 0.1, ratio
 
 
@@ -121,9 +114,10 @@ def test_a_zero_off_the_origin_is_named_and_a_single_loop_refuses_the_constraint
     single = ct.tf([1.0], [0.06, 1.0, 3.4, 4.0])  # a PD loop: no integral, no zero at s = 0
     files = []
     for flight in range(2):
-        y = _fly(single, t, _chirp(t, flight)) + NOISE * np.random.default_rng(flight).standard_normal(t.size)
+        u = chirp(t, 2.0, flight, w0=0.05)
+        y = fly(single, t, u) + NOISE * np.random.default_rng(flight).standard_normal(t.size)
         files.append(tmp_path / f"f{flight}.csv")
-        np.savetxt(files[-1], np.c_[t, _chirp(t, flight), y], delimiter=",", header="time,u,y", comments="")
+        np.savetxt(files[-1], np.c_[t, u, y], delimiter=",", header="time,u,y", comments="")
     assert main(["identify", str(files[0]), "--input", "u", "--output", "y", "--poles", "3", "--zeros", "1",
                  "--zero-at-origin", "--out", str(tmp_path / "m.json"), "--quiet"]) == 2
     assert not (tmp_path / "m.json").exists()

@@ -23,6 +23,7 @@ from ilcdob.channel_loop import ChannelLoop, ChannelSystemSpec
 from ilcdob.errors import FleetError
 from ilcdob.fleet import fleet_from_dict, load_fleet
 from ilcdob.loop import LoopSystem
+from lti_truth import chirp, fly
 
 TS = 0.01  # s
 NOISE = 5e-4  # m, position sensor noise (the acceptance's 0.5 mm)
@@ -44,16 +45,6 @@ def _true_maps(name: str) -> tuple[ct.TransferFunction, ct.TransferFunction, flo
     return ct.minreal(gain * loop, verbose=False), ct.minreal(loop, verbose=False), gain
 
 
-def _fly(sys: ct.TransferFunction, t: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return ct.forced_response(ct.c2d(ct.ss(sys), TS, "zoh"), t, u).outputs
-
-
-def _chirp(t: np.ndarray, amplitude: float, seed: int) -> np.ndarray:
-    """A log chirp 0.1 -> 15 rad/s plus a little white excitation."""
-    w0, w1, dur = 0.1, 15.0, t[-1]
-    phase = w0 * dur / np.log(w1 / w0) * (np.exp(t / dur * np.log(w1 / w0)) - 1)
-    return amplitude * (np.sin(phase) + 0.2 * np.random.default_rng(seed).standard_normal(t.size))
-
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory) -> Path:
@@ -67,8 +58,8 @@ def lab(tmp_path_factory) -> Path:
         g_ch, _, gain = _true_maps(name)
         files = []
         for flight in range(2):
-            u = _chirp(t, 1.0 if channel == "acceleration" else 0.2, 10 * k + flight)
-            y = _fly(g_ch, t, u) + NOISE * np.random.default_rng(100 + 10 * k + flight).standard_normal(t.size)
+            u = chirp(t, 1.0 if channel == "acceleration" else 0.2, 10 * k + flight)
+            y = fly(g_ch, t, u) + NOISE * np.random.default_rng(100 + 10 * k + flight).standard_normal(t.size)
             path = root / f"{name}_{flight}.csv"
             np.savetxt(path, np.c_[t, u, y], delimiter=",", header="time,u,y", comments="")
             files.append(path)
@@ -148,15 +139,15 @@ def _trial(name: str, seconds: float = 30.0) -> tuple[np.ndarray, np.ndarray, np
     """Time, the paper's disturbance (m/s^2) and the true vehicle's error flying it without learning (m)."""
     t = np.arange(0.0, seconds, TS)
     d = 0.3 + 0.5 * np.sin(0.94 * t) + 0.2 * np.sin(1.41 * t + 0.5)
-    e = -_fly(_true_maps(name)[1], t, d) + NOISE * np.random.default_rng(7).standard_normal(t.size)
+    e = -fly(_true_maps(name)[1], t, d) + NOISE * np.random.default_rng(7).standard_normal(t.size)
     return t, d, e
 
 
 def _flown_ratio(name: str, t: np.ndarray, d: np.ndarray, u: np.ndarray) -> float:
     """RMSE of the true vehicle flying ``u`` on its channel in ``d``, over its RMSE without (noise-free)."""
     g_ch, g_d, _ = _true_maps(name)
-    base = _fly(g_d, t, d)
-    return float(np.sqrt(np.mean((base + _fly(g_ch, t, u)) ** 2)) / np.sqrt(np.mean(base ** 2)))
+    base = fly(g_d, t, d)
+    return float(np.sqrt(np.mean((base + fly(g_ch, t, u)) ** 2)) / np.sqrt(np.mean(base ** 2)))
 
 
 @pytest.mark.parametrize("source, target", [("heavy", "racer"), ("racer", "heavy")])

@@ -21,6 +21,7 @@ from ilcdob.app.cli import main
 from ilcdob.design.law.laws import law_for
 from ilcdob.design.pair import design_pair
 from ilcdob.fleet import fleet_from_dict, load_fleet
+from lti_truth import chirp, fly
 
 TS = 0.01  # s
 NOISE = 5e-4  # m, position sensor noise (0.5 mm)
@@ -42,16 +43,6 @@ def _true(name: str, delayed: bool = True) -> dict[str, ct.TransferFunction]:
             "ch": gd if channel == "acceleration" else ct.minreal(kp * gd, verbose=False)}
 
 
-def _fly(sys: ct.TransferFunction, t: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return ct.forced_response(ct.c2d(ct.ss(sys), TS, "zoh"), t, u).outputs
-
-
-def _chirp(t: np.ndarray, amplitude: float, seed: int) -> np.ndarray:
-    """A log chirp 0.1 -> 15 rad/s plus a little white excitation."""
-    w0, w1, dur = 0.1, 15.0, t[-1]
-    phase = w0 * dur / np.log(w1 / w0) * (np.exp(t / dur * np.log(w1 / w0)) - 1)
-    return amplitude * (np.sin(phase) + 0.2 * np.random.default_rng(seed).standard_normal(t.size))
-
 
 def _task(seconds: float = 30.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Time, an aggressive reference (m; up to about 4 m/s^2, starting at rest where the vehicle is) and the
@@ -65,7 +56,7 @@ def _task(seconds: float = 30.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _error(maps: dict, t: np.ndarray, r: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
     """A true vehicle's (:func:`_true`) tracking error ``r - y`` flying ``r`` in ``d`` with ``u`` on its channel
     (noise-free)."""
-    return r - _fly(maps["T"], t, r) - _fly(maps["d"], t, d) - _fly(maps["ch"], t, u)
+    return r - fly(maps["T"], t, r) - fly(maps["d"], t, d) - fly(maps["ch"], t, u)
 
 
 def _ratio(maps: dict, u: np.ndarray) -> float:
@@ -112,8 +103,8 @@ def lab(tmp_path_factory) -> Path:
         for what, amplitude, zeros in (("ch", 1.0 if channel == "acceleration" else 0.2, "0"), ("T", 0.2, "1")):
             files = []
             for flight in range(2):
-                u = _chirp(t, amplitude, 100 * k + 10 * flight + len(what))
-                y = _fly(maps[what], t, u) + NOISE * np.random.default_rng(7 + 10 * k + flight).standard_normal(t.size)
+                u = chirp(t, amplitude, 100 * k + 10 * flight + len(what))
+                y = fly(maps[what], t, u) + NOISE * np.random.default_rng(7 + 10 * k + flight).standard_normal(t.size)
                 path = root / f"{name}_{what}_{flight}.csv"
                 np.savetxt(path, np.c_[t, u, y], delimiter=",", header="time,u,y", comments="")
                 files.append(path)
