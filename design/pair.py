@@ -488,8 +488,7 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
     if chosen.name not in CHANNEL_METHODS:
         raise SpecError(f"`method`: got {chosen.name!r}, which designs for ilcdob's PID + DOB loop, and {own} fly "
                         f"their own controller; design such pairs with {' or '.join(map(repr, CHANNEL_METHODS))} "
-                        "(the paper's filters on the identified channel maps, or the per-trial SOCP over their "
-                        "sampled fits; docs/closed_loop.md)")
+                        "(on the identified channel maps and their uncertainty; docs/closed_loop.md)")
     if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
         name, reference = (law.name, law.reference) if isinstance(law, ExactReference) else (law, None)
         _check_law_request(fleet, source, target, name, reference)
@@ -518,7 +517,7 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
 
 
 #: The methods that design a pair with a vehicle on its own controller (:func:`design_channel_pair`).
-CHANNEL_METHODS = ("closed-form", "robust")
+CHANNEL_METHODS = ("closed-form", "robust", "robust-set")
 
 
 def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *,

@@ -76,9 +76,9 @@ the learning channel to the position, not by plant, PID and DOB::
 The channel map's model file gives its ``identification`` (its Delta set, for ``check``). Per-axis
 sections work as for the other systems, with ``channel_map`` required and ``delay``,
 ``identification``, ``airframe``, ``channel_gain`` and ``reference_map`` bound to it. Such systems and
-ilcdob's own loop mix in one fleet; ``ilcdob design`` (the closed form or the robust SOCP; the paper's
-or the exact-reference law), ``check`` and ``learn`` serve them, and the commands that simulate ilcdob's
-loop refuse them (:meth:`Fleet.require_paper_loops`).
+ilcdob's own loop mix in one fleet; ``ilcdob design`` (the closed form, the robust SOCP or robust-set;
+the paper's or the exact-reference law), ``check`` and ``learn`` serve them, and the commands that simulate
+ilcdob's loop refuse them (:meth:`Fleet.require_paper_loops`).
 
 A system's ``name`` follows one rule (:func:`ilcdob.names.check_name`): 1 to 64 ASCII
 letters, digits, spaces and ``_ - . +``, starting with a letter or a digit and not ending

@@ -276,7 +276,7 @@ def test_a_mixed_pair_designs_and_a_dob_source_is_refused(lab, tmp_path):
     assert main(["design", "--fleet", fleet, "--from", "paper", "--to", "racer", "--out", str(tmp_path / "b"),
                  "--quiet"]) == 2
     assert not (tmp_path / "b").exists()
-    assert main(["design", "--fleet", fleet, "--from", "heavy", "--to", "racer", "--method", "robust-set",
+    assert main(["design", "--fleet", fleet, "--from", "heavy", "--to", "racer", "--method", "fir",
                  "--out", str(tmp_path / "c"), "--quiet"]) == 2
 
 

@@ -30,6 +30,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ilcdob.channel_loop import ChannelLoop
 from ilcdob.errors import SpecError
 from ilcdob.fleet import Fleet
 from ilcdob.loop import LoopSystem
@@ -46,6 +47,7 @@ from ..law.stage import hstack_maps
 from .fir import FIROptions, design_fir
 from .norm_optimal import NormOptimalDesigner, NormOptimalOptions, check_norm_optimal_size, norm_optimal_learning
 from .robust import RobustOptions, RobustPairDesigner
+from .channel_robust_set import design_channel_robust_set
 from .robust_set import RobustSetOptions, design_robust_set, structured_set
 
 __all__ = ["DesignInputs", "MethodSettings", "MethodDesign", "Method", "ClosedForm", "FIR", "NormOptimal", "Robust",
@@ -419,6 +421,8 @@ class RobustSet(Method):
         return RobustSet(options, settings.deltas or self.deltas)
 
     def design(self, inputs: DesignInputs) -> MethodDesign:  # noqa: D102 - Method.design
+        if isinstance(inputs.src, ChannelLoop) or isinstance(inputs.tgt, ChannelLoop):
+            return self._channel_design(inputs)
         source = inputs.src.name
         opts = self.options or RobustSetOptions()
         spec = next(s for s in inputs.fleet.systems if s.name == source)
@@ -444,6 +448,25 @@ class RobustSet(Method):
 
         entries = {k: filters[k] for k in ("law_maps", "F", "trial_ends") if k in filters}
         return MethodDesign(filters, Designed(self.name, rs.apply, entries if "law_maps" in entries else None, maps))
+
+    def _channel_design(self, inputs: DesignInputs) -> MethodDesign:
+        """:meth:`design` between vehicles on their own controller (:mod:`.channel_robust_set`; no C code)."""
+        source = inputs.src.name
+        ds = inputs.deltas[source]
+        rs = design_channel_robust_set(inputs.src, inputs.tgt, ds.w, ds.bound, self.options or RobustSetOptions())
+        filters = {**inputs.head, "closed_form": {"L1": zpk_to_coefficients(rs.filters.L1),
+                                                  "L2": zpk_to_coefficients(rs.filters.L2)},
+                   "learning": "u_j = -F{d_hat}/K_j with d_hat = -Gd_hat_{j-1}^{-1}{e_{j-1} + Gf_hat_{j-1}{u_{j-1}}} "
+                               "the disturbance reconstructed by the source's model, on the target's channel (F: FIR, "
+                               "output(k) = sum_i num[i] input(k + advance - i)); the trial's ends as `trial_ends` "
+                               "says; no C code",
+                   "delta_set": {source: ds.source}, **rs.to_dict()}
+        gf = inputs.src.G_f
+
+        def maps(m: int) -> LinearMap:  # the law on (e, u): its map of e' = e + Gf_hat_{j-1}{u}
+            return rs.trial_map(m) @ hstack_maps([identity_map(m), causal_map(gf, m, "Gf_hat_{j-1}")], "e + Gf u")
+
+        return MethodDesign(filters, Designed(self.name, rs.apply, None, maps))
 
     def check_options(self, given: dict[str, Any]) -> None:  # noqa: D102 - Method.check_options
         rho = given.get("--rho")

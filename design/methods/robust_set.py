@@ -762,6 +762,8 @@ class _Problem:
         # as equalities, leaves the cones without interior and the equality rows rank deficient)
         hard = (self.a <= 1e-9) | (self.r >= np.abs(self.b) * (1 - 1e-9))
         ok, zero = np.flatnonzero(~hard), np.flatnonzero(hard)
+        if not ok.size:  # the set reaches its centre's distance everywhere: only F = 0 (no learning) keeps 1
+            return np.zeros(o.n_taps), 1.0 if rho is None else float(rho)
         i_ok = self.idx[ok]
         br, bi = self.b[ok].real, self.b[ok].imag
         u, v = cp.Variable(ok.size), cp.Variable(self.w.size)
@@ -844,13 +846,7 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
     if key not in _CACHE:
         _CACHE[key] = _design_filter(source, target, w_bound, bound, o, structure)
     design = _CACHE[key]
-    if not design.feasible:
-        msg = (f"robust-set design {source.name!r} -> {target.name!r}: rho = {o.rho:g} cannot be guaranteed over "
-               f"the Delta set; the best an FIR of {o.n_taps} taps guarantees is rho = {design.rho_best:.4g}")
-        if not o.relax:
-            raise RobustSetInfeasibleError(msg + f". Next step: ask rho >= {design.rho_best:.4g}, lower the bound, "
-                                           "or allow more taps (`n_taps`).", rho=o.rho, rho_best=design.rho_best)
-        warnings.warn(msg + f"; designed at rho = {design.rho_design:.4g}", RuntimeWarning, stacklevel=2)
+    check_feasible(design, source, target, o)
     design = replace(design, filters=lf)
     n_trial = int(round(o.finite_trial_s / source.ts))
     if n_trial >= 2:
@@ -861,6 +857,31 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
 
 
 _CACHE: dict[tuple, RobustSetDesign] = {}
+
+
+def check_feasible(design: RobustSetDesign, source: object, target: object, o: RobustSetOptions) -> None:
+    """Raise or warn where ``design`` (its FIR) cannot guarantee the asked ``o.rho``.
+
+    Parameters
+    ----------
+    design : RobustSetDesign
+    source, target : LoopSystem or ChannelLoop
+        The pair, for the message.
+    o : RobustSetOptions
+
+    Raises
+    ------
+    RobustSetInfeasibleError
+        ``o.relax`` is False and ``o.rho`` is not guaranteed; with ``relax`` a RuntimeWarning instead.
+    """
+    if design.feasible:
+        return
+    msg = (f"robust-set design {source.name!r} -> {target.name!r}: rho = {o.rho:g} cannot be guaranteed over "
+           f"the Delta set; the best an FIR of {o.n_taps} taps guarantees is rho = {design.rho_best:.4g}")
+    if not o.relax:
+        raise RobustSetInfeasibleError(msg + f". Next step: ask rho >= {design.rho_best:.4g}, lower the bound, "
+                                       "or allow more taps (`n_taps`).", rho=o.rho, rho_best=design.rho_best)
+    warnings.warn(msg + f"; designed at rho = {design.rho_design:.4g}", RuntimeWarning, stacklevel=3)
 
 
 def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, bound: np.ndarray,

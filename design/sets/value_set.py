@@ -97,6 +97,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.stats import chi2
 
+from ilcdob.channel_loop import ChannelLoop
 from ilcdob.discretize import plant_block
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem, freqresp
@@ -660,15 +661,17 @@ def _perturbed_blocks(family: EllipseFamily, ts: float) -> tuple:
     return (block(x0), *moved)
 
 
-def complementary_sensitivity(source: LoopSystem, w: np.ndarray) -> np.ndarray:
+def complementary_sensitivity(source: LoopSystem | ChannelLoop, w: np.ndarray) -> np.ndarray:
     """``T0 = P_hat (M + C) / (1 - Q + P_hat (M + C))`` of a system's nominal DOB loop.
 
     The Moebius map ``g(Delta) = (1 + Delta)/(1 + T0 Delta)`` of the module docstring and of
-    :mod:`..methods.robust_set` takes a model error of the source to its error-ratio factor.
+    :mod:`..methods.robust_set` takes a model error of the source to its error-ratio factor. A vehicle on
+    its own controller has ``T0 = 0``: its identified map's error is ``Gd/Gd_hat = 1 + Delta`` itself
+    (:mod:`..methods.channel_robust_set`).
 
     Parameters
     ----------
-    source : LoopSystem
+    source : LoopSystem or ChannelLoop
         The system (its nominal loop is used).
     w : array_like
         Frequencies, rad/s.
@@ -678,6 +681,8 @@ def complementary_sensitivity(source: LoopSystem, w: np.ndarray) -> np.ndarray:
     numpy.ndarray
         ``T0(e^{j w Ts})``, complex.
     """
+    if isinstance(source, ChannelLoop):
+        return np.zeros(np.shape(w), complex)
     src = source.nominal
     p, m, c, q = (freqresp(blk, w) for blk in (src.P, src.M, src.C, src.Q))
     pm = p * (m + c)
