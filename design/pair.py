@@ -436,9 +436,8 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
         Unknown method, law, disturbance path or limit policy; ``multi-source``;
         ``exact-reference`` without its reference; a bad band.
     """
-    own = [n for n in (source, target) if isinstance(fleet.loop(n), ChannelLoop)]
-    if own:
-        return _fleet_channel_pair(fleet, source, target, method, own, law=law, band=band, disturbance=disturbance,
+    if any(isinstance(fleet.loop(n), ChannelLoop) for n in (source, target)):
+        return _fleet_channel_pair(fleet, source, target, method, law=law, band=band, disturbance=disturbance,
                                    on_limit=on_limit)
     if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
         name, reference, acceleration = ((law.name, law.reference, law.acceleration) if isinstance(law, ExactReference)
@@ -471,31 +470,26 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
     return design_with_band(design, chooser(error=None))
 
 
-def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Method, own: list[str], *,
+def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Method, *,
                         law: str | ExactReference, band: object, disturbance: str, on_limit: str) -> PairDesign:
-    """:func:`design_pair` for a pair with a vehicle on its own controller (``own``): :func:`design_channel_pair`
+    """:func:`design_pair` for a pair with a vehicle on its own controller: :func:`design_channel_pair`
     with the target's limit (its Limit stage on the acceleration channel; in the band's noise budget on every
     channel).
 
     Raises
     ------
     SpecError
-        A method other than the closed form or the robust SOCP (the latter between two vehicles on their own
-        controller), the multi-source law, exact-reference without its reference or the target's reference map,
-        a bad limit policy.
+        A method not of :data:`CHANNEL_METHODS` (:func:`design_channel_pair`), the multi-source law,
+        exact-reference without its reference or the target's reference map, a bad limit policy.
     """
-    chosen = method_named(method)
-    if chosen.name not in CHANNEL_METHODS:
-        raise SpecError(f"`method`: got {chosen.name!r}, which designs for ilcdob's PID + DOB loop, and {own} fly "
-                        f"their own controller; design such pairs with {' or '.join(map(repr, CHANNEL_METHODS))} "
-                        "(on the identified channel maps and their uncertainty; docs/closed_loop.md)")
+    chosen = _channel_method(method)
     if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
         name, reference = (law.name, law.reference) if isinstance(law, ExactReference) else (law, None)
         _check_law_request(fleet, source, target, name, reference)
         for lp in (fleet.loop(source), fleet.loop(target)):  # before the design: the law's own input
             if isinstance(lp, ChannelLoop):
                 lp.G_r  # noqa: B018 - raises where the reference map is not known
-        design = _fleet_channel_pair(fleet, source, target, method, own, law=DEFAULT_LAW, band=band,
+        design = _fleet_channel_pair(fleet, source, target, method, law=DEFAULT_LAW, band=band,
                                      disturbance=disturbance, on_limit=on_limit)
         return with_law(design, fleet, source, target, name, reference,
                         law.acceleration if isinstance(law, ExactReference) else None)
@@ -520,6 +514,16 @@ def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Me
 CHANNEL_METHODS = ("closed-form", "robust", "robust-set")
 
 
+def _channel_method(method: str | Method) -> Method:
+    """``method`` if it designs for vehicles on their own controller (:data:`CHANNEL_METHODS`), else SpecError."""
+    chosen = method_named(method)
+    if chosen.name not in CHANNEL_METHODS:
+        raise SpecError(f"`method`: got {chosen.name!r}, which designs for ilcdob's PID + DOB loop only; design a "
+                        f"pair with a vehicle on its own controller with {' or '.join(map(repr, CHANNEL_METHODS))} "
+                        "(on the identified channel maps and their uncertainty; docs/closed_loop.md)")
+    return chosen
+
+
 def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *,
                         method: str | Method = "closed-form", deltas: dict[str, DeltaSet] | None = None,
                         band: object = "auto", acceleration_limit: float | None = None,
@@ -537,12 +541,13 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     ----------
     source, target : ChannelLoop or LoopSystem
         Vehicles j-1 and j (a LoopSystem: its model's maps).
-    method : {"closed-form", "robust"} or Method
-        The Theorem's filters, or the per-trial SOCP over both vehicles' sampled channel maps
-        (:mod:`.methods.robust`; two vehicles on their own controller).
+    method : {"closed-form", "robust", "robust-set"} or Method
+        The Theorem's filters, the per-trial SOCP over both vehicles' sampled channel maps
+        (:mod:`.methods.robust`) or the closed form with a robustness FIR over the source's disc
+        (:mod:`.methods.channel_robust_set`); the last two between vehicles on their own controller.
     deltas : dict of str to DeltaSet, optional
-        The robust method's sampled maps by vehicle (default: the method's own, else 8 per vehicle drawn
-        from each fit, :func:`~.sets.delta.channel_delta_set`).
+        The robust methods' sets by vehicle (default: the method's own, else 8 maps per vehicle drawn from
+        each fit, :func:`~.sets.delta.channel_delta_set`).
     band : "auto", float or None
         As :func:`design_pair`; ``"auto"`` chooses the corner per trial from the source's error and, with
         ``acceleration_limit``, the noise the filter passes (in the acceleration it makes the target command).
@@ -563,14 +568,11 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     SpecError
         Not vehicles, other sample times, a target without a DOB after a source with one, a bad band, limit,
         method or disturbance; off the command, an airframe missing or without a rigid body to split off, or a
-        drag too small to learn the wind from; the robust method with ilcdob's loop in the pair or a vehicle
+        drag too small to learn the wind from; a robust method with ilcdob's loop in the pair or a vehicle
         without an identification.
     """
     check_disturbance(disturbance)
-    chosen = method_named(method)
-    if chosen.name not in CHANNEL_METHODS:
-        raise SpecError(f"`method`: got {chosen.name!r}, expected one of {list(CHANNEL_METHODS)} for vehicles on "
-                        "their own controller")
+    chosen = _channel_method(method)
     lf = channel_filters(source, target)
     request = check_bandwidth(band, source.ts)
     if acceleration_limit is not None and not (isinstance(acceleration_limit, (int, float))
@@ -584,7 +586,7 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
         if mixed:
             raise SpecError(f"`method`: {chosen.name!r} between a vehicle on its own controller and ilcdob's PID + "
                             f"DOB loop ({mixed}) is not built; design this pair with 'closed-form'")
-        deltas = chosen.deltas or deltas
+        deltas = deltas or chosen.deltas
         if deltas is None:
             rng = np.random.default_rng(0)
             deltas = {lp.name: channel_delta_set(lp, 8, rng) for lp in (source, target)}

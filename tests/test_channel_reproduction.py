@@ -37,7 +37,7 @@ def test_a_short_run_writes_its_tables_and_meets_the_acceptance():
     iteration, 8 s trials: every acceptance row is met, and results.json holds what README.md tabulates."""
     pytest.importorskip("rotorpy")
     settings = ChannelSettings(vehicles=DEFAULT_VEHICLES[::2], channels=("acceleration",), trial_s=8.0,
-                               identification_s=10.0)
+                               identification_s=10.0, identified_axes=())
     res = reproduce_channels([1], 1, settings)
     files = res.files(figures=True)
     data = json.loads(files["results.json"])

@@ -196,6 +196,9 @@ class ChannelSettings:
         Dryden turbulence's mean wind at 20 ft, m/s.
     dryden_seed : int
         Seed of its frozen field.
+    identified_axes : tuple of str
+        Axes whose channel maps are identified and reported besides those the scenarios learn on (x, and y
+        where the path moves laterally).
     """
 
     vehicles: tuple[ChannelVehicle, ...] = DEFAULT_VEHICLES
@@ -207,6 +210,7 @@ class ChannelSettings:
     dob: DOBSpec | None = None
     dryden_wind_20ft: float = 2.0
     dryden_seed: int = 7
+    identified_axes: tuple[str, ...] = ("x", "y", "z")
 
     def __post_init__(self) -> None:
         if len(self.vehicles) < 2 or not all(isinstance(v, ChannelVehicle) for v in self.vehicles):
@@ -218,6 +222,9 @@ class ChannelSettings:
             raise SpecError("`channels`: got none, expected some of 'position', 'velocity', 'acceleration'")
         for ch in self.channels:
             check_channel(ch, "channels")
+        bad = [ax for ax in self.identified_axes if ax not in ("x", "y", "z")]
+        if bad:
+            raise SpecError(f"`identified_axes`: got {list(self.identified_axes)}, expected some of ['x', 'y', 'z']")
         for what in ("ts", "trial_s", "identification_s"):
             value = getattr(self, what)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
@@ -540,7 +547,8 @@ def reproduce_channels(scenarios: Sequence[int] = (1, 2, 3, 4), iterations: int 
     t0 = time.perf_counter()
     make = settings.make()
     names = [v.name for v in settings.vehicles]
-    axes = tuple(ax for ax in ("x", "y") if any(ax in _axes(sid) for sid in scenarios))
+    axes = tuple(ax for ax in ("x", "y", "z") if any(ax in _axes(sid) for sid in scenarios)
+                 or ax in settings.identified_axes)
     total = len(settings.channels) * (1 + sum(len(runs_of(sid)) for sid in scenarios))
     done = 0
     fits, runs = {}, []

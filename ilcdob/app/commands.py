@@ -602,9 +602,8 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     validate : sequence of str or Path
         Held-out data files.
     plot : str or Path, optional
-        Folder for the compare / residual / Bode figures, written as a unit with the model:
-        the figures are staged and sealed, the model file written, then the folder swapped in,
-        so a run that fails (a full disk included) leaves neither.
+        Folder for the compare / residual / Bode figures, written as a unit with the model (staged and
+        sealed, the model written, then the folder swapped in: a failed run, a full disk included, leaves neither).
     progress : callable, optional
         ``progress(done, total, what)``.
     argv : sequence of str, optional
@@ -624,6 +623,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
         A window of ``inputs.segment`` holds fewer samples than the fit needs
         (:func:`ilcdob.identification.tfest.min_samples`); ``zero_at_origin`` where the data refuse it.
     """
+    from ilcdob.identification.origin_zero import with_zero_at_origin
     from ilcdob.identification.plots import fit_figures
     from ilcdob.identification.tfest import min_samples, tfest
     from ilcdob.signals import segments
@@ -645,10 +645,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     fits = [tfest(est_data, "u", "y", st, options, validation=val_data or None, progress=progress)
             for st in structures]
     est = compare_orders(fits, sum(len(fd) for fd in est_data)) if len(fits) > 1 else fits[0]
-    if zero_at_origin:
-        from ilcdob.identification.origin_zero import with_zero_at_origin
-
-        est = with_zero_at_origin(est, est_data, val_data)
+    est = with_zero_at_origin(est, est_data, val_data) if zero_at_origin else est
     prov = _provenance("identify", argv)
     data = est.to_dict()
     data["signals"] = {"input": inputs.input, "output": inputs.output}
