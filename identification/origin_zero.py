@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ilcdob.channel_loop import SLOWEST_ROOT
 from ilcdob.errors import SpecError
 from ilcdob.signals import FlightData
 
@@ -68,8 +69,8 @@ def with_zero_at_origin(est: TFEstimate, data: Sequence[FlightData],
     Raises
     ------
     SpecError
-        No zero to fix, an integrator (it would cancel against the zero), or ``b0`` further than
-        ``max_sigma`` standard deviations from 0.
+        No zero to fix, an integrator (it would cancel against the zero), ``b0`` further than ``max_sigma``
+        standard deviations from 0, or a pole of the result within :data:`SLOWEST_ROOT` of the origin.
     """
     s = est.structure
     if s.n_zeros < 1:
@@ -93,6 +94,11 @@ def with_zero_at_origin(est: TFEstimate, data: Sequence[FlightData],
     cov_c = cov - np.outer(cov[:, i], cov[i, :]) / var
     cov_c[i, :] = cov_c[:, i] = 0.0
     theta = full[: s.n_params]
+    slow = [p for p in np.roots(s.split(theta)[0]) if abs(p) < SLOWEST_ROOT]
+    if slow:
+        raise SpecError(f"`--zero-at-origin`: the fit puts a pole at s = {complex(slow[0]):.3g} beside the zero at "
+                        "s = 0, cancelling it: the data show a loop without an integral on this channel; fit without "
+                        "--zero-at-origin")
     delay = max(0.0, float(full[-1])) if est.delay_estimated else est.delay
     solver = {**est.solver, "zero_at_origin": {"b0_fitted": b0, "b0_std": sigma,
                                                "rule": "b0 = 0 by conditioning N(theta, Cov) on it "

@@ -50,12 +50,19 @@ from .loop import STABILITY_MARGIN
 from .names import check_name
 from .specs import DOBSpec, IdentificationSpec, LimitSpec, PlantSpec, SensorSpec
 
-__all__ = ["CHANNELS", "CHANNEL_UNITS", "check_channel", "ChannelLoop", "channel_loop", "ChannelSystemSpec"]
+__all__ = ["CHANNELS", "CHANNEL_UNITS", "SLOWEST_ROOT", "check_channel", "ChannelLoop", "channel_loop",
+           "ChannelSystemSpec"]
 
 #: The setpoint channels a learning signal can enter through (module docstring), in the setpoint's row order.
 CHANNELS = ("position", "velocity", "acceleration")
 #: Unit of a learning signal on each channel.
 CHANNEL_UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s^2"}
+#: rad/s: the slowest root a channel map keeps beside the origin. A pole this close to a zero fixed at s = 0
+#: cancels it (a loop without an integral fitted with a spurious pole-zero pair there: 1.2e-4 rad/s for the PD
+#: loop of ``tests/test_cascade.py``; a cascade's slowest pole is its velocity integral's, near ``kiv / kpv``:
+#: 0.23 and 0.44 rad/s for the tests' two), and a right-half-plane zero this slow is the zero at s = 0 of a loop
+#: that integrates placed a little off by a free fit (:mod:`ilcdob.identification.origin_zero`).
+SLOWEST_ROOT = 0.01
 
 
 def check_channel(channel: object, what: str = "channel") -> str:

@@ -108,3 +108,19 @@ def test_the_gain_check_tells_a_cascade_from_a_single_loop(kind):
     assert check.holds == (kind == "single loop"), check
     if kind == "cascade":
         assert np.max(check.mismatch) > 0.3  # far beyond any fit's uncertainty: not a near miss
+
+
+def test_the_python_route_fixes_a_cascades_zero_at_the_origin():
+    """`identify_channel(..., zero_at_origin=True)` on the PX4-like cascade's acceleration channel: the chosen map
+    has its zero at s = 0 exactly, held out >= 95 %, and its loop integrates; on the single PD loop (no integral)
+    every candidate's data refuse the zero and the identification says so."""
+    from ilcdob.channel_loop import channel_loop
+    from ilcdob.errors import SpecError
+
+    fit = identify_channel(lambda name, seed: Cascade(**CASCADES["px4-like"], seed=seed), "v", TS, "acceleration",
+                           "x", 30.0, zero_at_origin=True)
+    assert fit.plant.num[-1] == 0.0 and fit.fit_validation >= 95.0, (fit.plant, fit.fit_validation)
+    assert channel_loop("v", TS, "acceleration", fit.plant, identification=fit.identification).integrates
+    with pytest.raises(SpecError, match="does not integrate"):
+        identify_channel(lambda name, seed: SingleLoop(4.0, 3.0, seed=seed), "v", TS, "acceleration", "x", 30.0,
+                         zero_at_origin=True)

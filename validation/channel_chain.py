@@ -73,7 +73,8 @@ def with_dob(make: MakeDisturbed, loops: Mapping[str, Mapping[str, ChannelLoop |
 
 
 def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts: float,
-                           axes: Sequence[str] = ("x",), duration: float = 30.0, *, dob: DOBSpec | None = None
+                           axes: Sequence[str] = ("x",), duration: float = 30.0, *, dob: DOBSpec | None = None,
+                           zero_at_origin: bool = False
                            ) -> tuple[dict[str, dict[str, ChannelLoop]], dict[str, dict[str, ChannelFit]]]:
     """Every vehicle's loop per axis from its channel's identification flights (module docstring, step 1).
 
@@ -93,6 +94,9 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
     dob : DOBSpec, optional
         Fly every vehicle with the add-on DOB of this ``Q`` on its identified airframes and identify its
         channel again so (module docstring); the loops carry it.
+    zero_at_origin : bool
+        The vehicles' loops integrate: their channel maps' zero at s = 0 fixed
+        (:func:`~ilcdob.validation.channel_id.identify_channel`).
 
     Returns
     -------
@@ -110,7 +114,7 @@ def identify_channel_loops(make: MakeDisturbed, channels: Mapping[str, str], ts:
 
         def identified(flown: MakeDisturbed, airframes: Mapping[str, object] | None, q: DOBSpec | None) -> None:
             fits[name] = {ax: identify_channel(lambda nm, seed: flown(nm, seed, None, None), name, ts, channel, ax,
-                                               duration) for ax in axes}
+                                               duration, zero_at_origin=zero_at_origin) for ax in axes}
             loops[name] = {ax: channel_loop(name, ts, channel, f.plant, float(gain[AXES.index(ax)]),
                                             f.airframe if airframes is None else airframes[ax], q, f.identification)
                            for ax, f in fits[name].items()}

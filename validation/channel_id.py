@@ -163,8 +163,8 @@ def channel_flight(make: MakeClosedLoop, name: str, ts: float, channel: str, axi
 
 
 def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, axis: str = "x",
-                     duration: float = 30.0, structures: Sequence[ModelStructure] = CHANNEL_STRUCTURES
-                     ) -> ChannelFit:
+                     duration: float = 30.0, structures: Sequence[ModelStructure] = CHANNEL_STRUCTURES,
+                     zero_at_origin: bool = False) -> ChannelFit:
     """Identify the channel map of one vehicle's axis (module docstring).
 
     Parameters
@@ -181,6 +181,9 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
         Length of each of the two flights, s.
     structures : sequence of ModelStructure
         Candidates, fewest parameters first.
+    zero_at_origin : bool
+        The loop integrates (a cascade's velocity integral on the acceleration channel): one zero of the
+        channel map fixed at s = 0 (:func:`~ilcdob.validation.vehicle_chain.fit_candidates`).
 
     Returns
     -------
@@ -195,7 +198,7 @@ def identify_channel(make: MakeClosedLoop, name: str, ts: float, channel: str, a
         raise SpecError("`structures`: got none, expected at least one candidate structure")
     est = channel_flight(make, name, ts, channel, axis, 0, duration, up=True)
     val = channel_flight(make, name, ts, channel, axis, 1, duration, up=False)
-    candidates, chosen = fit_candidates(est, val, structures)
+    candidates, chosen = fit_candidates(est, val, structures, zero_at_origin)
     airframe = airframe_fit = None
     if "command" in est.signals:
         _, body = fit_candidates(_command_flight(est), _command_flight(val), AIRFRAME_STRUCTURES)

@@ -257,8 +257,8 @@ class Candidate:
     identification: IdentificationSpec | None = None
 
 
-def fit_candidates(est: FlightData, val: FlightData, structures: Sequence[ModelStructure]
-                   ) -> tuple[list[Candidate], Candidate]:
+def fit_candidates(est: FlightData, val: FlightData, structures: Sequence[ModelStructure],
+                   zero_at_origin: bool = False) -> tuple[list[Candidate], Candidate]:
     """Fit every candidate structure to ``est`` (``u -> y``, output error), score it on ``val`` and choose one:
     the best held-out fit, a structure with fewer parameters winning unless a larger one fits 1 point better.
 
@@ -268,19 +268,38 @@ def fit_candidates(est: FlightData, val: FlightData, structures: Sequence[ModelS
         Estimation and held-out flights, signals ``u`` and ``y``.
     structures : sequence of ModelStructure
         Candidates, fewest parameters first (at least one).
+    zero_at_origin : bool
+        Fix one zero of every candidate at s = 0 (:func:`ilcdob.identification.origin_zero.with_zero_at_origin`):
+        the candidates without a zero, with an integrator, or whose data refuse it are left out.
 
     Returns
     -------
     (list of Candidate, Candidate)
-        Every candidate in ``structures``' order, and the one chosen.
+        Every candidate kept, in ``structures``' order, and the one chosen.
+
+    Raises
+    ------
+    SpecError
+        With ``zero_at_origin``, no candidate left.
     """
+    from ilcdob.identification.origin_zero import with_zero_at_origin
     from ilcdob.identification.tfest import tfest
 
     candidates = []
     for st in structures:
+        if zero_at_origin and (st.n_zeros < 1 or st.n_integrators):
+            continue
         fit = tfest(est, "u", "y", st, validation=val)
+        if zero_at_origin:
+            try:
+                fit = with_zero_at_origin(fit, [est], [val])
+            except SpecError:
+                continue
         candidates.append(Candidate(st, PlantSpec(tuple(fit.num), tuple(fit.den), fit.delay), fit.fit_estimation,
                                     fit.fit_validation, fit.identification_spec(f"{est.source}; held out: {val.source}")))
+    if not candidates:
+        raise SpecError(f"{est.source}: no candidate structure has a zero at s = 0 that the data allow (a zero, no "
+                        "integrator, the fitted b0 within 5 standard deviations of 0): the loop does not integrate")
     best = max(c.fit_validation for c in candidates)
     return candidates, next(c for c in candidates if c.fit_validation >= best - 1.0)
 

@@ -39,7 +39,7 @@ import numpy as np
 from ilcdob.discretize import DiscreteBlock
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
-from ilcdob.channel_loop import ChannelLoop
+from ilcdob.channel_loop import SLOWEST_ROOT, ChannelLoop
 
 from .closed_form import LearningFilters, _block, _inverse_gd_response, _plant_zeros, _zeros_without_one, matched
 
@@ -113,9 +113,10 @@ def _one_minus_roots(q: DiscreteBlock | None, name: str) -> tuple[np.ndarray, np
     return _zeros_without_one(q, f"vehicle {name!r}"), np.asarray(q.poles, complex)
 
 
-#: Slowest right-half-plane zero (rad/s) a vehicle's map may have: slower, it is taken for the zero at s = 0 of a
-#: loop that integrates, placed a little off by the fit (its inverse would look ahead for hours).
-SLOWEST_ZERO = 0.01
+#: Slowest right-half-plane zero (rad/s) a vehicle's map may have (:data:`ilcdob.channel_loop.SLOWEST_ROOT`): slower,
+#: it is the zero at s = 0 of a loop that integrates, placed a little off by the fit (its inverse would look ahead
+#: for hours).
+SLOWEST_ZERO = SLOWEST_ROOT
 
 
 def channel_map_zeros(vehicle: ChannelLoop) -> np.ndarray:
