@@ -159,8 +159,9 @@ class VehicleSettings:
         from ilcdob.vehicles.rotorpy_vehicle import RotorpyVehicle
 
         own = self.airframes.get(name)
+        frame = {"airframe": own} if own is not None else {"params": self.params.get(name)}
         return RotorpyVehicle(name, self.ts, command_disturbance=command, wind=wind, noise_std=self.sensor_noise_std,
-                              seed=seed, **({"airframe": own} if own is not None else {"params": self.params.get(name)}))
+                              seed=seed, **frame)
 
 
 def _fly(settings: VehicleSettings, systems: list, sc: Scenario, disturbance: str,

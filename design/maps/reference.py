@@ -93,7 +93,8 @@ def inverse_gf_filter(loop: LoopSystem | ChannelLoop) -> ZPKFilter:
     """
     if isinstance(loop, ChannelLoop):
         blk, k = loop.block, loop.channel_gain
-        return matched(blk.poles, channel_map_zeros(loop), loop.ts, lambda w: 1.0 / (k * blk.response(w)), f"Gf^-1 of {loop.name!r}")
+        return matched(blk.poles, channel_map_zeros(loop), loop.ts, lambda w: 1.0 / (k * blk.response(w)),
+                       f"Gf^-1 of {loop.name!r}")
     src = loop.nominal
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)
     poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], np.linalg.eigvals(src.Q.A),
