@@ -436,15 +436,15 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
         Unknown method, law, disturbance path or limit policy; ``multi-source``;
         ``exact-reference`` without its reference; a bad band.
     """
-    if any(isinstance(fleet.loop(n), ChannelLoop) for n in (source, target)):
-        return _fleet_channel_pair(fleet, source, target, method, law=law, band=band, disturbance=disturbance,
-                                   on_limit=on_limit)
     if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
         name, reference, acceleration = ((law.name, law.reference, law.acceleration) if isinstance(law, ExactReference)
                                          else (law, None, None))
         _check_law_request(fleet, source, target, name, reference)  # before the design, which may take long
         design = design_pair(fleet, source, target, method, band=band, disturbance=disturbance, on_limit=on_limit)
         return with_law(design, fleet, source, target, name, reference, acceleration)
+    if any(isinstance(fleet.loop(n), ChannelLoop) for n in (source, target)):
+        return _fleet_channel_pair(fleet, source, target, method, band=band, disturbance=disturbance,
+                                   on_limit=on_limit)
     chosen = method_named(method)
     check_disturbance(disturbance)
     if on_limit not in LIMIT_POLICIES:
@@ -471,28 +471,17 @@ def design_pair(fleet: Fleet, source: str, target: str, method: str | Method = "
 
 
 def _fleet_channel_pair(fleet: Fleet, source: str, target: str, method: str | Method, *,
-                        law: str | ExactReference, band: object, disturbance: str, on_limit: str) -> PairDesign:
-    """:func:`design_pair` for a pair with a vehicle on its own controller: :func:`design_channel_pair`
-    with the target's limit (its Limit stage on the acceleration channel; in the band's noise budget on every
-    channel).
+                        band: object, disturbance: str, on_limit: str) -> PairDesign:
+    """:func:`design_pair` with the paper's law for a pair with a vehicle on its own controller:
+    :func:`design_channel_pair` with the target's limit (its Limit stage on the acceleration channel; in the
+    band's noise budget on every channel).
 
     Raises
     ------
     SpecError
-        A method not of :data:`CHANNEL_METHODS` (:func:`design_channel_pair`), the multi-source law,
-        exact-reference without its reference or the target's reference map, a bad limit policy.
+        A method not of :data:`CHANNEL_METHODS` (:func:`design_channel_pair`), a bad limit policy.
     """
     chosen = _channel_method(method)
-    if isinstance(law, ExactReference) or check_law(law) != DEFAULT_LAW:
-        name, reference = (law.name, law.reference) if isinstance(law, ExactReference) else (law, None)
-        _check_law_request(fleet, source, target, name, reference)
-        for lp in (fleet.loop(source), fleet.loop(target)):  # before the design: the law's own input
-            if isinstance(lp, ChannelLoop):
-                lp.G_r  # noqa: B018 - raises where the reference map is not known
-        design = _fleet_channel_pair(fleet, source, target, method, law=DEFAULT_LAW, band=band,
-                                     disturbance=disturbance, on_limit=on_limit)
-        return with_law(design, fleet, source, target, name, reference,
-                        law.acceleration if isinstance(law, ExactReference) else None)
     if on_limit not in LIMIT_POLICIES:
         raise SpecError(f"`on_limit`: got {on_limit!r}, expected one of {list(LIMIT_POLICIES)}")
     limits = {s.name: s for s in fleet.systems}[target].limits
@@ -631,7 +620,8 @@ def design_with_band(design: PairDesign, band: LearningBand) -> PairDesign:
 
 
 def _check_law_request(fleet: Fleet, source: str, target: str, law: str, reference: object) -> None:
-    """Refuse a law a pair design cannot learn with: ``multi-source``, or ``exact-reference`` without its reference."""
+    """Refuse a law a pair design cannot learn with: ``multi-source``, or ``exact-reference`` without its reference
+    or, for a vehicle on its own controller, without its reference map (:attr:`ChannelLoop.G_r`)."""
     if law == "multi-source":
         raise SpecError("`law`: 'multi-source' learns from the trials of every earlier system at once, and a pair "
                         f"design ({source} -> {target}) learns from one trial of {source}; use "
@@ -640,6 +630,9 @@ def _check_law_request(fleet: Fleet, source: str, target: str, law: str, referen
     if reference is None:
         raise SpecError(f"`reference`: the exact-reference law needs the reference trajectory of the trial "
                         f"(m, sampled every {fleet.sample_time} s); got none")
+    for lp in (fleet.loop(source), fleet.loop(target)):
+        if isinstance(lp, ChannelLoop):
+            lp.G_r  # noqa: B018 - raises where the reference map is not known
 
 
 def with_law(design: PairDesign, fleet: Fleet, source: str, target: str, law: str,

@@ -102,6 +102,24 @@ class DeltaSet:
         return np.array([freqresp(model(lp), w) / p_hat - 1 for lp in self.loops])
 
 
+def _check_samples(k: int) -> None:
+    """Refuse a sample count outside 1 to :data:`MAX_DELTA_SAMPLES`."""
+    if k < 1 or k > MAX_DELTA_SAMPLES:
+        raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}: every sample is "
+                        "a closed loop that is built, flown and constrained on by the fir/robust designs")
+
+
+def _check_bound(bound: float) -> None:
+    """Refuse a multiplicative bound outside (0, 1)."""
+    if not (np.isfinite(bound) and 0 < bound < 1):
+        raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+
+
+def _bound_grid(ts: float, w: np.ndarray | None) -> np.ndarray:
+    """``w`` (rad/s), or by default 200 log-spaced frequencies from 0.01 rad/s to Nyquist, where a bound is given."""
+    return np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
+
+
 def _identified_samples(ident: IdentificationSpec, delay: float, rng: np.random.Generator, scale: float):
     """Plants with parameters drawn from the fit's ``N(theta, scale^2 Cov)`` (``delay``: the fit's)."""
     structure = ModelStructure(ident.poles, ident.zeros, ident.integrators)
@@ -170,9 +188,7 @@ def delta_set(spec: SystemSpec, ts: float, k: int = 20, rng: np.random.Generator
         bound outside (0, 1), a bad ``scale`` (:func:`check_scale`), a margin outside [0, 1), or too many rejected
         samples.
     """
-    if k < 1 or k > MAX_DELTA_SAMPLES:
-        raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}: every sample is "
-                        "a closed loop that is built, flown and constrained on by the fir/robust designs")
+    _check_samples(k)
     if not (np.isfinite(margin) and 0 <= margin < 1):
         raise SpecError(f"`margin`: got {margin!r}, expected a number in [0, 1) (0: stability only)")
     rng = np.random.default_rng(0) if rng is None else rng
@@ -248,16 +264,14 @@ def channel_delta_set(loop: ChannelLoop, k: int = 8, rng: np.random.Generator | 
         ``k`` out of range, a bad ``scale`` or ``bound``, no identification and no bound, or too many
         unstable draws.
     """
-    if k < 1 or k > MAX_DELTA_SAMPLES:
-        raise SpecError(f"`k` (Delta-set samples per system): got {k}, expected 1 to {MAX_DELTA_SAMPLES}")
+    _check_samples(k)
     check_scale(scale, bound)
     rng = np.random.default_rng(0) if rng is None else rng
-    w = np.logspace(-2, np.log10(0.999 * np.pi / loop.ts), 200) if w is None else np.asarray(w, float)
+    w = _bound_grid(loop.ts, w)
     g_ch = PlantSpec(tuple(np.asarray(loop.disturbance_map.num) * loop.channel_gain), loop.disturbance_map.den,
                      loop.disturbance_map.delay)
     if bound is not None:
-        if not (np.isfinite(bound) and 0 < bound < 1):
-            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+        _check_bound(bound)
         gen, bnd, source = _bound_samples(g_ch, float(bound), rng), np.full(w.size, float(bound)), "fleet bound"
     else:
         bnd = loop.delta(w, scale)  # raises without an identification
@@ -395,12 +409,11 @@ def delta_bound(spec: SystemSpec, ts: float, w: np.ndarray | None = None, scale:
         outside (0, 1).
     """
     check_scale(scale, bound)
-    w = np.logspace(-2, np.log10(0.999 * np.pi / ts), 200) if w is None else np.asarray(w, float)
+    w = _bound_grid(ts, w)
     if bound is None and spec.uncertainty is not None:
         bound = spec.uncertainty.bound
     if bound is not None:
-        if not (np.isfinite(bound) and 0 < bound < 1):
-            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+        _check_bound(bound)
         return w, np.full(w.size, float(bound)), "fleet bound"
     ident = spec.identification
     if ident is None:
