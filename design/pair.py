@@ -592,7 +592,7 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     filters = {**made.filters, "units": units, "disturbance": path_entry}
     k_j = channel_view(target).gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
-                      l1_gain=lambda w: k_j * np.abs(lf.l1_response(w)) * _sos_gain(path, w, source.ts))
+                      l1_gain=lambda w: np.abs(k_j(w) * lf.l1_response(w)) * _sos_gain(path, w, source.ts))
     design = PairDesign(chosen.name, filters, made.core, robust=made.robust, source_gf=channel_gf(source), path=path,
                         choose=chooser if request == "auto" else None)
     return design_with_band(design, chooser(error=None))

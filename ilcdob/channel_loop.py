@@ -7,14 +7,16 @@ setpoint its flight stack accepts (:mod:`ilcdob.vehicles.closed_loop`)::
 
     y = T r + Gd d + Gf u,      e = r - y,      Gf = K Gd
 
-``K`` is the controller's map from the channel to the acceleration it commands: 1 on the
-acceleration feed-forward channel (added to the command, where the paper's disturbance acts),
-``kp`` for a position offset and ``kd`` for a velocity offset on a single position/velocity loop
-such as rotorpy's SE3 or a Crazyflie's Mellinger controller without its integral (the setpoint
-reaches the airframe only through ``K``, whatever else the loop feeds back); a cascade's position
-channel (PX4, ArduPilot, a Crazyflie's PID) has no constant ``K``. ``Gd`` is identified: on the
-acceleration channel it is the channel's own map; from a setpoint channel's map ``G_ch`` it is
-``G_ch / K``. ``d`` is an acceleration added to the controller's command, as the paper's
+``K`` is the controller's map from the channel to the acceleration it commands
+(:mod:`ilcdob.channel_gain`): 1 on the acceleration feed-forward channel (added to the command, where
+the paper's disturbance acts), ``kp`` for a position offset and ``kd`` for a velocity offset on a single
+position/velocity loop such as rotorpy's SE3 or a Crazyflie's Mellinger controller without its integral
+(the setpoint reaches the airframe only through ``K``, whatever else the loop feeds back), and a transfer
+function with the velocity integral on a cascade's position or velocity channel (PX4, ArduPilot).
+``Gd`` is identified: on the acceleration channel it is the channel's own map; from a setpoint
+channel's map ``G_ch`` it is ``G_ch / K``. Where ``K`` depends on frequency both are kept
+(:attr:`ChannelLoop.channel_map`) and sampled apart: ``Gf`` is the zero-order hold of ``G_ch`` as the
+setpoint is flown, ``Gd`` that of ``G_ch / K``, so their sampled ratio is not the continuous ``K``. ``d`` is an acceleration added to the controller's command, as the paper's
 disturbance and the learning signal are; a force on the rigid body (wind through drag) bypasses the
 attitude loop, and the learning reaches it through the airframe correction of
 :mod:`ilcdob.design.maps.flown`, built from each vehicle's identified airframe (commanded
@@ -44,6 +46,7 @@ from dataclasses import dataclass, field
 import control as ct
 import numpy as np
 
+from .channel_gain import ChannelGain, as_channel_gain
 from .discretize import DiscreteBlock, plant_block, q_block
 from .errors import SpecError, UnstableLoopError
 from .loop import STABILITY_MARGIN
@@ -110,11 +113,11 @@ class ChannelLoop:
     channel : {"position", "velocity", "acceleration"}
         Where the learning signal enters.
     disturbance_map : PlantSpec
-        ``Gf / K`` in continuous time: acceleration added to the command (m/s^2) -> position (m); stable.
+        ``G_ch / K`` in continuous time: acceleration added to the command (m/s^2) -> position (m); stable.
         Without the add-on DOB this is ``Gd`` itself; with it ``Gd = (1 - Q)`` times it (module docstring).
-    channel_gain : float
+    channel_gain : float or ChannelGain
         ``K``: acceleration (m/s^2) the controller commands per unit of channel signal (1 on the
-        acceleration channel).
+        acceleration channel; :mod:`ilcdob.channel_gain`).
     airframe : PlantSpec or None
         The airframe's identified model, commanded acceleration (m/s^2) -> position (m), with one
         integrator and a drag pole, where the flights logged the commanded acceleration; needed for a
@@ -128,17 +131,22 @@ class ChannelLoop:
     reference_map : PlantSpec or None
         ``T`` (module docstring): reference (m) -> position (m), continuous, identified; None: on the position
         channel the channel map ``K Gd`` (:attr:`G_r`), elsewhere not known.
+    channel_map : PlantSpec or None
+        ``G_ch``, the channel's identified map (channel unit -> m, continuous), where ``K`` depends on frequency
+        (required there, and equal to ``K`` times ``disturbance_map``); None for a constant ``K``
+        (``G_ch = K disturbance_map``). Build both with :func:`channel_loop`.
     """
 
     name: str
     ts: float
     channel: str
     disturbance_map: PlantSpec
-    channel_gain: float = 1.0
+    channel_gain: float | ChannelGain = 1.0
     airframe: PlantSpec | None = None
     dob: DOBSpec | None = None
     identification: IdentificationSpec | None = None
     reference_map: PlantSpec | None = None
+    channel_map: PlantSpec | None = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -146,11 +154,8 @@ class ChannelLoop:
         if not isinstance(self.disturbance_map, PlantSpec):
             raise SpecError(f"`disturbance_map`: got {type(self.disturbance_map).__name__}, expected a PlantSpec "
                             "(the identified map from an acceleration on the airframe to the position)")
-        k = self.channel_gain
-        if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
-            raise SpecError(f"`channel_gain`: got {k!r}, expected the controller's acceleration per unit of "
-                            f"{self.channel} signal, > 0 ({CHANNEL_UNITS['acceleration']} per "
-                            f"{CHANNEL_UNITS[self.channel]})")
+        self._cache["gain"] = as_channel_gain(self.channel_gain)
+        k = self.gain.constant
         if self.airframe is not None and not isinstance(self.airframe, PlantSpec):
             raise SpecError(f"`airframe`: got {type(self.airframe).__name__}, expected a PlantSpec (commanded "
                             "acceleration -> position) or None")
@@ -166,11 +171,56 @@ class ChannelLoop:
             raise SpecError(f"vehicle {self.name!r}: an add-on DOB needs the identified airframe it inverts "
                             "(`airframe`, commanded acceleration -> position)")
         if self.channel == "acceleration" and k != 1.0:
-            raise SpecError(f"`channel_gain`: got {k!r} on the acceleration channel, where the learning signal "
-                            "is added where a disturbance acts: it must be 1")
+            raise SpecError(f"`channel_gain`: got {self.gain.describe() if k is None else k} on the acceleration "
+                            "channel, where the learning signal is added where a disturbance acts: it must be 1")
         self._cache["block"] = _stable_block(self.disturbance_map, self.ts, self.name, "disturbance map")
+        if k is None:
+            self._check_channel_map()
+        elif self.channel_map is not None:
+            raise SpecError(f"vehicle {self.name!r}: `channel_map` is kept only where K depends on frequency; with "
+                            f"{self.gain.describe()} it is K times `disturbance_map` (give None)")
         if self.reference_map is not None:
             self.G_r  # noqa: B018 - built now: an unstable reference map is refused with the vehicle
+
+    def _check_channel_map(self) -> None:
+        """A frequency-dependent ``K``: ``channel_map`` given, equal to ``K`` times ``disturbance_map``, no DOB."""
+        what = f"vehicle {self.name!r} ({self.gain.describe()})"
+        if not isinstance(self.channel_map, PlantSpec):
+            raise SpecError(f"{what}: a K that depends on frequency needs the identified channel map as "
+                            "`channel_map` (a PlantSpec); build the loop with ilcdob.channel_loop.channel_loop")
+        if self.dob is not None:
+            raise SpecError(f"{what}: the add-on DOB is built for a constant K; give the vehicle no DOB or learn on "
+                            "its acceleration channel")
+        if abs(self.channel_map.delay - self.disturbance_map.delay) > 1e-12:
+            raise SpecError(f"{what}: `channel_map` delay {self.channel_map.delay:g} s differs from "
+                            f"`disturbance_map`'s {self.disturbance_map.delay:g} s")
+        s = 1j * np.geomspace(1e-2, 0.9 * np.pi / self.ts, 50)
+        g_ch = np.polyval(self.channel_map.num, s) / np.polyval(self.channel_map.den, s)
+        g_d = np.polyval(self.disturbance_map.num, s) / np.polyval(self.disturbance_map.den, s)
+        err = float(np.max(np.abs(g_ch - self.gain.response(s) * g_d) / np.abs(g_ch)))
+        if not err <= 1e-6:
+            raise SpecError(f"{what}: `channel_map` is not K times `disturbance_map` (relative difference {err:.3g} "
+                            "up to 0.9 Nyquist); build the loop with ilcdob.channel_loop.channel_loop")
+        self._cache["channel_block"] = _stable_block(self.channel_map, self.ts, self.name, "channel map")
+
+    @property
+    def gain(self) -> ChannelGain:
+        """``K`` (:attr:`channel_gain`) as a :class:`~ilcdob.channel_gain.ChannelGain`."""
+        return self._cache["gain"]
+
+    @property
+    def channel_block(self) -> DiscreteBlock | None:
+        """``G_ch`` sampled with a zero-order hold where ``K`` depends on frequency (:attr:`channel_map`); None
+        for a constant ``K`` (``G_f`` is then ``K`` times :attr:`block`)."""
+        return self._cache.get("channel_block")
+
+    def channel_plant(self) -> PlantSpec:
+        """``G_ch``: the channel's map (channel unit -> m), continuous: :attr:`channel_map`, or ``K`` times
+        ``disturbance_map`` for a constant ``K``."""
+        if self.channel_map is not None:
+            return self.channel_map
+        dm = self.disturbance_map
+        return PlantSpec(tuple(np.asarray(dm.num) * self.gain.constant), dm.den, dm.delay)
 
     @property
     def block(self) -> DiscreteBlock:
@@ -197,9 +247,12 @@ class ChannelLoop:
 
     @property
     def G_f(self) -> ct.StateSpace:
-        """``Gf = K Gd``: learning signal (channel unit) -> position (m), discrete."""
-        s = self.block.sys
-        return ct.ss(s.A, s.B, self.channel_gain * s.C, self.channel_gain * s.D, s.dt)
+        """``Gf``: learning signal (channel unit) -> position (m), discrete: ``K Gd`` for a constant ``K``, the
+        sampled channel map otherwise (module docstring)."""
+        if self.channel_block is not None:
+            return self.channel_block.sys
+        s, k = self.block.sys, self.gain.constant
+        return ct.ss(s.A, s.B, k * s.C, k * s.D, s.dt)
 
     @property
     def G_r(self) -> ct.StateSpace:
@@ -239,7 +292,8 @@ class ChannelLoop:
 
     def delta(self, w: np.ndarray, scale: float = 1.0) -> np.ndarray:
         """The channel map's multiplicative uncertainty ``|Delta(jw)|`` at 3 standard deviations of its fit
-        (:func:`~ilcdob.uncertainty.multiplicative_bound`), times ``scale``: ``Gd`` and ``Gf`` share it.
+        (:func:`~ilcdob.uncertainty.multiplicative_bound`), times ``scale``: ``Gd`` and ``Gf`` share it (``K`` is
+        the controller's, known).
 
         Parameters
         ----------
@@ -268,17 +322,18 @@ class ChannelLoop:
         return scale * ident.bound(w, self.disturbance_map.delay)
 
     def poles(self) -> np.ndarray:
-        """Poles of ``Gf`` (z-plane, analytic); ``Gd`` has the add-on DOB's ``Q``'s besides."""
+        """Poles of ``G_ch / K`` (z-plane, analytic); ``Gd`` has the add-on DOB's ``Q``'s besides."""
         return self.block.poles
 
 
-def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float = 1.0,
+def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, channel_gain: float | ChannelGain = 1.0,
                  airframe: PlantSpec | None = None, dob: DOBSpec | None = None,
                  identification: IdentificationSpec | None = None,
                  reference_map: PlantSpec | None = None) -> ChannelLoop:
     """The loop of a vehicle from its identified channel map ``G_ch`` (channel -> position).
 
-    ``Gd = G_ch / K``, times ``1 - Q`` with the add-on DOB (module docstring).
+    ``Gd = G_ch / K``, times ``1 - Q`` with the add-on DOB (module docstring); where ``K`` depends on frequency
+    ``G_ch`` is kept beside it (:attr:`ChannelLoop.channel_map`).
 
     Parameters
     ----------
@@ -288,13 +343,15 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
     channel : {"position", "velocity", "acceleration"}
     channel_map : PlantSpec
         The channel's fit (:func:`ilcdob.validation.channel_id.identify_channel`), channel unit -> m.
-    channel_gain : float
+    channel_gain : float or ChannelGain
         ``K`` (module docstring): 1 on the acceleration channel, the controller's ``kp`` on the position
-        channel, its ``kd`` on the velocity channel.
+        channel and its ``kd`` on the velocity channel of a single loop, ``ChannelGain.cascade(...)`` on a
+        cascade's.
     airframe : PlantSpec, optional
         The airframe's identified model (:attr:`ChannelLoop.airframe`).
     dob : DOBSpec, optional
-        The add-on DOB the vehicle flew ``channel_map``'s flights with (:attr:`ChannelLoop.dob`).
+        The add-on DOB the vehicle flew ``channel_map``'s flights with (:attr:`ChannelLoop.dob`); constant ``K``
+        only.
     identification : IdentificationSpec, optional
         The fit's parameters and covariance (:attr:`ChannelLoop.identification`).
     reference_map : PlantSpec, optional
@@ -307,15 +364,23 @@ def channel_loop(name: str, ts: float, channel: str, channel_map: PlantSpec, cha
     Raises
     ------
     SpecError
-        A bad channel or gain.
+        A bad channel or gain, or a ``G_ch / K`` that is not strictly proper.
     UnstableLoopError
         The map is not stable.
     """
-    if not (isinstance(channel_gain, (int, float)) and math.isfinite(channel_gain) and channel_gain > 0):
-        raise SpecError(f"`channel_gain`: got {channel_gain!r}, expected a gain > 0")
-    num = [c / channel_gain for c in channel_map.num]
-    return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
-                       float(channel_gain), airframe, dob, identification, reference_map)
+    gain = as_channel_gain(channel_gain)
+    k = gain.constant
+    if k is not None:
+        num = [c / k for c in channel_map.num]
+        return ChannelLoop(name, ts, channel, PlantSpec(num=num, den=list(channel_map.den), delay=channel_map.delay),
+                           float(k), airframe, dob, identification, reference_map)
+    num, den = np.polymul(channel_map.num, gain.den), np.polymul(channel_map.den, gain.num)
+    try:
+        gd = PlantSpec(num=tuple(num), den=tuple(den), delay=channel_map.delay)
+    except SpecError as exc:
+        raise SpecError(f"vehicle {name!r}: G_ch / K with {gain.describe()} is not a map from an acceleration to "
+                        f"the position ({exc}); check the channel and its gains") from None
+    return ChannelLoop(name, ts, channel, gd, gain, airframe, dob, identification, reference_map, channel_map)
 
 
 @dataclass(frozen=True)
@@ -331,7 +396,7 @@ class ChannelSystemSpec:
     channel_map : PlantSpec
         The identified map from the channel (its unit, :data:`CHANNEL_UNITS`) to the position (m) with the
         vehicle's own loop closed (and its add-on DOB, with ``dob``): stable, continuous.
-    channel_gain : float
+    channel_gain : float or ChannelGain
         ``K``: commanded acceleration (m/s^2) per unit of channel signal (module docstring); 1 on the
         acceleration channel.
     airframe : PlantSpec or None
@@ -352,7 +417,7 @@ class ChannelSystemSpec:
     name: str
     channel: str
     channel_map: PlantSpec
-    channel_gain: float = 1.0
+    channel_gain: float | ChannelGain = 1.0
     airframe: PlantSpec | None = None
     dob: DOBSpec | None = None
     identification: IdentificationSpec | None = None
@@ -363,6 +428,10 @@ class ChannelSystemSpec:
     def __post_init__(self) -> None:
         check_name(self.name)
         check_channel(self.channel)
+        try:
+            as_channel_gain(self.channel_gain)
+        except SpecError as exc:
+            raise SpecError(f"system {self.name!r}: {exc}") from None
         if not isinstance(self.channel_map, PlantSpec):
             raise SpecError(f"system {self.name!r}: `channel_map`: got {type(self.channel_map).__name__}, expected "
                             "a PlantSpec (the identified map from the channel to the position)")

@@ -65,7 +65,10 @@ the learning channel to the position, not by plant, PID and DOB::
     channel = "acceleration"               # or "position" (setpoint offset, m), "velocity" (feed-forward, m/s)
     channel_map = { model = "lab-quad_channel.json" }   # or num/den (+ delay): channel unit -> m, stable
     channel_gain = 1.0                     # K, m/s^2 per channel unit: 1 on acceleration (default there),
-                                           # the controller's kp on position, its kd on velocity (required)
+                                           # the controller's kp on position, its kd on velocity (required);
+                                           # a cascade's: { position_p = 0.95, velocity_p = 1.8, velocity_i = 0.4 }
+                                           # (PX4's MPC_XY_P, MPC_XY_VEL_P_ACC, MPC_XY_VEL_I_ACC), or any
+                                           # K(s) as { num = [...], den = [...] } (ilcdob.channel_gain)
     airframe = { model = "lab-quad_airframe.json" }      # optional: commanded acceleration -> position,
                                            # for --disturbance airframe/wind and the add-on DOB
     dob = { q_order = 3, q_time_constant = 0.15 }        # optional: the add-on DOB it flies
@@ -96,6 +99,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Sequence
 
+from .channel_gain import ChannelGain, as_channel_gain
 from .channel_loop import ChannelLoop, ChannelSystemSpec, check_channel
 from .errors import FleetError, ModelFileError, SpecError, UnstableLoopError
 from .identified import IdentifiedModel, load_model
@@ -191,7 +195,7 @@ class Fleet:
             if isinstance(s, ChannelSystemSpec):
                 p = s.channel_map
                 rows.append([s.name, f"{s.channel} channel: {list(p.num)} / {list(p.den)}", p.delay,
-                             f"own controller, K = {s.channel_gain:g}",
+                             f"own controller, {as_channel_gain(s.channel_gain).describe()}",
                              "-" if s.dob is None else f"{s.dob.q_order}, {s.dob.q_time_constant:g} s",
                              "identified" if s.identification else "-"])
                 continue
@@ -351,8 +355,13 @@ def _spec_parts(label: str, table: dict[str, Any], files: dict[str, IdentifiedMo
     return parts
 
 
-def _channel_gain(label: str, table: dict[str, Any]) -> float:
-    """``channel_gain`` of a vehicle on its own controller: required off the acceleration channel."""
+#: Keys of a cascade's ``channel_gain`` table (:meth:`ilcdob.channel_gain.ChannelGain.cascade`).
+_CASCADE_KEYS = {"position_p": True, "velocity_p": True, "velocity_i": False}
+
+
+def _channel_gain(label: str, table: dict[str, Any]) -> float | ChannelGain:
+    """``channel_gain`` of a vehicle on its own controller: required off the acceleration channel; a number, a
+    cascade's gains or a transfer function (module docstring)."""
     try:
         check_channel(table["channel"])
     except SpecError as exc:
@@ -363,8 +372,19 @@ def _channel_gain(label: str, table: dict[str, Any]) -> float:
                          "acceleration (m/s^2) the vehicle's controller commands per unit of channel signal (its "
                          "position gain kp on the position channel, its velocity gain kd on the velocity channel; "
                          "docs/closed_loop.md)")
+    what = f"{label}, key `channel_gain`"
+    try:
+        if isinstance(gain, dict) and "position_p" in gain:
+            _check_keys(what, gain, _CASCADE_KEYS)
+            return ChannelGain.cascade(table["channel"], gain["position_p"], gain["velocity_p"],
+                                       gain.get("velocity_i", 0.0))
+        if isinstance(gain, dict):
+            return as_channel_gain(gain)
+    except SpecError as exc:
+        raise FleetError(f"{what}: {exc}") from exc
     if isinstance(gain, bool) or not isinstance(gain, (int, float)):
-        raise FleetError(f"{label}, key `channel_gain`: got {gain!r}, expected a number > 0")
+        raise FleetError(f"{what}: got {gain!r}, expected a number > 0, a cascade's gains {{position_p, velocity_p, "
+                         "velocity_i}, or a transfer function {num, den}")
     return float(gain)
 
 

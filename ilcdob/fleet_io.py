@@ -293,7 +293,7 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
 
 
 def add_channel_system(path: str | Path, name: str, model: str | Path, channel: str, *,
-                       channel_gain: float | None = None, airframe: str | Path | None = None,
+                       channel_gain: float | dict[str, Any] | None = None, airframe: str | Path | None = None,
                        dob: DOBSpec | None = None, sample_time: float | None = None,
                        reference_map: str | Path | None = None) -> Fleet:
     """Add a vehicle on its own controller to a fleet file (:mod:`ilcdob.fleet`'s ``channel`` systems), creating
@@ -310,8 +310,9 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
         the vehicle's loop closed: its ``channel_map``.
     channel : {"position", "velocity", "acceleration"}
         Where the learning signal enters.
-    channel_gain : float, optional
-        ``K``, m/s^2 per channel unit (required off the acceleration channel: the controller's kp or kd).
+    channel_gain : float or dict, optional
+        ``K``, m/s^2 per channel unit (required off the acceleration channel: the controller's kp or kd), or a
+        ``channel_gain`` table of :mod:`ilcdob.fleet` (a cascade's gains, or ``num``/``den``).
     airframe : str or pathlib.Path, optional
         The ``model.json`` of the airframe (commanded acceleration -> position).
     dob : DOBSpec, optional

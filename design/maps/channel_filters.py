@@ -3,7 +3,9 @@
 Every vehicle here is seen through the channel its learning signal enters
 (:mod:`ilcdob.channel_loop`): ``Gf = K G`` and ``Gd = (1 - Q) G`` with ``G = P/D`` of its loop,
 ``Q`` the DOB's where it flies one (the add-on DOB, :mod:`ilcdob.vehicles.dob_loop`) and ``1 - Q`` read
-as 1 where it does not. ilcdob's PID + DOB loop is such a vehicle on its acceleration feed-forward
+as 1 where it does not. Where the controller's ``K`` depends on frequency (a cascade's position channel,
+:mod:`ilcdob.channel_gain`), ``K`` below is the ratio of the sampled maps, ``K_d = Gf(z) / G(z)``, with its
+zeros and poles those of the two zero-order holds (their common poles cancelled). ilcdob's PID + DOB loop is such a vehicle on its acceleration feed-forward
 (``K = 1``; a learning signal ``u`` there is ``-d_f`` of the paper's law). With the ratio
 ``R = Gd/Gf = (1 - Q)/K`` the Theorem's pair is::
 
@@ -20,7 +22,8 @@ the PID + DOB loop as :func:`~.closed_form.inverse_gd_filter` takes them) and ch
 A loop that integrates (a cascade's velocity integral; :attr:`~ilcdob.channel_loop.ChannelLoop.integrates`) has
 ``Gd`` vanishing at ``z = 1`` too: ``L1`` then holds an integrator, run from rest over the trial (the source's
 error carries a constant disturbance only through its start transient, as with a DOB), and a learner that
-integrates itself does not see the constant part of its signal.
+integrates itself does not see the constant part of its signal. On a cascade's position channel ``K_d`` has the
+velocity integral's pole at ``z = 1``: ``R`` vanishes there and cancels the source's integrator.
 
 ``1 - Q`` vanishes at ``z = 1``. Where both vehicles fly a DOB the common root cancels analytically; a
 vehicle without a DOB cannot learn from one with a DOB this way: that source's error holds no trace of
@@ -29,14 +32,14 @@ a constant disturbance (its DOB removed it), and ``L2`` would integrate.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
 
 import control as ct
 import numpy as np
 
-from ilcdob.discretize import DiscreteBlock
+from ilcdob.discretize import DiscreteBlock, cancel_roots
 from ilcdob.errors import SpecError
 from ilcdob.loop import LoopSystem
 from ilcdob.channel_loop import SLOWEST_ROOT, ChannelLoop
@@ -44,7 +47,7 @@ from ilcdob.channel_loop import SLOWEST_ROOT, ChannelLoop
 from .closed_form import LearningFilters, _block, _inverse_gd_response, _plant_zeros, _zeros_without_one, matched
 
 __all__ = ["channel_filters", "channel_view", "channel_gf", "learning_channel", "ChannelView", "channel_map_zeros",
-           "SLOWEST_ZERO"]
+           "gain_roots", "SLOWEST_ZERO"]
 
 
 @dataclass(frozen=True)
@@ -56,23 +59,28 @@ class ChannelView:
     name : str
     ts : float
         Sample time, s.
-    gain : float
-        ``K``.
+    gain : callable
+        ``gain(w)``: ``K`` on ``z = e^{jwTs}`` (``w`` in rad/s); the sampled ratio ``K_d`` where ``K`` depends on
+        frequency (module docstring).
     q : DiscreteBlock or None
         The DOB's ``Q`` (None: no DOB).
     inverse_zeros, inverse_poles : numpy.ndarray
         Zeros and poles of ``Gd^{-1}`` (z-plane), without the pole ``z = 1`` of a DOB's ``1/(1 - Q)``.
     inverse : callable
         ``inverse(w)``: ``Gd^{-1}(e^{jwTs})`` from the blocks' responses (``w`` in rad/s).
+    gain_zeros, gain_poles : numpy.ndarray
+        Zeros and poles of ``K_d`` (z-plane; none for a constant ``K``).
     """
 
     name: str
     ts: float
-    gain: float
+    gain: Callable[[np.ndarray], np.ndarray]
     q: DiscreteBlock | None
     inverse_zeros: np.ndarray
     inverse_poles: np.ndarray
     inverse: Callable[[np.ndarray], np.ndarray]
+    gain_zeros: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    gain_poles: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
 
     def ratio(self, w: np.ndarray) -> np.ndarray:
         """``R = Gd/Gf = (1 - Q)/K``.
@@ -88,10 +96,10 @@ class ChannelView:
             Its response on ``z = e^{jwTs}``.
         """
         one = 1.0 if self.q is None else 1.0 - self.q.response(w)
-        return one / self.gain * np.ones(np.shape(w))
+        return one / self.gain(w) * np.ones(np.shape(w))
 
     def ratio_roots(self, one: bool) -> tuple[np.ndarray, np.ndarray]:
-        """Zeros and poles of ``1 - Q`` (none without a DOB).
+        """Zeros and poles of ``R``: those of ``1 - Q`` (none without a DOB) and of ``1 / K_d``.
 
         Parameters
         ----------
@@ -104,7 +112,8 @@ class ChannelView:
             Zeros and poles, z-plane.
         """
         zeros, poles = _one_minus_roots(self.q, self.name)
-        return (np.append(zeros, 1.0 + 0j) if one and self.q is not None else zeros), poles
+        zeros = np.append(zeros, 1.0 + 0j) if one and self.q is not None else zeros
+        return np.concatenate([zeros, self.gain_poles]), np.concatenate([poles, self.gain_zeros])
 
 
 def _one_minus_roots(q: DiscreteBlock | None, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -153,6 +162,40 @@ def channel_map_zeros(vehicle: ChannelLoop) -> np.ndarray:
     return zeros
 
 
+def _unit_gain(w: np.ndarray) -> np.ndarray:
+    return np.ones(np.shape(w))
+
+
+def _gain_response(vehicle: ChannelLoop) -> Callable[[np.ndarray], np.ndarray]:
+    """``K`` on the unit circle: the constant, or the sampled ratio ``K_d = G_ch(z) / (G_ch / K)(z)``."""
+    k, chb, blk = vehicle.gain.constant, vehicle.channel_block, vehicle.block
+    if k is not None:
+        return lambda w: np.full(np.shape(w), k, dtype=float)
+    return lambda w: chb.response(w) / blk.response(w)
+
+
+def gain_roots(vehicle: ChannelLoop) -> tuple[np.ndarray, np.ndarray]:
+    """Zeros and poles of the sampled ``K_d`` of a vehicle whose ``K`` depends on frequency (module docstring): the
+    channel map's zeros and ``G_ch / K``'s poles, over ``G_ch / K``'s zeros (its integrator's at ``z = 1`` exact)
+    and the channel map's poles, common roots cancelled. None for a constant ``K``.
+
+    Parameters
+    ----------
+    vehicle : ChannelLoop
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        Zeros and poles, z-plane (complex).
+    """
+    chb = vehicle.channel_block
+    if chb is None:
+        return np.zeros(0, complex), np.zeros(0, complex)
+    ch_zeros = np.asarray(chb.zeros if chb.zeros is not None else [], complex)
+    return cancel_roots(np.concatenate([ch_zeros, vehicle.block.poles]),
+                        np.concatenate([channel_map_zeros(vehicle), chb.poles]), rtol=1e-9)
+
+
 def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
     """A vehicle's :class:`ChannelView`: a vehicle on its own controller, or ilcdob's PID + DOB loop on its
     acceleration feed-forward (its model's maps).
@@ -179,15 +222,16 @@ def channel_view(vehicle: ChannelLoop | LoopSystem) -> ChannelView:
             one = 1.0 if q is None else 1.0 - q.response(w)
             return 1.0 / (blk.response(w) * one)
 
-        return ChannelView(vehicle.name, vehicle.ts, vehicle.channel_gain, q, np.concatenate([blk.poles, q_poles]),
-                           np.concatenate([zeros, om_zeros]), inverse)
+        return ChannelView(vehicle.name, vehicle.ts, _gain_response(vehicle), q, np.concatenate([blk.poles, q_poles]),
+                           np.concatenate([zeros, om_zeros]), inverse, *gain_roots(vehicle))
     if isinstance(vehicle, LoopSystem):
         src = vehicle.nominal
         q = _block(src, "Q")
         # Gd^-1 = D/(P (1 - Q)): zeros the closed-loop poles; poles the zeros of P_hat and 1 - Q, M's and C's poles
         poles = np.concatenate([_plant_zeros(src), _one_minus_roots(q, vehicle.name)[0],
                                 _block(src, "M").poles, _block(src, "C").poles])
-        return ChannelView(vehicle.name, vehicle.ts, 1.0, q, src.poles(), poles, partial(_inverse_gd_response, src))
+        return ChannelView(vehicle.name, vehicle.ts, _unit_gain, q, src.poles(), poles,
+                           partial(_inverse_gd_response, src))
     raise SpecError(f"got {type(vehicle).__name__}, expected a ChannelLoop (ilcdob.channel_loop) or a "
                     "LoopSystem (ilcdob's PID + DOB)")
 

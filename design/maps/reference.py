@@ -30,7 +30,7 @@ from ilcdob.channel_loop import ChannelLoop
 from ilcdob.loop import LoopSystem, freqresp
 from ilcdob.signals import as_signal
 
-from .channel_filters import channel_map_zeros
+from .channel_filters import channel_map_zeros, channel_view
 from .closed_form import LearningFilters, matched, simulate_map
 from ..filters.noncausal import ZPKFilter
 
@@ -78,7 +78,8 @@ def inverse_gf_filter(loop: LoopSystem | ChannelLoop) -> ZPKFilter:
 
     Zeros: the closed-loop poles; poles: zeros of P_hat (the ZOH sampling zero outside the unit
     circle becomes anti-causal) and the poles of Q, M and C. For a vehicle on its own controller:
-    ``(K Gd)^{-1}`` of its channel, from its sampled disturbance map's poles and zeros.
+    ``(K Gd)^{-1}`` of its channel, from its sampled disturbance map's poles and zeros and those of ``K``'s
+    sampled ratio where ``K`` depends on frequency (:func:`~.channel_filters.gain_roots`).
 
     Parameters
     ----------
@@ -92,9 +93,10 @@ def inverse_gf_filter(loop: LoopSystem | ChannelLoop) -> ZPKFilter:
         (:func:`~ilcdob.design.maps.closed_form.matched`).
     """
     if isinstance(loop, ChannelLoop):
-        blk, k = loop.block, loop.channel_gain
-        return matched(blk.poles, channel_map_zeros(loop), loop.ts, lambda w: 1.0 / (k * blk.response(w)),
-                       f"Gf^-1 of {loop.name!r}")
+        blk, view = loop.block, channel_view(loop)
+        return matched(np.concatenate([blk.poles, view.gain_poles]),
+                       np.concatenate([channel_map_zeros(loop), view.gain_zeros]), loop.ts,
+                       lambda w: 1.0 / (view.gain(w) * blk.response(w)), f"Gf^-1 of {loop.name!r}")
     src = loop.nominal
     p_zeros = np.asarray(src.P.zeros(), dtype=complex)
     poles = np.concatenate([p_zeros[np.isfinite(p_zeros)], np.linalg.eigvals(src.Q.A),

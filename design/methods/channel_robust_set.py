@@ -91,7 +91,7 @@ solve_time, delta_set, finite, trial
             In the target's channel unit, same length.
         """
         d_hat = self._d_hat(e_prev, df_prev)
-        return -fir_on_trial(d_hat, self.F.h, self.F.advance, self.end_fade) / self.filters.target.channel_gain
+        return -fir_on_trial(d_hat, self.F.h, self.F.advance, self.end_fade) / self.filters.target.gain.constant
 
     def trial_map(self, n: int) -> LinearMap:
         """:meth:`apply` on a trial of ``n`` samples, the source flying without learning, as a linear map
@@ -102,7 +102,7 @@ solve_time, delta_set, finite, trial
         n : int
             Samples of the trial.
         """
-        a, k = self.F.advance, self.filters.target.channel_gain
+        a, k = self.F.advance, self.filters.target.gain.constant
         out = -zpk_map(self.inverse, n)
         if a:
             out = trend_map(n, a, self.end_fade) @ out
@@ -135,15 +135,18 @@ def design_channel_robust_set(source: ChannelLoop, target: ChannelLoop, w_bound:
     Raises
     ------
     SpecError
-        Not two vehicles on their own controller, an add-on DOB, or the projected trial law.
+        Not two vehicles on their own controller, an add-on DOB, a ``K`` that depends on frequency, or the
+        projected trial law.
     RobustSetInfeasibleError
         As :func:`~.robust_set.design_robust_set`.
     """
     o = options or RobustSetOptions()
-    kinds = [lp.name for lp in (source, target) if not isinstance(lp, ChannelLoop) or lp.dob is not None]
+    kinds = [lp.name for lp in (source, target)
+             if not isinstance(lp, ChannelLoop) or lp.dob is not None or lp.gain.constant is None]
     if kinds:
-        raise SpecError(f"robust-set between vehicles on their own controller: {kinds} are ilcdob's loop or fly the "
-                        "add-on DOB, for which it is not built; design with 'closed-form' or 'robust'")
+        raise SpecError(f"robust-set between vehicles on their own controller: {kinds} are ilcdob's loop, fly the "
+                        "add-on DOB or have a K that depends on frequency (a cascade's setpoint channel), for which "
+                        "it is not built; design with 'closed-form' or 'robust'")
     if o.trial != "extended":
         raise SpecError(f"`trial`: got {o.trial!r}; robust-set for vehicles on their own controller has the extended "
                         "trial law only")

@@ -268,8 +268,7 @@ def channel_delta_set(loop: ChannelLoop, k: int = 8, rng: np.random.Generator | 
     check_scale(scale, bound)
     rng = np.random.default_rng(0) if rng is None else rng
     w = _bound_grid(loop.ts, w)
-    g_ch = PlantSpec(tuple(np.asarray(loop.disturbance_map.num) * loop.channel_gain), loop.disturbance_map.den,
-                     loop.disturbance_map.delay)
+    g_ch = loop.channel_plant()
     if bound is not None:
         _check_bound(bound)
         gen, bnd, source = _bound_samples(g_ch, float(bound), rng), np.full(w.size, float(bound)), "fleet bound"

@@ -1727,7 +1727,8 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
 
 
 def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controller: Any, dob: Any,
-                 sample_time: float | None = None, channel: str | None = None, channel_gain: float | None = None,
+                 sample_time: float | None = None, channel: str | None = None,
+                 channel_gain: float | dict[str, Any] | None = None,
                  airframe: str | Path | None = None, reference_map: str | Path | None = None) -> Fleet:
     """Add a system flying an identified ``model.json`` to a fleet file (created if needed): ilcdob's PID + DOB
     loop, or with ``channel`` a vehicle on its own controller (:func:`ilcdob.fleet_io.add_channel_system`).
@@ -1748,8 +1749,9 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
         New fleet file: sample time in s (default: the model's).
     channel : {"position", "velocity", "acceleration"}, optional
         A vehicle on its own controller learning through this channel; ``model`` is its channel map.
-    channel_gain : float, optional
-        With ``channel``: ``K``, m/s^2 per channel unit.
+    channel_gain : float or dict, optional
+        With ``channel``: ``K``, m/s^2 per channel unit, or a fleet file's ``channel_gain`` table (a cascade's
+        gains, :mod:`ilcdob.fleet`).
     airframe : str or Path, optional
         With ``channel``: the airframe's ``model.json``.
     reference_map : str or Path, optional

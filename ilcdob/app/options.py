@@ -120,6 +120,28 @@ def poles(text: str) -> list[int]:
     return list(range(first, last + 1))
 
 
+def cascade_gains(text: str) -> dict[str, float]:
+    """``KPP,KPV[,KIV]``: a cascade's position P, velocity P and velocity I gains (1/s, 1/s, 1/s^2), as a fleet
+    file's ``channel_gain`` table (:meth:`ilcdob.channel_gain.ChannelGain.cascade`).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not two or three comma-separated numbers, or a gain out of range (the first two > 0, the third >= 0).
+    """
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values) or min(values[:2], default=0) <= 0 \
+            or (len(values) == 3 and values[2] < 0):
+        raise argparse.ArgumentTypeError(f"got {text!r}, expected KPP,KPV[,KIV]: the position P and velocity P "
+                                         "gains (> 0, 1/s) and optionally the velocity I gain (>= 0, 1/s^2), e.g. "
+                                         "PX4's MPC_XY_P,MPC_XY_VEL_P_ACC,MPC_XY_VEL_I_ACC = 0.95,1.8,0.4")
+    return dict(zip(("position_p", "velocity_p", "velocity_i"), values))
+
+
 def scenario_ids(text: str) -> list[int]:
     """Comma-separated scenario ids (:func:`ilcdob.validation.scenarios.parse_scenarios`).
 
@@ -548,6 +570,10 @@ _FLEET_ADD = Command(
                   "PID + DOB)"),
         flag("--channel-gain", type=float, help="with --channel: K, m/s^2 commanded per channel unit (the "
                                                 "controller's kp on position, kd on velocity; 1 on acceleration)"),
+        flag("--cascade-gains", type=cascade_gains, metavar="KPP,KPV[,KIV]",
+             help="with --channel position or velocity on a cascade (a position P over a velocity PI, as PX4's "
+                  "and ArduPilot's): its gains, 1/s, 1/s, 1/s^2 (PX4: MPC_XY_P, MPC_XY_VEL_P_ACC, "
+                  "MPC_XY_VEL_I_ACC); K(s) = KPP (KPV + KIV/s) on position, KPV + KIV/s on velocity"),
         flag("--airframe", help="with --channel: model.json of the airframe, commanded acceleration -> position"),
         flag("--reference-map", help="with --channel: model.json of the reference map, reference -> position as "
                                      "the flight stack flies it (the exact-reference law; default on the position "
