@@ -184,6 +184,30 @@ def test_identified_cascades_learn_through_the_position_setpoint(lab, tmp_path, 
     assert main(["check", "--fleet", str(fleet), "--order", f"{source},{target}", "--quiet"]) == 0
 
 
+def test_the_gains_come_from_a_real_px4_logs_parameters(lab, tmp_path):
+    """``fleet add --cascade-gains-from`` on pyulog's sample log (tests/data, BSD-3): its ``MPC_XY_P``,
+    ``MPC_XY_VEL_P_ACC``, ``MPC_XY_VEL_I_ACC`` are 0.95, 1.8, 0.4 (read with pyulog here) and its ``MPC_Z_*`` 1, 4,
+    2; the fleet's K is ``kpp (kpv s + kiv) / s`` of them; a file that is not a ULog is refused, nothing
+    written."""
+    from pyulog import ULog
+
+    log = Path(__file__).parent / "data" / "px4_sample_log_small_filtered.ulg"
+    params = ULog(str(log), []).initial_parameters
+    model = str(lab / "stiff_position.json")
+    for axis, prefix in (("x", "MPC_XY"), ("z", "MPC_Z")):
+        fleet = tmp_path / f"{axis}.toml"
+        assert main(["fleet", "add", str(fleet), "--name", "uav", "--model", model, "--channel", "position",
+                     "--cascade-gains-from", str(log), "--cascade-axis", axis, "--quiet"]) == 0
+        kpp, kpv, kiv = (params[f"{prefix}_{p}"] for p in ("P", "VEL_P_ACC", "VEL_I_ACC"))
+        gain = load_fleet(fleet).loop("uav").gain
+        assert gain.num == pytest.approx((kpp * kpv, kpp * kiv), rel=1e-6) and gain.den == (1.0, 0.0)
+    assert (kpp, kpv, kiv) == (1.0, 4.0, 2.0)
+    bad = tmp_path / "bad.toml"
+    assert main(["fleet", "add", str(bad), "--name", "uav", "--model", model, "--channel", "position",
+                 "--cascade-gains-from", str(log.parent / "ardupilot_pymavlink_test.BIN"), "--quiet"]) == 2
+    assert not bad.exists()
+
+
 def test_whole_trials_of_source_maps_inside_the_set_are_no_worse_than_the_check_says(lab):
     """Eight true position-channel maps of the px4-like source drawn with numpy from its model file's
     ``N(theta, Cov)`` and inside the check's 3-sigma set, its true ``Gd = G_ch s / (kpp (kpv s + kiv))`` built with

@@ -25,7 +25,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ilcdob.errors import SignalError
+from ilcdob.channel_gain import ChannelGain
+from ilcdob.errors import SignalError, SpecError
 from ilcdob.extras import require
 from ilcdob.signals import FlightData
 
@@ -34,7 +35,13 @@ from .common import (check_file, check_ts, check_units, check_window, from_serie
 from .guard import BudgetedFile, CapturedOutput, ReadBudgetExceeded, captured_output
 
 
-__all__ = ["load_ulog"]
+__all__ = ["load_ulog", "px4_cascade_gains", "PX4_CASCADE_PARAMETERS"]
+
+#: The multicopter position controller's gains per axis (PX4 1.12 on: velocity gains in acceleration units), in
+#: the order of :meth:`ilcdob.channel_gain.ChannelGain.cascade`: position P, velocity P, velocity I.
+PX4_CASCADE_PARAMETERS = {"x": ("MPC_XY_P", "MPC_XY_VEL_P_ACC", "MPC_XY_VEL_I_ACC"),
+                          "y": ("MPC_XY_P", "MPC_XY_VEL_P_ACC", "MPC_XY_VEL_I_ACC"),
+                          "z": ("MPC_Z_P", "MPC_Z_VEL_P_ACC", "MPC_Z_VEL_I_ACC")}
 
 #: Units of common PX4 uORB fields (index suffixes such as ``[0]`` are stripped first);
 #: ULog files carry no units of their own.
@@ -194,3 +201,53 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
             "dropouts": {"count": len(drop_ms), "total_ms": float(sum(drop_ms))},
             "file_corruption": bool(ulog.file_corruption), "parser_reports": printed.lines}
     return from_series(series, what, sig_units, meta, ts, start, stop, source)
+
+
+def px4_cascade_gains(path: str | os.PathLike, channel: str, axis: str = "x") -> tuple[ChannelGain, dict[str, float]]:
+    """``K`` of PX4's position cascade on one axis, from the parameters a ULog file records at its start.
+
+    PX4's multicopter position controller is a position P over a velocity PI whose derivative acts on the
+    measured acceleration, so a setpoint offset meets ``K(s) = kpp (kpv + kiv/s)`` on the position channel and
+    ``kpv + kiv/s`` on the velocity channel (:mod:`ilcdob.channel_gain`; docs/closed_loop.md, "A cascade's
+    position setpoint").
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.ulg`` file.
+    channel : {"position", "velocity"}
+        The setpoint row the learning signal is added to.
+    axis : {"x", "y", "z"}
+        The axis (x and y share ``MPC_XY_*``).
+
+    Returns
+    -------
+    (ChannelGain, dict)
+        ``K``, and the parameters read (name -> value).
+
+    Raises
+    ------
+    SignalError
+        Not a readable ULog file, or the parameters are missing (a log of PX4 before 1.12, whose velocity gains
+        are in thrust units, names ``MPC_XY_VEL_P`` instead: the message says so).
+    SpecError
+        A bad ``channel`` or ``axis``, or gains that make no cascade.
+    """
+    if axis not in PX4_CASCADE_PARAMETERS:
+        raise SpecError(f"`axis`: got {axis!r}, expected one of {sorted(PX4_CASCADE_PARAMETERS)}")
+    source = source_of(path)
+    check_file(source)
+    ulog, _ = _parse(source, [])
+    params = ulog.initial_parameters
+    names = PX4_CASCADE_PARAMETERS[axis]
+    missing = [n for n in names if n not in params]
+    if missing:
+        old = [n for n in (m.replace("_ACC", "") for m in missing) if n in params]
+        hint = (f"; it has {old}: PX4 before 1.12 states the velocity gains in thrust units, so give "
+                "--cascade-gains with them converted (times g over the hover thrust, MPC_THR_HOVER)" if old else "")
+        raise SignalError(f"{source}: no parameter {missing} in the log's initial parameters{hint}")
+    read = {n: float(f"{float(params[n]):.7g}") for n in names}  # float32 in the log: 0.95, not 0.949999988
+    try:
+        return ChannelGain.cascade(channel, *read.values()), read
+    except SpecError as exc:
+        raise SpecError(f"{source}: {', '.join(f'{k} = {v:g}' for k, v in read.items())}: {exc}") from None

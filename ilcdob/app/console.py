@@ -408,8 +408,8 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     created = not path.exists()
     model_ts = load_model(a.model).sample_time
     pid = {"--kp": a.kp, "--ki": a.ki, "--kd": a.kd, "--derivative-filter": a.derivative_filter}
-    own = {"--channel-gain": a.channel_gain, "--cascade-gains": a.cascade_gains, "--airframe": a.airframe,
-           "--reference-map": a.reference_map}
+    own = {"--channel-gain": a.channel_gain, "--cascade-gains": a.cascade_gains,
+           "--cascade-gains-from": a.cascade_gains_from, "--airframe": a.airframe, "--reference-map": a.reference_map}
     if a.channel is not None and any(v is not None for v in pid.values()):
         raise SpecError(f"{', '.join(k for k, v in pid.items() if v is not None)}: a system with --channel flies "
                         "its own controller, described by its identified channel map; ilcdob's PID gains would be "
@@ -417,9 +417,18 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     if a.channel is None and any(v is not None for v in own.values()):
         raise SpecError(f"{', '.join(k for k, v in own.items() if v is not None)}: only for a vehicle on its own "
                         "controller (give --channel); nothing written")
-    if a.channel_gain is not None and a.cascade_gains is not None:
-        raise SpecError("--channel-gain, --cascade-gains: give one (a constant K, or a cascade's gains); nothing "
-                        "written")
+    gains = [k for k in ("--channel-gain", "--cascade-gains", "--cascade-gains-from") if own[k] is not None]
+    if len(gains) > 1:
+        raise SpecError(f"{', '.join(gains)}: give one (a constant K, or a cascade's gains); nothing written")
+    if a.cascade_axis is not None and a.cascade_gains_from is None:
+        raise SpecError("--cascade-axis: only with --cascade-gains-from; nothing written")
+    cascade = a.cascade_gains
+    if a.cascade_gains_from is not None:
+        from ilcdob.identification.loaders.ulog import px4_cascade_gains
+
+        _, read = px4_cascade_gains(a.cascade_gains_from, a.channel, _given(a.cascade_axis, "x"))
+        cascade = dict(zip(("position_p", "velocity_p", "velocity_i"), read.values()))
+        con.note(f"read {', '.join(f'{k} = {v:g}' for k, v in read.items())} from {a.cascade_gains_from}")
     needed = ([] if a.channel is not None else ["--kp", "--ki", "--kd"]) + ["--q-order", "--q-time-constant"]
     given = {"--q-order": a.q_order, "--q-time-constant": a.q_time_constant, **pid}
     missing = [k for k in needed if given[k] is None and (a.channel is None or given["--q-order"] is not None
@@ -436,7 +445,7 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                         f"--q-time-constant): {exc}; nothing written") from exc
     if a.channel is not None:
         fleet = uc.add_to_fleet(path, a.name, a.model, None, dob, sample_time=a.sample_time, channel=a.channel,
-                                channel_gain=_given(a.cascade_gains, a.channel_gain), airframe=a.airframe,
+                                channel_gain=_given(cascade, a.channel_gain), airframe=a.airframe,
                                 reference_map=a.reference_map)
     else:
         fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time)

@@ -574,6 +574,10 @@ _FLEET_ADD = Command(
              help="with --channel position or velocity on a cascade (a position P over a velocity PI, as PX4's "
                   "and ArduPilot's): its gains, 1/s, 1/s, 1/s^2 (PX4: MPC_XY_P, MPC_XY_VEL_P_ACC, "
                   "MPC_XY_VEL_I_ACC); K(s) = KPP (KPV + KIV/s) on position, KPV + KIV/s on velocity"),
+        flag("--cascade-gains-from", metavar="LOG.ulg",
+             help="with --channel position or velocity on PX4: read --cascade-gains from the ULog's parameters "
+                  "(MPC_XY_* for x and y, MPC_Z_* for z: --cascade-axis)"),
+        flag("--cascade-axis", choices=["x", "y", "z"], help="with --cascade-gains-from: the axis (default x)"),
         flag("--airframe", help="with --channel: model.json of the airframe, commanded acceleration -> position"),
         flag("--reference-map", help="with --channel: model.json of the reference map, reference -> position as "
                                      "the flight stack flies it (the exact-reference law; default on the position "
