@@ -42,7 +42,7 @@ from .law.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTe
 from .law.limit import LIMIT_POLICIES, LimitReport
 from .methods import METHODS, DesignInputs, Method, method_named
 from .methods.robust import RobustPairDesigner
-from .checks.theorem import theorem_rhs
+from .checks.theorem import exact_worst_on_set, theorem_rhs
 
 __all__ = ["PairDesign", "LearningSignal", "design_pair", "design_channel_pair", "pair_band", "with_law",
            "fleet_delta_sets", "design_with_band"]
@@ -343,14 +343,15 @@ def _band_inputs(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, path: np.ndarra
     else:
         b = delta_bound(s_spec, fleet.sample_time)
         found = None if b is None else b[:2]
-    trust = None
+    trust = exact = None
     if found is not None:
         w = np.asarray(found[0], float)
         trust = (w, np.asarray(found[1], float) / theorem_rhs(src, w))
+        exact = exact_worst_on_set(src, w, found[1])
     return {"noise_std": s_spec.sensor.noise_std if s_spec.sensor is not None else None,
             "a_max": t_spec.limits.max_acceleration if t_spec.limits is not None else None,
             "l1_gain": lambda w: np.abs(closed_form().l1_response(w)) * _sos_gain(path, w, fleet.sample_time),
-            "trust": trust}
+            "trust": trust, "exact": exact}
 
 
 def _band_chooser(fleet: Fleet, src: LoopSystem, tgt: LoopSystem, request: object, path: np.ndarray | None,

@@ -59,3 +59,8 @@ class LearningLimitError(IlcdobError, ValueError):
 
 class LearningLimitWarning(UserWarning):
     """A learning signal exceeded the learning vehicle's acceleration limit and was clipped."""
+
+
+class LearningEndWarning(UserWarning):
+    """A learning signal's first or last samples rise far above its interior peak (an artefact of the trial's
+    ends, not of the disturbance)."""

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import ilcdob
+from lti_truth import alias_radius
 from ilcdob.app.cli import main
 
 W_AP = 0.3   # the fleets' stated bound
@@ -88,6 +89,12 @@ def _brute_worst(loop, w: np.ndarray, W: np.ndarray, F: np.ndarray | None = None
     return np.max(np.abs(1 - F[:, None] * gd((1 + delta) * ph) / gd(ph)), axis=1)
 
 
+def _stated(loop, w: np.ndarray, bound: float = W_AP) -> np.ndarray:
+    """The stated continuous bound's radius on the sampled model (the aliases' sum, tests/lti_truth.py)."""
+    p = loop.spec.nominal_plant
+    return alias_radius(p.num, p.den, p.delay, loop.ts, w, bound)
+
+
 def _rhs(loop, w: np.ndarray) -> np.ndarray:
     """|1 + P_hat C| / 2 from the blocks' responses."""
     return np.abs(1 + _resp(loop.nominal.P, w) * _resp(loop.C, w)) / 2
@@ -98,9 +105,10 @@ def _pair(data: dict, source: str) -> dict:
 
 
 def test_allpass_counterexample_fails_the_exact_check_while_the_paper_condition_holds(fleet_file, tmp_path, capsys):
+    """The Theorem's filters (``--bandwidth off``): the paper's condition holds, the exact worst case does not."""
     path = fleet_file(_allpass_fleet_text())
     out = tmp_path / "check.json"
-    assert main(["check", "--fleet", str(path), "--out", str(out)]) == 1
+    assert main(["check", "--fleet", str(path), "--bandwidth", "off", "--out", str(out)]) == 1
     cap = capsys.readouterr()
     row = next(line for line in cap.out.splitlines() if line.startswith("UAV3 -> UAV2"))
     assert row.split()[3] == "yes" and row.split()[-2:] == ["FAILS", "NO"]  # paper: yes; verdict FAILS; agree NO
@@ -124,11 +132,11 @@ def test_allpass_counterexample_fails_the_exact_check_while_the_paper_condition_
     # the paper's condition holds at the worst frequency: |1 + P_hat C|/2 > 0.3 (margin > 1.05) ...
     assert _rhs(src, np.array([w_star]))[0] > 1.05 * W_AP
     # ... while the brute force over the disc gives the reported worst case, above 1
-    brute = _brute_worst(src, np.array([w_star]), np.array([W_AP]))[0]
+    brute = _brute_worst(src, np.array([w_star]), _stated(src, np.array([w_star])))[0]
     assert brute == pytest.approx(ex["worst_ratio"], rel=1e-5) and brute > 1.05
     # and along the checked grid (every 37th frequency)
     we = np.asarray(ex["w_rad_s"])[::37]
-    np.testing.assert_allclose(_brute_worst(src, we, np.full(we.size, W_AP)), np.asarray(ex["ratio"])[::37],
+    np.testing.assert_allclose(_brute_worst(src, we, _stated(src, we)), np.asarray(ex["ratio"])[::37],
                                rtol=1e-5)
 
     # the stated plant: Delta known; its ratio from the true loop's interconnected maps, 1 - Gd/Gd_hat
@@ -139,6 +147,25 @@ def test_allpass_counterexample_fails_the_exact_check_while_the_paper_condition_
     # (near DC both ratios are 1e-9 differences of nearly equal maps: 1e-11 of rounding between the two routes)
     np.testing.assert_allclose(np.asarray(sp["ratio"])[::37], truth, rtol=1e-6, atol=1e-10)
     np.testing.assert_allclose(np.asarray(sp["abs_delta"]), W_AP, rtol=2e-3)  # the discrete Delta is all-pass too
+
+
+def test_the_default_band_closes_where_the_exact_worst_case_needs_it(fleet_file, tmp_path):
+    """The same fleet with the learning band ``design`` and ``check`` choose (auto): its model edge keeps the exact
+    worst case within 1 + 0.01, so check holds (exit 0), and the brute force over the disc with that band's gain
+    ``|H|^4`` (written here from the Butterworth formula) agrees at every 37th checked frequency."""
+    path = fleet_file(_allpass_fleet_text())
+    out = tmp_path / "check.json"
+    assert main(["check", "--fleet", str(path), "--out", str(out), "--quiet"]) == 0
+    p = _pair(json.loads(out.read_text()), "UAV3")
+    band, ex = p["learning_band"], p["exact"]
+    assert band["cutoff_rad_s"] is not None and band["edges_rad_s"]["model"] == band["cutoff_rad_s"]
+    assert ex["guaranteed"] and ex["worst_ratio"] <= 1.01
+    ts = ilcdob.load_fleet(path).sample_time
+    we = np.asarray(ex["w_rad_s"])[::37]
+    gain = (1 / (1 + (np.tan(we * ts / 2) / np.tan(band["cutoff_rad_s"] * ts / 2)) ** (2 * band["order"]))) ** 2
+    src = ilcdob.load_fleet(path).loop("UAV3")
+    brute = _brute_worst(src, we, _stated(src, we), gain)
+    assert np.max(brute) <= 1.01 + 1e-6
 
 
 def test_allpass_counterexample_flown_learning_makes_the_error_worse(fleet_file):
@@ -177,10 +204,13 @@ def test_builtin_fleet_exact_and_paper_verdicts_both_printed(tmp_path, capsys):
         assert p["exact"]["worst_ratio"] < 0.1 and p["stated_plant"] is None
         assert f"{p['source']} -> {p['target']}: improvement guaranteed" in cap.out
 
-    # the built-in fleet at a stated |Delta| <= 0.3: the paper's condition holds for every pair, the exact
-    # worst case does not for UAV1 -> UAV2 (1.28) and UAV3 -> UAV1 (1.09): exit 1, the disagreement stated
+    # the built-in fleet at a stated |Delta| <= 0.3, the Theorem's filters: the paper's condition holds for every
+    # pair, the exact worst case does not for UAV1 -> UAV2 (1.28) and UAV3 -> UAV1 (1.09): exit 1, the
+    # disagreement stated (with the band check and design choose, its model edge closes there: exit 0)
     out3 = tmp_path / "check3.json"
-    assert main(["check", "--bound", "0.3", "--out", str(out3)]) == 1
+    assert main(["check", "--bound", "0.3", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["check", "--bound", "0.3", "--bandwidth", "off", "--out", str(out3)]) == 1
     cap = capsys.readouterr()
     data = json.loads(out3.read_text())
     verdicts = {p["source"]: (p["paper_first_order"]["holds"], p["verdict"], p["agrees"]) for p in data["pairs"]}
@@ -189,7 +219,8 @@ def test_builtin_fleet_exact_and_paper_verdicts_both_printed(tmp_path, capsys):
     flt = ilcdob.default_fleet()
     for p in data["pairs"]:
         ex = p["exact"]
-        brute = _brute_worst(flt.loop(p["source"]), np.array([ex["worst_w_rad_s"]]), np.array([0.3]))[0]
+        w_star = np.array([ex["worst_w_rad_s"]])
+        brute = _brute_worst(flt.loop(p["source"]), w_star, _stated(flt.loop(p["source"]), w_star))[0]
         assert brute == pytest.approx(ex["worst_ratio"], rel=1e-5)
     assert _pair(data, "UAV1")["exact"]["worst_ratio"] == pytest.approx(1.276, abs=2e-3)
 
@@ -212,13 +243,13 @@ def test_paper_condition_fails_but_the_exact_worst_case_guarantees_improvement(f
     w = np.asarray(p["w"])
     failing = w[~np.asarray(p["holds"])]
     assert np.all(_rhs(loop, failing) < W_AP)  # the paper's condition really fails there ...
-    brute = _brute_worst(loop, failing, np.full(failing.size, W_AP))
+    brute = _brute_worst(loop, failing, _stated(loop, failing))
     assert np.max(brute) < 0.5  # ... and every Delta of the disc still learns to half the error or better
     we = np.asarray(p["exact"]["w_rad_s"])
     np.testing.assert_allclose(np.asarray(p["exact"]["ratio"])[np.searchsorted(we, failing)], brute, rtol=1e-5)
     w_star = p["exact"]["worst_w_rad_s"]
-    assert _brute_worst(loop, np.array([w_star]), np.array([W_AP]))[0] == pytest.approx(p["exact"]["worst_ratio"],
-                                                                                      rel=1e-5)
+    at = np.array([w_star])
+    assert _brute_worst(loop, at, _stated(loop, at))[0] == pytest.approx(p["exact"]["worst_ratio"], rel=1e-5)
 
     # with the automatic band (closed on the first-order ratio, below the failing band) it holds too
     assert main(["check", "--fleet", str(path)]) == 0
@@ -244,7 +275,8 @@ def test_a_designed_filter_and_the_band_enter_the_exact_figure(fleet_file):
     w = c.exact_w[::41]
     z, p, k = sps.butter(band.order, band.cutoff / (np.pi / flt.sample_time), output="zpk")
     f = np.abs(sps.freqz_zpk(z, p, k, worN=w * flt.sample_time)[1]) ** 4 * 0.8 * np.exp(-1j * 0.02 * w)
-    np.testing.assert_allclose(c.exact[::41], _brute_worst(flt.loop("UAV3"), w, np.full(w.size, W_AP), f), rtol=1e-5)
+    np.testing.assert_allclose(c.exact[::41], _brute_worst(flt.loop("UAV3"), w, _stated(flt.loop("UAV3"), w), f),
+                               rtol=1e-5)
     truth = np.abs(1 - f * _resp(flt.loop("UAV3").G_d, w) / _resp(flt.loop("UAV3").nominal.G_d, w))
     np.testing.assert_allclose(c.known[::41], truth, rtol=1e-6, atol=1e-10)
 

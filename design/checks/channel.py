@@ -35,7 +35,7 @@ from ilcdob.channel_loop import ChannelLoop
 
 from ..filters.band import LearningBand
 from ..maps.channel_filters import channel_filters
-from ..sets.delta import delta_bound
+from ..sets.delta import delta_bound, sampled_bound
 from ..sets.worst_case import mask_intervals
 from .theorem import EXACT_TOL, exact_worst_ratio
 
@@ -156,7 +156,7 @@ def channel_check(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSy
         if bound is not None:
             if not (isinstance(bound, (int, float)) and np.isfinite(bound) and 0 < bound < 1):
                 raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
-            radius, origin = np.full(w.size, float(bound)), "stated bound"
+            radius, origin = sampled_bound(source.channel_plant(), ts, w, float(bound)), "stated bound"
         else:
             radius, origin = source.delta(w, scale), "identification"
         worst = np.abs(1.0 - factor) + np.abs(factor) * radius

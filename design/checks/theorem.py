@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import textwrap
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -65,7 +66,8 @@ from ..sets.delta import DeltaSet, delta_bound
 from ..sets.worst_case import mask_intervals, ratio_for_delta, uncertainty_cones, worst_case_ratio
 
 __all__ = ["PairCheck", "theorem_check", "theorem_rhs", "format_theorem_table", "learning_pairs",
-           "exact_worst_ratio", "exact_ratio_for_delta", "bound_delta_sets", "EXACT_TOL", "REFINE"]
+           "exact_worst_ratio", "exact_worst_on_set", "exact_ratio_for_delta", "bound_delta_sets", "EXACT_TOL",
+           "REFINE"]
 
 _SOURCES = ("bound", "samples")
 
@@ -274,7 +276,10 @@ class PairCheck:
         parts = []
         plant_said = False
         if self.holds_exact:
-            parts.append(f"{pair}: improvement guaranteed: the exact worst case of |e_j/e'_j| over |Delta| <= W is "
+            what = ("improvement guaranteed" if self.exact_worst <= 1.0 else
+                    f"guaranteed at most {100 * (self.exact_worst - 1):.2g} % worse than the DOB alone (no improvement "
+                    "guaranteed)")
+            parts.append(f"{pair}: {what}: the exact worst case of |e_j/e'_j| over |Delta| <= W is "
                          f"{worst} (at {self.exact_worst_w:.4g} rad/s) for {applied}, within 1 + {EXACT_TOL:g}.")
         elif self.guaranteed:  # the disc is fine, the stated plant (outside it) is not
             plant_said = True
@@ -379,6 +384,36 @@ class PairCheck:
                                      "(and for the stated plant, if any)",
                     "agrees": self.agrees, "statement": self.statement})
         return out
+
+
+def _on_grid(w_set: np.ndarray, bound: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A Delta set's bound interpolated log-log from its grid ``w_set`` onto ``x`` (rad/s)."""
+    order = np.argsort(w_set)
+    return np.exp(np.interp(np.log(x), np.log(w_set[order]), np.log(np.maximum(bound[order], 1e-300))))
+
+
+def exact_worst_on_set(source: LoopSystem, w_set: np.ndarray, bound: np.ndarray
+                       ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+    """The exact worst case over a source's Delta set as :func:`theorem_check` evaluates it, for any law ``F``.
+
+    Parameters
+    ----------
+    source : LoopSystem
+        System j-1.
+    w_set, bound : array_like
+        The Delta set's grid (rad/s) and its radius ``W`` there.
+
+    Returns
+    -------
+    (numpy.ndarray, callable)
+        The check's grid (``w_set`` refined :data:`REFINE` times, ``W`` interpolated log-log) and
+        ``worst(F)``: :func:`exact_worst_ratio` on it for a law response ``F`` there (the learning band's
+        ``model`` edge, :func:`~ilcdob.design.filters.band.choose_band`).
+    """
+    w_set, bound = np.asarray(w_set, float), np.asarray(bound, float)
+    we = _refined(w_set)
+    a, b, r, _, _ = uncertainty_cones(source, we, _on_grid(w_set, bound, we), margin=0.0)
+    return we, lambda f: worst_case_ratio(f, a, b, r)
 
 
 def exact_worst_ratio(source: LoopSystem, w: np.ndarray, W: np.ndarray, F: np.ndarray | None = None) -> np.ndarray:
@@ -604,11 +639,7 @@ def theorem_check(fleet, order: list[str] | tuple[str, ...] | None, deltas: dict
             if w is not None and (ww.min() < bw.min() * (1 - 1e-12) or ww.max() > bw.max() * (1 + 1e-12)):
                 raise SpecError(f"`w`: [{ww.min():.4g}, {ww.max():.4g}] rad/s leaves the Delta set's grid "
                                 f"[{bw.min():.4g}, {bw.max():.4g}]; pass w inside it or use source='samples'")
-            order_b = np.argsort(bw)
-
-            def on(x: np.ndarray) -> np.ndarray:
-                return np.exp(np.interp(np.log(x), np.log(bw[order_b]), np.log(np.maximum(bb[order_b], 1e-300))))
-
+            on = partial(_on_grid, bw, bb)
             delta = bb if w is None else on(ww)
             W = on(we)
         else:

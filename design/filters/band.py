@@ -50,9 +50,13 @@ known:
     has an RMS of at most :data:`NOISE_SHARE` of the limit.
 ``model``
     From the previous vehicle's Delta set (identification covariance or stated bound): the
-    largest corner at which the filtered law's first-order worst case
-    ``1 - |F| + |F| |Delta| / (|1 + P C|/2)`` exceeds 1 by at most
-    :data:`AMPLIFICATION_TOL` at any frequency.
+    largest corner at which both the filtered law's first-order worst case
+    ``1 - |F| + |F| |Delta| / (|1 + P C|/2)`` (the paper's condition) and its exact worst case over
+    the set's disc (the figure ``ilcdob check`` reports, :mod:`..checks.theorem`) exceed 1 by at most
+    :data:`AMPLIFICATION_TOL` at any frequency; ``design`` and ``check`` then agree. Where the disc
+    reaches the source loop's stability boundary (``W |T0| >= 1``) no corner bounds the exact worst
+    case: the paper's condition alone sets the edge and the band says the improvement is not
+    guaranteed (docs/theory.md section 6).
 
 No edge (noise-free data, no noise level, models trusted everywhere), or an edge above
 :data:`OFF_FRACTION` of the Nyquist frequency, leaves the Theorem's filters unfiltered.
@@ -485,9 +489,35 @@ def _model_edge(ts: float, order: int, w: np.ndarray, ratio: np.ndarray) -> floa
     return _largest_corner(ts, ok)
 
 
+def _exact_edge(ts: float, order: int, w: np.ndarray, worst: Callable[[np.ndarray], np.ndarray]) -> tuple[
+        float | None, str]:
+    """Largest corner with ``max worst(F) <= 1 + AMPLIFICATION_TOL``, and why none does ("" where one does): the
+    worst case is unbounded for every ``F != 0`` where the Delta set reaches the source's stability boundary, or
+    it exceeds the tolerance below the lowest corner a band has. ``worst(F)`` is convex in a real ``F`` in
+    [0, 1] with ``worst(0) = 1``, so a lower corner never does worse and the bisection is sound."""
+    def ok(wc: float | None) -> bool:
+        f = LearningBand(ts, wc, order, "stated").response(w)
+        with np.errstate(invalid="ignore"):
+            return bool(np.max(worst(f)) <= 1.0 + AMPLIFICATION_TOL)
+
+    if ok(None):
+        return None, ""
+    lowest = _LOWEST * math.pi / ts
+    if not ok(lowest):
+        with np.errstate(invalid="ignore"):
+            bad = w[~np.isfinite(worst(np.ones(w.size)))]
+        why = (f"the Delta set reaches the source loop's stability boundary ({bad.min():.4g}-{bad.max():.4g} rad/s)"
+               if bad.size else f"the exact worst case exceeds it below the lowest corner, {lowest:.4g} rad/s")
+        return None, why
+    edge = _largest_corner(ts, ok)
+    return (0.999 * math.pi / ts if edge is None else edge), ""
+
+
 def choose_band(ts: float, request: object = "auto", *, error: object | None = None, noise_std: float | None = None,
                 a_max: float | None = None, l1_gain: Callable[[np.ndarray], np.ndarray] | None = None,
-                trust: tuple[np.ndarray, np.ndarray] | None = None, order: int = FILTER_ORDER) -> LearningBand:
+                trust: tuple[np.ndarray, np.ndarray] | None = None,
+                exact: tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]] | None = None,
+                order: int = FILTER_ORDER) -> LearningBand:
     """The learning band for one pair: stated, or chosen from a trial and the fleet (module docstring).
 
     Parameters
@@ -508,6 +538,9 @@ def choose_band(ts: float, request: object = "auto", *, error: object | None = N
     trust : (w, ratio), optional
         Frequencies (rad/s) and ``|Delta_{j-1}| / (|1 + P C|/2)`` of the previous vehicle's
         Delta set (``model`` edge).
+    exact : (w, worst), optional
+        Frequencies (rad/s) and ``worst(F)``: the exact worst case over the same set for a band gain ``F`` on
+        them (:func:`~..checks.theorem.exact_worst_on_set`; ``model`` edge).
     order : int
         Butterworth order of F.
 
@@ -526,8 +559,16 @@ def choose_band(ts: float, request: object = "auto", *, error: object | None = N
         std = est.std
     if std and a_max is not None and l1_gain is not None:
         edges["noise budget"] = _noise_budget_edge(ts, order, std, a_max, l1_gain)
+    unbounded, needed = "", False
     if trust is not None:
         edges["model"] = _model_edge(ts, order, *trust)
+    if exact is not None:
+        edge, why = _exact_edge(ts, order, *exact)
+        if why:
+            unbounded = (f"; not guaranteed: no corner keeps the exact worst case within 1 + {AMPLIFICATION_TOL:g} "
+                         f"({why}; ilcdob check)")
+        elif edge is not None:
+            edges["model"], needed = min(edge, edges.get("model") or edge), True
     if request != "auto":
         return LearningBand(ts, float(request), order, "stated", edges, std, "stated with --bandwidth")
     source = "data" if error is not None else "fleet"
@@ -537,11 +578,12 @@ def choose_band(ts: float, request: object = "auto", *, error: object | None = N
         why = ("the trial's error has no resolved noise floor" if error is not None
                else "no trial, no stated sensor noise") + (" and the models are trusted at every frequency"
                                                            if trust is not None else "")
-        return LearningBand(ts, None, order, "off", edges, std, why)
+        return LearningBand(ts, None, order, "off", edges, std, why + unbounded)
     name = min(finite, key=finite.get)
     wc = finite[name]
-    if wc >= OFF_FRACTION * nyq:
+    if wc >= OFF_FRACTION * nyq and not (needed and name == "model"):  # the exact worst case needs the band
         return LearningBand(ts, None, order, "off", edges, std,
-                            f"every edge is above {OFF_FRACTION:g} x Nyquist (lowest: {name}, {wc:.4g} rad/s)")
-    return LearningBand(ts, wc, order, source, edges, std, f"set by the {name} edge")
+                            f"every edge is above {OFF_FRACTION:g} x Nyquist (lowest: {name}, {wc:.4g} rad/s)"
+                            + unbounded)
+    return LearningBand(ts, wc, order, source, edges, std, f"set by the {name} edge" + unbounded)
 

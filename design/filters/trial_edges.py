@@ -1,15 +1,24 @@
 """The ends of a trial for a non-causal filter: the reconstructed disturbance continued past the
-trial's end along its trend, and a look-ahead FIR run over the trial with its output before
-``t = 0`` folded back in (the robust-set law, :meth:`~..methods.robust_set.RobustSetDesign.apply`).
+trial's end along its trend, a look-ahead FIR run over the trial with its output before
+``t = 0`` folded back in (the robust-set law, :meth:`~..methods.robust_set.RobustSetDesign.apply`),
+and the check that a learning signal's ends stay near its interior (:func:`end_peaks`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .band import fade_out, fold_start
+import warnings
+from dataclasses import dataclass
 
-__all__ = ["trend_weights", "end_continuation", "fir_on_trial"]
+from ilcdob.errors import LearningEndWarning
+
+from .band import END_FIT_S, fade_out, fold_start
+
+__all__ = ["trend_weights", "end_continuation", "fir_on_trial", "EndPeaks", "end_peaks", "END_PEAK_FACTOR"]
+
+#: An end of a learning signal whose peak exceeds its interior peak this many times is flagged (:func:`end_peaks`).
+END_PEAK_FACTOR = 2.0
 
 
 def trend_weights(n: int) -> np.ndarray:
@@ -92,3 +101,82 @@ def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> n
         d_hat = end_continuation(d_hat, advance, fade)
     full = np.convolve(d_hat, h)  # F's output at times -advance, -advance + 1, ...
     return fold_start(full[:advance + n], advance, n) if advance else full[:n].copy()
+
+
+@dataclass(frozen=True)
+class EndPeaks:
+    """The peaks of a learning signal at a trial's ends and inside it (:func:`end_peaks`).
+
+    Attributes
+    ----------
+    start, end : float
+        Largest magnitude over the first and the last ``window`` samples, in the signal's unit.
+    interior : float
+        Largest magnitude between them.
+    window : int
+        Samples of each end.
+    ts : float
+        Sample time, s.
+    """
+
+    start: float
+    end: float
+    interior: float
+    window: int
+    ts: float
+
+    @property
+    def flagged(self) -> list[str]:
+        """The ends (``"start"``, ``"end"``) whose peak exceeds :data:`END_PEAK_FACTOR` times the interior's."""
+        return [k for k, v in (("start", self.start), ("end", self.end)) if v > END_PEAK_FACTOR * self.interior]
+
+    def to_dict(self) -> dict:
+        """``start_peak``, ``end_peak``, ``interior_peak``, ``window_s`` and ``flagged`` (as in ``learning.json``)."""
+        return {"start_peak": self.start, "end_peak": self.end, "interior_peak": self.interior,
+                "window_s": self.window * self.ts, "flagged": self.flagged}
+
+    def warn(self, unit: str, band_off: bool) -> None:
+        """Warn (:class:`~ilcdob.errors.LearningEndWarning`) where an end is flagged, naming it and the cause.
+
+        Parameters
+        ----------
+        unit : str
+            The signal's unit, for the message.
+        band_off : bool
+            Whether the law ran without a learning band (the usual cause).
+        """
+        for k in self.flagged:
+            peak = self.start if k == "start" else self.end
+            cause = ("the law runs without a learning band, so the source's inverse (its gain ~1/P_hat at high "
+                     "frequency) acts on the continuation of the error past the trial's "
+                     + ("start" if k == "start" else "end") + "; learn with a band (--bandwidth auto or a corner)"
+                     if band_off else
+                     "the learning filters act on the continuation of the error past the trial's "
+                     + ("start" if k == "start" else "end") + "; a lower --bandwidth or a longer trial shortens it")
+            warnings.warn(f"learning signal: its {k} ({self.window * self.ts:.3g} s) peaks at {peak:.4g} {unit}, "
+                          f"{peak / self.interior if self.interior > 0 else float('inf'):.3g} x its interior peak "
+                          f"({self.interior:.4g} {unit}): {cause}, or fade that part out before flying it",
+                          LearningEndWarning, stacklevel=2)
+
+
+def end_peaks(d_f: np.ndarray, ts: float) -> EndPeaks:
+    """Peaks of a learning signal over its first and last :data:`~.band.END_FIT_S` seconds (at least 5 samples, at
+    most a tenth of the trial each) and over the samples between.
+
+    Parameters
+    ----------
+    d_f : numpy.ndarray
+        The learning signal of one trial.
+    ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    EndPeaks
+    """
+    d_f = np.abs(np.asarray(d_f, float))
+    n = d_f.size
+    m = min(max(5, int(round(END_FIT_S / ts))), n // 10)
+    if m == 0:
+        return EndPeaks(0.0, 0.0, float(d_f.max()) if n else 0.0, 0, ts)
+    return EndPeaks(float(d_f[:m].max()), float(d_f[-m:].max()), float(d_f[m:-m].max()), m, ts)

@@ -396,7 +396,7 @@ def structured_set(spec, source: str, bound: np.ndarray, choice: str = "auto") -
         return None
     if source == "identification":
         return EllipseFamily.from_spec(spec)
-    return BoundFamily(float(np.max(bound)))
+    return BoundFamily(float(np.min(bound)))  # the stated bound: the sampled radius at low frequency (1 + 1e-12)
 
 
 def admissible(source: LoopSystem, source_true: LoopSystem, w_bound: np.ndarray, bound: np.ndarray,

@@ -1065,6 +1065,32 @@ def signal_unit(filters: dict[str, Any]) -> tuple[str, str]:
     return unit, unit.replace("/", "_").replace("^", "")
 
 
+def signal_summary(d_f: np.ndarray, filters: dict[str, Any]) -> dict[str, Any]:
+    """A learning signal's peak and RMS in its unit, and its ends against its interior
+    (:func:`~ilcdob.design.filters.trial_edges.end_peaks`, warned about where an end is flagged).
+
+    Parameters
+    ----------
+    d_f : numpy.ndarray
+        The learning signal.
+    filters : dict
+        The design's ``filters.json`` content (unit, sample time, band).
+
+    Returns
+    -------
+    dict
+        ``peak_<unit>``, ``rms_<unit>`` and ``ends``.
+    """
+    from ilcdob.design.filters.trial_edges import end_peaks
+
+    unit, key = signal_unit(filters)
+    n = d_f.size
+    ends = end_peaks(d_f, float(filters["sample_time"]))
+    ends.warn(unit, band_off=(filters.get("band") or {}).get("cutoff_rad_s") is None)
+    return {f"peak_{key}": float(np.max(np.abs(d_f))) if n else 0.0,
+            f"rms_{key}": float(np.sqrt(np.mean(d_f ** 2))) if n else 0.0, "ends": ends.to_dict()}
+
+
 def _learn_from_trial(design: Any, data: Any, trial: str | Path) -> tuple[dict[str, Any], np.ndarray, Any]:
     """The learning signal of ``design`` on the source's trial.
 
@@ -1083,10 +1109,8 @@ def _learn_from_trial(design: Any, data: Any, trial: str | Path) -> tuple[dict[s
 
     signal = design.learning(data["e"], data["d_f"], learn=robust_learn if design.robust is not None else None)
     d_f = signal.d_f
-    _, key = signal_unit(design.filters)
     info: dict[str, Any] = {"file": str(trial), "samples": len(data),
-                            "learning_signal": {f"peak_{key}": float(np.max(np.abs(d_f))),
-                                                f"rms_{key}": float(np.sqrt(np.mean(d_f ** 2)))}}
+                            "learning_signal": signal_summary(d_f, design.filters)}
     if signal.limit is not None:
         info["limit"] = signal.limit.to_dict()
     if not socp:
@@ -1460,8 +1484,7 @@ def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: A
                            "the acceleration limit" + ("" if "channel" not in filters else
                                                      f" (on the {filters['channel']} channel: unit {unit})"),
                "band": {k: (filters.get("band") or {}).get(k) for k in ("cutoff_rad_s", "source", "reason")},
-               "learning_signal": {f"peak_{key}": float(np.max(np.abs(d_f))) if n else 0.0,
-                                   f"rms_{key}": float(np.sqrt(np.mean(d_f ** 2))) if n else 0.0},
+               "learning_signal": signal_summary(d_f, filters),
                "limit": None if report is None else report.to_dict(),
                "files": {"learning_signal.csv": f"time (s), learning ({unit})",
                          "learning_signal.bin": f"{n} little-endian float64 samples, {unit}",

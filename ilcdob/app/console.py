@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ilcdob.errors import LearningLimitWarning, SpecError
+from ilcdob.errors import LearningEndWarning, LearningLimitWarning, SpecError
 
 from . import commands as uc
 
@@ -80,10 +80,10 @@ class Console:
     def warning(self, message: Warning | str, category: type[Warning], filename: str = "") -> None:
         """Print a warning as one ``ilcdob: warning:`` line on stderr.
 
-        ilcdob's own :class:`~ilcdob.errors.LearningLimitWarning` (a learning signal was clipped)
-        is always printed; any other warning (SciPy's ``LinAlgWarning`` or ``BadCoefficients``,
-        Dask's, ...) once per distinct text with its category and package, and not at all when
-        quiet.
+        ilcdob's own :class:`~ilcdob.errors.LearningLimitWarning` (a learning signal was clipped) and
+        :class:`~ilcdob.errors.LearningEndWarning` (spikes at a trial's ends) are always printed; any other
+        warning (SciPy's ``LinAlgWarning`` or ``BadCoefficients``, Dask's, ...) once per distinct text with
+        its category and package, and not at all when quiet.
 
         Parameters
         ----------
@@ -95,7 +95,7 @@ class Console:
             The file that issued it (names the package).
         """
         text = " ".join(str(message).split())
-        if issubclass(category, LearningLimitWarning):
+        if issubclass(category, (LearningLimitWarning, LearningEndWarning)):
             self.error(text, kind="warning")
             return
         line = f"{text} ({category.__name__} in {_package(filename)})"
