@@ -42,6 +42,7 @@ from .law.laws import DEFAULT_LAW, LAW_DESCRIPTIONS, ExactReference, ReferenceTe
 from .law.limit import LIMIT_POLICIES, LimitReport
 from .methods import METHODS, DesignInputs, Method, method_named
 from .methods.robust import RobustPairDesigner
+from .checks.channel import channel_worst
 from .checks.theorem import exact_worst_on_set, theorem_rhs
 
 __all__ = ["PairDesign", "LearningSignal", "design_pair", "design_channel_pair", "pair_band", "with_law",
@@ -593,10 +594,22 @@ def design_channel_pair(source: ChannelLoop | LoopSystem, target: ChannelLoop | 
     filters = {**made.filters, "units": units, "disturbance": path_entry}
     k_j = channel_view(target).gain
     chooser = partial(choose_band, source.ts, request, a_max=acceleration_limit,
-                      l1_gain=lambda w: np.abs(k_j(w) * lf.l1_response(w)) * _sos_gain(path, w, source.ts))
+                      l1_gain=lambda w: np.abs(k_j(w) * lf.l1_response(w)) * _sos_gain(path, w, source.ts),
+                      exact=_channel_exact(source, target, lf) if not chosen.needs_delta_sets else None)
     design = PairDesign(chosen.name, filters, made.core, robust=made.robust, source_gf=channel_gf(source), path=path,
                         choose=chooser if request == "auto" else None)
     return design_with_band(design, chooser(error=None))
+
+
+def _channel_exact(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem,
+                   lf: LearningFilters) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]] | None:
+    """The channel pair's exact worst case for the band's ``model`` edge (what ``check`` reports,
+    :func:`~.checks.channel.channel_worst`); None where the source has no Delta set (no identification)."""
+    try:
+        w, _, _, _, worst = channel_worst(source, target, filters=lf)
+    except SpecError:
+        return None
+    return w, worst
 
 
 def design_with_band(design: PairDesign, band: LearningBand) -> PairDesign:

@@ -93,3 +93,25 @@ def test_a_set_reaching_the_stability_boundary_is_said_not_guaranteed():
     check = theorem_check(fleet, ["rhp", "drag"], bound_delta_sets(fleet, ["rhp", "drag"]),
                           bands={("rhp", "drag"): band})[0]
     assert not check.guaranteed and not np.isfinite(check.exact_worst)
+
+
+def test_a_channel_pair_band_closes_where_its_fit_is_not_trusted():
+    """Vehicles on their own controller: a position-channel source whose fit's 3-sigma radius passes 1 near
+    Nyquist (the covariance of ``tests/test_channel_check.py`` times 4). Without a band the check fails there;
+    the band ``design`` picks from the fleet alone (no noise, no trial) is set by the model edge and the check
+    with it holds, within 1 + 0.01; with the original covariance (radius at most 0.57) the band stays off."""
+    from ilcdob.channel_loop import channel_loop
+    from ilcdob.design.checks.channel import channel_check
+    from ilcdob.design.pair import design_channel_pair
+    from ilcdob.specs import IdentificationSpec, PlantSpec
+    from test_channel_check import COV, OTHER, THETA, TS, A, B, TAU
+
+    tgt = channel_loop("tgt", TS, "acceleration", OTHER, 1.0)
+    for cov, needs_band in ((COV, False), (4 * COV, True)):
+        ident = IdentificationSpec(3, 1, 0, tuple(THETA[:-1]), tuple(map(tuple, cov)), delay_estimated=True)
+        src = channel_loop("src", TS, "position", PlantSpec(num=list(B), den=list(A), delay=TAU), 6.0,
+                           identification=ident)
+        band = design_channel_pair(src, tgt).band
+        assert (band.cutoff is not None) == needs_band, band.describe()
+        assert channel_check(src, tgt, band=band).holds
+        assert channel_check(src, tgt).holds == (not needs_band)

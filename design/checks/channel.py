@@ -26,6 +26,7 @@ Units: rad/s.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -35,11 +36,12 @@ from ilcdob.channel_loop import ChannelLoop
 
 from ..filters.band import LearningBand
 from ..maps.channel_filters import channel_filters
+from ..maps.closed_form import LearningFilters
 from ..sets.delta import delta_bound, sampled_bound
 from ..sets.worst_case import mask_intervals
 from .theorem import EXACT_TOL, exact_worst_ratio
 
-__all__ = ["ChannelPairCheck", "channel_check", "format_channel_table"]
+__all__ = ["ChannelPairCheck", "channel_check", "channel_worst", "format_channel_table"]
 
 
 @dataclass(frozen=True)
@@ -134,33 +136,65 @@ def channel_check(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSy
         As :func:`~ilcdob.design.maps.channel_filters.channel_filters`; a source with neither an
         identification nor a bound; a bad ``scale``, ``bound`` or ``band``.
     """
-    lf = channel_filters(source, target)
+    if band is not None and not isinstance(band, LearningBand):
+        raise SpecError(f"`band`: got {type(band).__name__}, expected a LearningBand or None")
+    w, radius, origin, factor, worst = channel_worst(source, target, w=w, scale=scale, bound=bound)
+    f_band = np.ones(w.size) if band is None else band.response(w)
+    return ChannelPairCheck(source.name, target.name, w, radius, origin, factor * f_band, worst(f_band), band)
+
+
+def channel_worst(source: ChannelLoop | LoopSystem, target: ChannelLoop | LoopSystem, *, w: np.ndarray | None = None,
+                  scale: float = 1.0, bound: float | None = None, filters: LearningFilters | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, str, np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+    """The exact worst case of :func:`channel_check` for any learning band: what ``check`` reports and the band's
+    ``model`` edge of a channel pair bounds (:func:`~ilcdob.design.filters.band.choose_band`).
+
+    Parameters
+    ----------
+    source, target : ChannelLoop or LoopSystem
+        Vehicles j-1 and j.
+    w : array_like, optional
+        Frequencies, rad/s (default: 400 log-spaced from 0.01 rad/s to 0.999 Nyquist).
+    scale : float
+        Multiplier (> 0) of the identified standard deviations.
+    bound : float, optional
+        A stated multiplicative bound in (0, 1) on the source's map (the continuous one: its radius on the sampled
+        map, :func:`~..sets.delta.sampled_bound`).
+    filters : LearningFilters, optional
+        The pair's filters, if built (default: built here).
+
+    Returns
+    -------
+    (w, radius, origin, factor, worst)
+        The grid, the disc's radius and where it comes from, the factor ``L1 as applied / L1`` on it, and
+        ``worst(F)``: the exact worst case for a band gain ``F`` on the grid.
+
+    Raises
+    ------
+    SpecError
+        As :func:`channel_check`.
+    """
+    lf = channel_filters(source, target) if filters is None else filters
     ts = source.ts
     w = np.geomspace(0.01, 0.999 * np.pi / ts, 400) if w is None else np.asarray(w, float)
     if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w <= 0) or np.any(w >= np.pi / ts):
         raise SpecError(f"`w`: expected frequencies in (0, {np.pi / ts:.6g}) rad/s (below Nyquist)")
-    if band is not None and not isinstance(band, LearningBand):
-        raise SpecError(f"`band`: got {type(band).__name__}, expected a LearningBand or None")
     with np.errstate(all="ignore"):
         factor = lf.L1.freqresp(w) / lf.L1.exact_freqresp(w)
-    if band is not None:
-        factor = factor * band.response(w)
     if isinstance(source, LoopSystem):
         got = delta_bound(source.spec, ts, w, scale, bound)
         if got is None:
             raise SpecError(f"system {source.name!r}: neither an identification nor a stated bound, so no Delta set")
         _, radius, origin = got
-        worst = exact_worst_ratio(source, w, radius, factor)
         origin = "stated bound" if origin == "fleet bound" and bound is not None else origin
+        return w, radius, origin, factor, lambda f: exact_worst_ratio(source, w, radius, factor * f)
+    if bound is not None:
+        if not (isinstance(bound, (int, float)) and np.isfinite(bound) and 0 < bound < 1):
+            raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
+        radius, origin = sampled_bound(source.channel_plant(), ts, w, float(bound)), "stated bound"
     else:
-        if bound is not None:
-            if not (isinstance(bound, (int, float)) and np.isfinite(bound) and 0 < bound < 1):
-                raise SpecError(f"`bound`: got {bound!r}, expected a relative error in (0, 1)")
-            radius, origin = sampled_bound(source.channel_plant(), ts, w, float(bound)), "stated bound"
-        else:
-            radius, origin = source.delta(w, scale), "identification"
-        worst = np.abs(1.0 - factor) + np.abs(factor) * radius
-    return ChannelPairCheck(source.name, target.name, w, np.asarray(radius, float), origin, factor, worst, band)
+        radius, origin = np.asarray(source.delta(w, scale), float), "identification"
+    return w, radius, origin, factor, lambda f: np.abs(1.0 - factor * f) + np.abs(factor * f) * radius
 
 
 def format_channel_table(checks: list[ChannelPairCheck]) -> str:
