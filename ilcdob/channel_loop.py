@@ -16,8 +16,9 @@ function with the velocity integral on a cascade's position or velocity channel 
 ``Gd`` is identified: on the acceleration channel it is the channel's own map; from a setpoint
 channel's map ``G_ch`` it is ``G_ch / K``. Where ``K`` depends on frequency both are kept
 (:attr:`ChannelLoop.channel_map`) and sampled apart: ``Gf`` is the zero-order hold of ``G_ch`` as the
-setpoint is flown, ``Gd`` that of ``G_ch / K``, so their sampled ratio is not the continuous ``K``. ``d`` is an acceleration added to the controller's command, as the paper's
-disturbance and the learning signal are; a force on the rigid body (wind through drag) bypasses the
+setpoint is flown, ``Gd`` that of ``G_ch / K``, so their sampled ratio is not the continuous ``K``.
+``d`` is an acceleration added to the controller's command, as the paper's disturbance and the learning
+signal are; a force on the rigid body (wind through drag) bypasses the
 attitude loop, and the learning reaches it through the airframe correction of
 :mod:`ilcdob.design.maps.flown`, built from each vehicle's identified airframe (commanded
 acceleration -> position, :attr:`ChannelLoop.airframe`).

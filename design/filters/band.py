@@ -53,10 +53,10 @@ known:
     largest corner at which both the filtered law's first-order worst case
     ``1 - |F| + |F| |Delta| / (|1 + P C|/2)`` (the paper's condition) and its exact worst case over
     the set's disc (the figure ``ilcdob check`` reports, :mod:`..checks.theorem`) exceed 1 by at most
-    :data:`AMPLIFICATION_TOL` at any frequency; ``design`` and ``check`` then agree. Where the disc
-    reaches the source loop's stability boundary (``W |T0| >= 1``) no corner bounds the exact worst
-    case: the paper's condition alone sets the edge and the band says the improvement is not
-    guaranteed (docs/theory.md section 6).
+    :data:`AMPLIFICATION_TOL` at any frequency; ``design`` and ``check`` then agree. Where no corner
+    bounds the exact worst case (the disc reaches the source loop's stability boundary, ``W |T0| >= 1``,
+    or the figure exceeds the tolerance below the lowest corner) the paper's condition alone sets the
+    edge and the band says the improvement is not guaranteed, and why (docs/theory.md section 6).
 
 No edge (noise-free data, no noise level, models trusted everywhere), or an edge above
 :data:`OFF_FRACTION` of the Nyquist frequency, leaves the Theorem's filters unfiltered.
@@ -575,9 +575,10 @@ def choose_band(ts: float, request: object = "auto", *, error: object | None = N
     finite = {k: v for k, v in edges.items() if v is not None}
     nyq = math.pi / ts
     if not finite:
+        trusted = ("" if trust is None else " and the paper's condition holds at every frequency" if unbounded
+                   else " and the models are trusted at every frequency")
         why = ("the trial's error has no resolved noise floor" if error is not None
-               else "no trial, no stated sensor noise") + (" and the models are trusted at every frequency"
-                                                           if trust is not None else "")
+               else "no trial, no stated sensor noise") + trusted
         return LearningBand(ts, None, order, "off", edges, std, why + unbounded)
     name = min(finite, key=finite.get)
     wc = finite[name]

@@ -5,8 +5,9 @@ Every vehicle here is seen through the channel its learning signal enters
 ``Q`` the DOB's where it flies one (the add-on DOB, :mod:`ilcdob.vehicles.dob_loop`) and ``1 - Q`` read
 as 1 where it does not. Where the controller's ``K`` depends on frequency (a cascade's position channel,
 :mod:`ilcdob.channel_gain`), ``K`` below is the ratio of the sampled maps, ``K_d = Gf(z) / G(z)``, with its
-zeros and poles those of the two zero-order holds (their common poles cancelled). ilcdob's PID + DOB loop is such a vehicle on its acceleration feed-forward
-(``K = 1``; a learning signal ``u`` there is ``-d_f`` of the paper's law). With the ratio
+zeros and poles those of the two zero-order holds (their common poles cancelled). ilcdob's PID + DOB loop
+is such a vehicle on its acceleration feed-forward (``K = 1``; a learning signal ``u`` there is ``-d_f`` of
+the paper's law). With the ratio
 ``R = Gd/Gf = (1 - Q)/K`` the Theorem's pair is::
 
     L1_j = Gd_j / (Gf_j Gd_{j-1}) = R_j Gd_{j-1}^{-1}

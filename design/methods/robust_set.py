@@ -66,7 +66,9 @@ Clarabel through cvxpy)::
 2. ``rho_design = min(1, max(rho, rho_best + slack))``: the asked rho if it is feasible; if not,
    the design says so (warning, or :class:`RobustSetInfeasibleError` with ``relax=False``) and
    guarantees the best it can. It never exceeds 1: no admissible plant is made worse than
-   without learning.
+   without learning. A feasible rho whose verified worst case ends above it (the exchange stops
+   within ``tol``) is designed again at ``rho - tol``; a design is feasible only where the verified
+   ``rho_guaranteed <= rho``.
 3. Exchange: the worst case is evaluated on a dense verification grid (``n_verify`` points,
    linear to Nyquist, plus a log grid below ``w_min``); frequencies where it exceeds
    ``rho_design`` are added to the design grid and the SOCP is solved again (per round at most 60:
@@ -459,12 +461,13 @@ class RobustSetDesign:
     rho_best : float
         Smallest factor an FIR of this order guarantees (verification grid).
     rho_design : float
-        Factor imposed: ``rho`` if feasible, else ``min(1, rho_best + slack)``.
+        Factor imposed: ``rho`` (or ``rho - tol``, step 2 of the module docstring) if feasible, else
+        ``min(1, rho_best + slack)``.
     rho_guaranteed : float
         ``max_w max_{|Delta|<=W} |T(w)|`` of the result on the verification grid
         (<= ``rho_design + tol``; the exchange step stops within ``tol``).
     feasible : bool
-        Whether the asked ``rho`` is guaranteed.
+        Whether the asked ``rho`` is guaranteed: ``rho_guaranteed <= rho`` on the verification grid.
     nominal_worst : float
         ``max_w |1 - F(w)|``: the ratio bound for the nominal plant.
     margin_bands : list of (float, float)
@@ -876,8 +879,11 @@ def check_feasible(design: RobustSetDesign, source: object, target: object, o: R
     """
     if design.feasible:
         return
+    best = max(design.rho_best, design.rho_guaranteed) if design.rho_best <= o.rho else design.rho_best
     msg = (f"robust-set design {source.name!r} -> {target.name!r}: rho = {o.rho:g} cannot be guaranteed over "
-           f"the Delta set; the best an FIR of {o.n_taps} taps guarantees is rho = {design.rho_best:.4g}")
+           f"the Delta set; the best an FIR of {o.n_taps} taps guarantees is rho = {best:.4g}"
+           + (" (verified on the dense grid, within the exchange's tolerance of the asked rho)"
+              if design.rho_best <= o.rho else ""))
     if not o.relax:
         raise RobustSetInfeasibleError(msg + f". Next step: ask rho >= {design.rho_best:.4g}, lower the bound, "
                                        "or allow more taps (`n_taps`).", rho=o.rho, rho_best=design.rho_best)
@@ -927,10 +933,14 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
                                float(np.max(np.abs(1 - phi_v_at(h_best)))), mask_intervals(wv, excluded_v), wv,
                                worst_best, 0, time.perf_counter() - t_start, described, trial=o.trial)
     h, worst, _, rounds = run(rho_design)
+    if feasible and np.max(worst) > o.rho and o.rho - o.tol >= rho_best:
+        rho_design = o.rho - o.tol  # the exchange stops within `tol` of what it imposes: aim below the asked rho
+        h, worst, _, rounds = run(rho_design)
     guaranteed = float(np.max(worst))
     if guaranteed > max(rho_design + o.tol, rho_best):  # the exchange did not converge: keep the min-max filter
         h, worst, guaranteed = h_best, worst_best, rho_best
     rho_best = min(rho_best, guaranteed)  # the min-max exchange may stop short of what the design reaches
+    feasible = feasible and guaranteed <= o.rho  # the asked rho as verified, not only as imposed
     if not guaranteed <= 1.0 + o.tol:
         raise RobustSetSolverError(f"robust-set design {source.name!r} -> {target.name!r}: worst-case ratio "
                                    f"{guaranteed:.4g} > 1 on the verification grid after {rounds} exchange rounds; "
