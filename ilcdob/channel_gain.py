@@ -95,6 +95,8 @@ class ChannelGain:
         Returns
         -------
         ChannelGain
+            ``kpp (kpv s + kiv) / s`` on the position channel, ``(kpv s + kiv) / s`` on the velocity channel (a
+            constant where ``kiv = 0``).
 
         Raises
         ------
