@@ -879,11 +879,11 @@ def check_feasible(design: RobustSetDesign, source: object, target: object, o: R
     """
     if design.feasible:
         return
-    best = max(design.rho_best, design.rho_guaranteed) if design.rho_best <= o.rho else design.rho_best
+    verified = design.rho_best <= o.rho  # the asked rho was imposed, and the verification found it exceeded
     msg = (f"robust-set design {source.name!r} -> {target.name!r}: rho = {o.rho:g} cannot be guaranteed over "
-           f"the Delta set; the best an FIR of {o.n_taps} taps guarantees is rho = {best:.4g}"
-           + (" (verified on the dense grid, within the exchange's tolerance of the asked rho)"
-              if design.rho_best <= o.rho else ""))
+           f"the Delta set; the best an FIR of {o.n_taps} taps guarantees is rho = "
+           f"{design.rho_guaranteed if verified else design.rho_best:.4g}"
+           + (" (verified on the dense grid, within the exchange's tolerance of the asked rho)" if verified else ""))
     if not o.relax:
         raise RobustSetInfeasibleError(msg + f". Next step: ask rho >= {design.rho_best:.4g}, lower the bound, "
                                        "or allow more taps (`n_taps`).", rho=o.rho, rho_best=design.rho_best)

@@ -1472,7 +1472,7 @@ def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: A
     n = d_f.size
     ts = float(filters["sample_time"])
     axis = filters.get("axis", "x")
-    unit, key = signal_unit(filters)
+    unit, _ = signal_unit(filters)
     prefix = (filters.get("c") or {}).get("prefix") or default_c_prefix(str(source), str(target), axis)
     summary = {"from": source, "to": target, "axis": axis, "filters": origin, "method": filters.get("method"),
                "law": "paper",
