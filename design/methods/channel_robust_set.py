@@ -45,8 +45,9 @@ class ChannelRobustSetDesign(RobustSetDesign):
     filters : LearningFilters
         The Theorem's channel pair (:func:`~..maps.channel_filters.channel_filters`).
     F, rho, rho_best, rho_design, rho_guaranteed, feasible, nominal_worst, margin_bands, w, worst, exchanges, \
-solve_time, delta_set, finite, trial
-        As :class:`~.robust_set.RobustSetDesign` (``finite`` None: no whole-trial figure is computed).
+solve_time, delta_set, finite, trial, whole_trial
+        As :class:`~.robust_set.RobustSetDesign` (``finite`` and ``whole_trial`` None: no whole-trial figure is
+        computed).
     """
 
     @cached_property

@@ -1,0 +1,212 @@
+"""The whole-trial figure of a learning law over the stated set's extreme plants (docs/theory.md section 6).
+
+A per-frequency guarantee (:mod:`..methods.robust_set`, :mod:`..checks.theorem`) holds for signals over an infinite
+horizon. A vehicle flies a trial of ``N`` samples, and near its ends a non-causal law acts on samples that do not
+exist. This module flies whole trials through the loops' lifted maps (:class:`~..maps.finite_horizon.PairTrials`)
+for the plants at the edge of the source's stated set and for the disturbances that meet a trial's ends, and
+reports the worst ratio ``||e_j|| / ||e'_j||`` among them, with the plant and disturbance that reach it.
+
+The plants of system j-1, ``P = (1 + Delta) P_hat`` with the stated bound ``B`` (continuous, sampled with the loop's
+zero-order hold): the model itself; the gains ``Delta = +-B``; the all-pass errors ``Delta(s) = +-B (a - s)/(a + s)``
+(``|Delta(jw)| = B`` at every frequency, every phase at the corner ``a``) at the worst frequency of the per-frequency
+figure and at corners log-spaced over the band where loops act (:data:`CORNERS`). The disturbances (the same at both
+vehicles, from rest): a gust (``1 - cos`` pulse) over the trial's last and over its first :data:`GUST_S` seconds, a
+sinusoid at each worst frequency switched on at ``t = 0``, and a constant (a wind that blows all trial).
+
+This is a figure over stated members, not a bound over every disturbance: over every disturbance a trial's ratio is
+at least 1 whenever the source's relative degree exceeds the target's (a disturbance in the last samples reaches
+the target's error, never the source's), so no law keeps ``rho < 1`` there; docs/theory.md section 6 gives the
+argument and the measured figures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
+
+import numpy as np
+
+from ilcdob.errors import SpecError, UnstableLoopError
+from ilcdob.loop import LoopSystem, build_loop
+from ilcdob.specs import PlantSpec
+
+from .finite_horizon import PairTrials
+
+__all__ = ["CORNERS", "GUST_S", "WholeTrialFigure", "stress_plants", "stress_disturbances", "whole_trial_figure"]
+
+#: Corners (rad/s) of the all-pass errors beside the worst frequencies, kept below a third of Nyquist.
+CORNERS = (0.3, 1.0, 3.0, 10.0, 30.0)
+#: Length of the gusts at the trial's ends, s (at most a quarter of the trial).
+GUST_S = 3.0
+
+
+@dataclass(frozen=True)
+class WholeTrialFigure:
+    """The worst whole-trial ratio over the stated members (module docstring).
+
+    Attributes
+    ----------
+    ratio : float
+        The largest ``||e_j|| / ||e'_j||`` over every plant and disturbance flown.
+    plant, disturbance : str
+        Where it is reached.
+    duration_s : float
+        Trial length, s.
+    ts : float
+        Sample time, s.
+    ratios : numpy.ndarray
+        ``(plants, disturbances)`` ratios.
+    plants, disturbances : list of str
+        Their labels.
+    skipped : list of str
+        Plants left out, with why (outside the set the guarantee covers).
+    """
+
+    ratio: float
+    plant: str
+    disturbance: str
+    duration_s: float
+    ts: float
+    ratios: np.ndarray = field(repr=False)
+    plants: list[str] = field(default_factory=list)
+    disturbances: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON fields: the worst, where, and the worst per disturbance."""
+        return {"ratio": self.ratio, "worst_plant": self.plant, "worst_disturbance": self.disturbance,
+                "duration_s": self.duration_s, "plants": len(self.plants),
+                "worst_per_disturbance": {d: float(np.max(self.ratios[:, k])) for k, d in enumerate(self.disturbances)},
+                "skipped_plants": list(self.skipped)}
+
+
+def stress_plants(model: PlantSpec, bound: float, corners: list[float]) -> list[tuple[str, PlantSpec]]:
+    """The stated set's extreme members: the model, the gains ``1 +- B``, the all-pass errors ``+-B`` at ``corners``.
+
+    Parameters
+    ----------
+    model : PlantSpec
+        ``P_hat``, continuous.
+    bound : float
+        The stated bound ``B`` (>= 0).
+    corners : list of float
+        All-pass corners, rad/s (> 0).
+
+    Returns
+    -------
+    list of (str, PlantSpec)
+        Label and plant.
+
+    Raises
+    ------
+    SpecError
+        A negative or non-finite bound, or a corner <= 0.
+    """
+    if not (np.isfinite(bound) and bound >= 0):
+        raise SpecError(f"`bound`: got {bound!r}, expected a stated model-error bound >= 0")
+    if any(not (np.isfinite(a) and a > 0) for a in corners):
+        raise SpecError(f"`corners`: got {list(corners)}, expected all-pass corners > 0 rad/s")
+    num, den = np.asarray(model.num, float), np.asarray(model.den, float)
+    out = [("model", model)]
+    if bound == 0:
+        return out
+    for sign in (1.0, -1.0):
+        out.append((f"gain {1 + sign * bound:g}", PlantSpec(tuple(num * (1 + sign * bound)), model.den, model.delay)))
+    for a in corners:
+        for sign in (1.0, -1.0):  # 1 + s B (a - s)/(a + s) = ((1 - s B) s + (1 + s B) a)/(s + a)
+            b = sign * bound
+            out.append((f"all-pass {'+' if sign > 0 else '-'}{bound:g} at {a:.3g} rad/s",
+                        PlantSpec(tuple(np.polymul(num, [1 - b, (1 + b) * a])), tuple(np.polymul(den, [1.0, a])),
+                                  model.delay)))
+    return out
+
+
+def stress_disturbances(n: int, ts: float, w_worst: list[float]) -> list[tuple[str, np.ndarray]]:
+    """Gusts over the trial's last and first :data:`GUST_S` seconds, sinusoids at ``w_worst`` from ``t = 0``,
+    a constant.
+
+    Parameters
+    ----------
+    n : int
+        Samples of the trial.
+    ts : float
+        Sample time, s.
+    w_worst : list of float
+        Frequencies of the sinusoids, rad/s.
+
+    Returns
+    -------
+    list of (str, numpy.ndarray)
+        Label and disturbance (unit peak, m/s^2).
+    """
+    t = np.arange(n) * ts
+    k = max(2, min(int(round(GUST_S / ts)), n // 4))
+    pulse = 0.5 * (1 - np.cos(2 * np.pi * np.arange(k) / (k - 1)))
+    end, start = np.zeros(n), np.zeros(n)
+    end[n - k:], start[:k] = pulse, pulse
+    out = [(f"gust over the last {k * ts:.3g} s", end), (f"gust over the first {k * ts:.3g} s", start)]
+    out += [(f"sin({w:.4g} t) from t = 0", np.sin(w * t)) for w in w_worst]
+    out.append(("constant", np.ones(n)))
+    return out
+
+
+def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSystem, target: LoopSystem,
+                       bound: float, w_worst: list[float], duration_s: float,
+                       keep: Callable[[LoopSystem], str] | None = None) -> WholeTrialFigure:
+    """Fly whole trials of ``law`` for the stated set's extreme plants of the source (module docstring).
+
+    Parameters
+    ----------
+    law : callable
+        ``e'_{j-1} -> d_f,j`` over a trial of ``round(duration_s / Ts)`` samples (e.g. a :class:`LinearMap`).
+    source, target : LoopSystem
+        Systems j-1 and j; their models are used (the target's plant does not enter the ratio per frequency).
+    bound : float
+        The source's stated bound ``B`` on ``|Delta(jw)|``.
+    w_worst : list of float
+        Worst frequencies of the per-frequency figure, rad/s: the all-pass corners and sinusoids there.
+    duration_s : float
+        Trial length, s.
+    keep : callable, optional
+        ``true source loop -> reason`` ("" keeps the plant): the plants a guarantee covers (e.g. a stability margin).
+
+    Returns
+    -------
+    WholeTrialFigure
+
+    Raises
+    ------
+    SpecError
+        A trial shorter than 10 samples.
+    """
+    ts = source.ts
+    n = int(round(duration_s / ts))
+    if n < 10:
+        raise SpecError(f"`duration_s`: got {duration_s!r} s, expected a trial of at least 10 samples of {ts:g} s")
+    nyq = np.pi / ts
+    w_worst = [float(w) for w in w_worst if 0 < w < nyq]
+    corners = sorted({*w_worst, *(a for a in CORNERS if a < nyq / 3)})
+    spec = source.nominal.spec
+    model = spec.model or spec.plant
+    nominal_target = target.nominal
+    disturbances = stress_disturbances(n, ts, w_worst)
+    rows, labels, skipped = [], [], []
+    for label, plant in stress_plants(model, bound, corners):
+        try:
+            loop = build_loop(replace(spec, plant=plant, model=model), ts)
+        except UnstableLoopError:
+            skipped.append(f"{label}: the source's DOB loop is unstable with it")
+            continue
+        why = keep(loop) if keep is not None else ""
+        if why:
+            skipped.append(f"{label}: {why}")
+            continue
+        trials = PairTrials(loop, nominal_target, n)
+        rows.append([trials.ratio(law, d) for _, d in disturbances])
+        labels.append(label)
+    ratios = np.asarray(rows, float).reshape(len(labels), len(disturbances))
+    if not labels:
+        return WholeTrialFigure(float("nan"), "", "", n * ts, ts, ratios, [], [d for d, _ in disturbances], skipped)
+    i, k = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
+    return WholeTrialFigure(float(ratios[i, k]), labels[i], disturbances[k][0], n * ts, ts, ratios, labels,
+                            [d for d, _ in disturbances], skipped)
