@@ -62,13 +62,18 @@ Clarabel through cvxpy)::
     minimise    sum_w  weight(w) |1 - F(w)|^2  +  ridge ||h||^2          (nominal: T = 1 - F)
     subject to  the cone constraint above at every grid frequency, with rho_design
 
-1. ``rho_best``: the smallest rho any FIR of this order guarantees (same cones, minimise rho).
-2. ``rho_design = min(1, max(rho, rho_best + slack))``: the asked rho if it is feasible; if not,
-   the design says so (warning, or :class:`RobustSetInfeasibleError` with ``relax=False``) and
-   guarantees the best it can. It never exceeds 1: no admissible plant is made worse than
-   without learning. A feasible rho whose verified worst case ends above it (the exchange stops
-   within ``tol``) is designed again at ``rho - tol``; a design is feasible only where the verified
-   ``rho_guaranteed <= rho``.
+1. The asked rho first (with the exchange of step 3). A feasible rho whose verified worst case ends above
+   it (the exchange stops within ``tol``) is designed again at ``rho - tol``; a design is feasible only
+   where the verified ``rho_guaranteed <= rho``. ``rho_best``, the smallest rho an FIR of this order
+   guarantees (same cones, minimise rho), is then only reported: one solve on the grid the design ended
+   on, verified (an upper bound on the best; converging its own exchange took 7 solves, 15 s, at 2 ms).
+   Where a frequency's set reaches its centre's distance (``R >= |b|``, or its image is unbounded) every
+   ``F`` has a worst case of at least 1 there (``|a - b F| + R |F| >= a``): ``rho_best = 1`` without a solve.
+2. Where the asked rho is not feasible (the SOCP infeasible, or not solved within
+   :data:`_FIRST_TRY_ITERATIONS`, and the min-max filter with its exchange above rho),
+   ``rho_design = min(1, rho_best + slack)``: the design says so (warning, or
+   :class:`RobustSetInfeasibleError` with ``relax=False``) and guarantees the best it can. It never
+   exceeds 1: no admissible plant is made worse than without learning.
 3. Exchange: the worst case is evaluated on a dense verification grid (``n_verify`` points,
    linear to Nyquist, plus a log grid below ``w_min``); frequencies where it exceeds
    ``rho_design`` are added to the design grid and the SOCP is solved again (per round at most 60:
@@ -88,9 +93,12 @@ stops within ``tol`` (2e-3) of the imposed rho, so ``rho_guaranteed <= rho_desig
 reported; where ``F`` must vanish on a band a FIR can only come within ``tol`` of it, hence e.g.
 1.0013 for "never worse"); (b) a trial is finite: the bound is per frequency, i.e. for signals
 over an infinite horizon, and a non-causal ``F`` at the ends of a trial acts on samples it does
-not have (:meth:`RobustSetDesign.apply` says how they are treated). The whole-trial figure
+not have (:meth:`RobustSetDesign.apply` says how they are treated). Every design flies whole trials of
+its law for the stated set's extreme plants and the disturbances that meet a trial's ends
+(:attr:`RobustSetDesign.whole_trial`, :mod:`..maps.whole_trial`) and says where one exceeds its
+guarantee (:func:`check_whole_trial`). The whole-trial figure
 ``rho_N = max_d ||e_j|| / ||e'_j||`` of the lifted ``N``-sample map (:mod:`..maps.finite_horizon`) is
-reported beside ``rho_guaranteed`` (:attr:`RobustSetDesign.finite`, exact models). It exceeds 1
+reported on request (:attr:`RobustSetDesign.finite`, exact models, ``finite_trial_s``). It exceeds 1
 for every zero-phase ``F`` (1.5-2.1 on the built-in fleet at |Delta| <= 0.3 and 0.5, 60 s): the
 worst disturbance sits in the trial's last half second, where ``F``'s look-ahead spreads it back
 to times at which the error without learning has nothing. A causal ``F`` (``advance = 0``) keeps
@@ -475,7 +483,8 @@ class RobustSetDesign:
     rho : float
         The asked factor.
     rho_best : float
-        Smallest factor an FIR of this order guarantees (verification grid).
+        Smallest factor an FIR of this order guarantees (verification grid; where the asked rho is
+        feasible, the verified worst case of one min-max solve: an upper bound, module docstring step 1).
     rho_design : float
         Factor imposed: ``rho`` (or ``rho - tol``, step 2 of the module docstring) if feasible, else
         ``min(1, rho_best + slack)``.
