@@ -47,7 +47,7 @@ class WholeTrialFigure:
     Attributes
     ----------
     ratio : float
-        The largest ``||e_j|| / ||e'_j||`` over every plant and disturbance flown.
+        The largest ``||e_j|| / ||e'_j||`` over every plant and disturbance flown (nan if every plant was skipped).
     plant, disturbance : str
         Where it is reached.
     duration_s : float
@@ -76,7 +76,8 @@ class WholeTrialFigure:
         """JSON fields: the worst, where, and the worst per disturbance."""
         return {"ratio": self.ratio, "worst_plant": self.plant, "worst_disturbance": self.disturbance,
                 "duration_s": self.duration_s, "plants": len(self.plants),
-                "worst_per_disturbance": {d: float(np.max(self.ratios[:, k])) for k, d in enumerate(self.disturbances)},
+                "worst_per_disturbance": {d: float(np.max(self.ratios[:, k])) for k, d in enumerate(self.disturbances)
+                                          if self.plants},
                 "skipped_plants": list(self.skipped)}
 
 

@@ -1028,6 +1028,11 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
                                margin_bands=mask_intervals(wv, excluded_v), w=wv, worst=worst, exchanges=rounds,
                                solve_time=time.perf_counter() - t_start, delta_set=described, trial=o.trial)
 
+    def _refused(h: np.ndarray, worst: np.ndarray, best: float) -> RobustSetDesign:  # relax=False: the best, unused
+        return RobustSetDesign(None, FIRFilter(h, o.lead, ts), o.rho, best, best, best, False,
+                               float(np.max(np.abs(1 - phi_v_at(h)))), mask_intervals(wv, excluded_v), wv, worst, 0,
+                               time.perf_counter() - t_start, described, trial=o.trial)
+
     def run(rho: float | None, grid: np.ndarray, max_rounds: int = o.max_exchange, first_try: bool = False
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
         """Taps, worst case on the verification grid, final design grid and rounds; None if ``rho`` is infeasible."""
@@ -1050,9 +1055,7 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     if o.rho < 1 and np.any(forced):
         # |a - b F| + R |F| >= a - |b| |F| + R |F| >= a there: no FIR guarantees rho < 1, and the best is "never worse"
         if not o.relax:
-            return RobustSetDesign(None, FIRFilter(np.zeros(o.n_taps), o.lead, ts), o.rho, 1.0, 1.0, 1.0, False, 1.0,
-                                   mask_intervals(wv, excluded_v), wv, np.ones(wv.size), 0,
-                                   time.perf_counter() - t_start, described, trial=o.trial)
+            return _refused(np.zeros(o.n_taps), np.ones(wv.size), 1.0)
         made = run(1.0, o.grid(ts))
         h, worst, _, rounds = made if made is not None else (np.zeros(o.n_taps), np.ones(wv.size), None, 0)
         return _result(h, worst, 1.0, 1.0, False, rounds)
@@ -1074,9 +1077,7 @@ def _design_filter(source: LoopSystem, target: LoopSystem, w_bound: np.ndarray, 
     else:  # the asked rho is not guaranteed: design at the best guaranteed one
         rho_design = float(min(1.0, rho_best + o.slack))
         if not o.relax:
-            return RobustSetDesign(None, FIRFilter(h_best, o.lead, ts), o.rho, rho_best, rho_best, rho_best, False,
-                                   float(np.max(np.abs(1 - phi_v_at(h_best)))), mask_intervals(wv, excluded_v), wv,
-                                   worst_best, 0, time.perf_counter() - t_start, described, trial=o.trial)
+            return _refused(h_best, worst_best, rho_best)
         made = run(rho_design, start)
         h, worst, _, rounds = made if made is not None else (h_best, worst_best, start, 0)
     if float(np.max(worst)) > max(rho_design + o.tol, rho_best):  # the exchange did not converge: the min-max filter
