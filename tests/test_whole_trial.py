@@ -36,7 +36,18 @@ from test_band_exact import TEN_MS, TWO_MS, _fleet
 BOUND = 0.3
 
 
+_MADE: dict[tuple, tuple] = {}
+
+
 def _design(ts: float, systems: list[dict], src: str, tgt: str, **opts):
+    """The pair's design with its warnings, made once per module (each takes 6-8 s of CPU)."""
+    key = (ts, src, tgt, tuple(sorted(opts.items())))
+    if key not in _MADE:
+        _MADE[key] = _made(ts, systems, src, tgt, **opts)
+    return _MADE[key]
+
+
+def _made(ts: float, systems: list[dict], src: str, tgt: str, **opts):
     fleet = _fleet(ts, BOUND, systems)
     deltas = fleet_delta_sets(fleet, list(fleet.names), k=1)
     ds = deltas[src]
