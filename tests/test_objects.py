@@ -189,7 +189,8 @@ def test_design_to_mat_holds_the_numbers_and_the_law(tmp_path):
                       **({"lookahead": m[f"{k}_lookahead"].ravel().tolist()} if m[f"{k}_lookahead"].size else {})}
                   for k in ("L1", "L2")},
                "band": {"sos": m["band_sos"].tolist(), "zi": m["band_zi"].tolist(), "pad": int(m["band_pad"].item()),
-                        "end_fit": int(m["band_end_fit"].item()), "start": str(m["band_start"][0])},
+                        "end_fit": int(m["band_end_fit"].item()), "start": str(m["band_start"][0]),
+                        "output_start": str(m["band_output_start"][0])},
                "disturbance": {"W": {"sos": m["W_sos"].tolist()}}}
     e = np.sin(np.linspace(0.0, 8.0, 300)) * np.linspace(0.0, 1.0, 300)
     np.testing.assert_array_equal(apply_learning(rebuilt, e, 0.1 * e), apply_learning(f, e, 0.1 * e))

@@ -439,15 +439,19 @@ def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: s
                    "band_pad": int(band.get("pad", 0)) if has_band else 0,
                    "band_end_fit": int(band.get("end_fit", 1)) if has_band else 0,
                    "band_cutoff_rad_s": float(band["cutoff_rad_s"]) if has_band else float("nan"),
-                   "band_start": str(band.get("start", "crop")) if has_band else ""})
+                   "band_start": str(band.get("start", "crop")) if has_band else "",
+                   "band_output_start": str(band.get("output_start", "first sample")) if has_band else ""})
     notes.update({"band_sos": "learning band F, second-order sections run forwards then backwards (zero phase); "
                               "empty: no band (F = 1)",
-                  "band_zi": "steady state of band_sos per unit input (sosfilt_zi), the start of each pass",
+                  "band_zi": "steady state of band_sos per unit input (sosfilt_zi), the start of each pass (but "
+                             "band_output_start)",
                   "band_pad": "samples H adds before and after the trial (zeros before, a line after)",
                   "band_end_fit": "last samples of the trial the line after it is fitted to",
                   "band_cutoff_rad_s": "corner of F, rad/s (NaN: no band)",
                   "band_start": "'fold': the part before t = 0 is added, time-reversed, to the first band_pad "
-                                "samples; 'crop': dropped; '': no band"})
+                                "samples; 'crop': dropped; '': no band",
+                  "band_output_start": "'rest': the pass of F on the learning signal starts its forward filter from "
+                                       "rest; 'first sample': from band_zi times its first sample; '': no band"})
     w_sos = (filters.get("disturbance") or {}).get("W", {}) or {}
     values["W_sos"] = _matrix(w_sos.get("sos"), 6)
     notes["W_sos"] = ("airframe correction W, second-order sections run forwards from rest; empty: the disturbance "

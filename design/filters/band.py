@@ -361,17 +361,19 @@ class LearningBand:
             state per unit input, ``scipy.signal.sosfilt_zi``, that the backward passes start
             from), ``pad`` and ``end_fit`` (samples), ``start`` (``"fold"``: the part of the
             learning signal before ``t = 0`` is added, time-reversed, to the trial's first ``pad``
-            samples, :func:`fold_start`) and ``rule``.
+            samples, :func:`fold_start`), ``output_start`` (``"rest"``: the pass of F on the learning
+            signal starts its forward filter from rest, docs/theory.md section 6) and ``rule``.
         """
         out: dict[str, Any] = {"cutoff_rad_s": self.cutoff, "order": int(self.order), "source": self.source,
                                "reason": self.reason, "edges_rad_s": dict(self.edges), "noise_std_m": self.noise_std}
         if self.cutoff is not None:
             sos = self.sos
             out.update({"sos": sos.tolist(), "zi": sps.sosfilt_zi(sos).tolist(), "pad": self.pad,
-                        "end_fit": end_fit_samples(self.ts), "start": "fold",
+                        "end_fit": end_fit_samples(self.ts), "start": "fold", "output_start": "rest",
                         "rule": "d_f = fold(F{W{L1{F{H{e}}} + L2{F{H{d_f_prev}}}}}): H extends the trial by `pad` "
                                 "samples (zeros before, the line through the last `end_fit` samples after); F is "
-                                "`sos` run forwards then backwards (scipy.signal.sosfiltfilt, padtype=None); with z "
+                                "`sos` run forwards then backwards (scipy.signal.sosfiltfilt, padtype=None; the outer F's "
+                                "forward run from rest, output_start); with z "
                                 "the result on the extended horizon (n + 2 pad samples), fold gives d_f[k] = "
                                 "z[pad + k] + z[pad - 1 - k] for k < min(pad, n) and z[pad + k] after"})
         return out

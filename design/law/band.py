@@ -41,6 +41,9 @@ class BandSpec:
         The band's reason, for the README.
     fold : bool
         The learning signal before ``t = 0`` folded onto the first samples (else cropped).
+    rest : bool
+        The output pass starts its forward filter from rest (key ``output_start``: ``"rest"``), else from the
+        steady state of its first sample (``"first sample"``, files written before the key).
     """
 
     entry: dict[str, Any]
@@ -52,6 +55,7 @@ class BandSpec:
     order: int | None
     why: str
     fold: bool
+    rest: bool = False
 
 
 def band_spec(filters: dict[str, Any], ctx: LawContext | None = None) -> BandSpec | None:
@@ -102,9 +106,13 @@ def band_spec(filters: dict[str, Any], ctx: LawContext | None = None) -> BandSpe
     if band.get("start", "crop") not in ("crop", "fold"):
         raise SpecError(f"`band.start`: got {band.get('start')!r:.80}, expected 'fold' (the part before t = 0 "
                         "added, time-reversed, to the first samples) or 'crop'")
+    start = band.get("output_start", "first sample")
+    if start not in ("rest", "first sample"):
+        raise SpecError(f"`band.output_start`: got {start!r:.80}, expected 'rest' (the output pass of F starts from "
+                        "rest) or 'first sample' (from the steady state of its first sample)")
     return BandSpec(band, sos, zi, pad, end_fit, None if cutoff is None else float(cutoff),
                     band.get("order") if isinstance(band.get("order"), int) else None,
-                    str(band.get("reason") or band.get("source") or ""), band.get("start") == "fold")
+                    str(band.get("reason") or band.get("source") or ""), band.get("start") == "fold", start == "rest")
 
 
 def check_cutoff(cutoff: object) -> float:
@@ -126,9 +134,9 @@ def check_cutoff(cutoff: object) -> float:
     return float(cutoff)
 
 
-def forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """One zero-phase pass: ``sos`` forwards from the state ``zi x[0]``, then backwards from
-    ``zi y[-1]`` (what ``scipy.signal.sosfiltfilt(..., padtype=None)`` computes).
+def forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, rest: bool = False) -> np.ndarray:
+    """One zero-phase pass: ``sos`` forwards from the state ``zi x[0]`` (from rest if ``rest``), then backwards
+    from ``zi y[-1]`` (what ``scipy.signal.sosfiltfilt(..., padtype=None)`` computes, ``rest`` False).
 
     Parameters
     ----------
@@ -138,18 +146,21 @@ def forward_backward(sos: np.ndarray, zi: np.ndarray, x: np.ndarray) -> np.ndarr
         Their steady state per unit input (``scipy.signal.sosfilt_zi``).
     x : numpy.ndarray
         The signal (at least one sample).
+    rest : bool
+        Start the forward filter from rest: the signal is zero before ``x[0]`` (the learning signal before the
+        extended horizon, docs/theory.md section 6).
     """
-    y, _ = sps.sosfilt(sos, x, zi=zi * x[0])
+    y, _ = sps.sosfilt(sos, x, zi=zi * (0.0 if rest else x[0]))
     y, _ = sps.sosfilt(sos, y[::-1], zi=zi * y[-1])
     return y[::-1]
 
 
-def _zero_phase_map(spec: BandSpec, m: int) -> LinearMap:
+def _zero_phase_map(spec: BandSpec, m: int, rest: bool = False) -> LinearMap:
     """One forward-backward pass of F over ``m`` samples (:func:`forward_backward`) as a linear map."""
     phi = sps.sosfilt(spec.sos, np.zeros(m), zi=spec.zi)[0]
     causal = sos_map(spec.sos, m, "F")
 
-    def f(x: np.ndarray) -> np.ndarray:
+    def f(x: np.ndarray) -> np.ndarray:  # from the steady state of the first sample
         return causal(x) + phi * x[0]
 
     def ft(y: np.ndarray) -> np.ndarray:
@@ -157,7 +168,8 @@ def _zero_phase_map(spec: BandSpec, m: int) -> LinearMap:
         out[0] += float(phi @ y)
         return out
 
-    return LinearMap(m, m, lambda x: f(f(x)[::-1])[::-1], lambda y: ft(ft(y[::-1])[::-1]), "F")
+    first, first_t = (causal, causal.T) if rest else (f, ft)
+    return LinearMap(m, m, lambda x: f(first(x)[::-1])[::-1], lambda y: first_t(ft(y[::-1])[::-1]), "F")
 
 
 class _Band(Stage):
@@ -217,7 +229,7 @@ class BandIn(_Band):
             p=prefix, m=macro)
         step = (f"    {prefix}horizon(e, n, a);   /* e and df_prev are read before df_next is written */\n"
                 f"    {prefix}horizon(df_prev, n, b);\n"
-                f"    {prefix}band_pass(a, len);\n    {prefix}band_pass(b, len);\n")
+                f"    {prefix}band_pass(a, len, 0);\n    {prefix}band_pass(b, len, 0);\n")
         return CParts(tables, helpers, step, sections=True, loads=True)
 
 
@@ -231,18 +243,18 @@ class BandOut(_Band):
 
     def apply(self, x: Signals, n: int, notes: dict[str, Any]) -> Signals:  # noqa: D102 - Stage.apply
         s = self.spec
-        z = forward_backward(s.sos, s.zi, x[0])
+        z = forward_backward(s.sos, s.zi, x[0], s.rest)
         return (fold_start(z, s.pad, n) if s.fold else z[s.pad:s.pad + n],)
 
     def shape(self, m: int, k: int, n: int) -> tuple[int, int]:  # noqa: D102 - Stage.shape
         return n, k
 
     def linear_map(self, m: int, k: int, n: int) -> LinearMap:  # noqa: D102 - Stage.linear_map
-        return fold_map(self.spec.pad, n, self.spec.fold) @ _zero_phase_map(self.spec, m)
+        return fold_map(self.spec.pad, n, self.spec.fold) @ _zero_phase_map(self.spec, m, self.spec.rest)
 
     def c_parts(self, prefix: str) -> CParts:  # noqa: D102 - Stage.c_parts
         macro = prefix.upper()
-        step = (f"    {prefix}band_pass(a, len);\n"
+        step = (f"    {prefix}band_pass(a, len, {int(self.spec.rest)});\n"
                 f"    for (k = 0; k < n; ++k)\n        df_next[k] = a[{macro}PAD + k];\n")
         if self.spec.fold:
             step += (f"    /* fold: the part before t = 0, time-reversed, onto the first samples */\n"
@@ -252,16 +264,17 @@ class BandOut(_Band):
 
 
 _BAND_PASS_C = """
-/* One zero-phase pass of F over x[0..n) in place, n >= 1: forwards from the state zi x[0],
-   then backwards from zi y[n-1] (scipy.signal.sosfiltfilt with padtype=None). */
-static void {p}band_pass(double *x, size_t n)
+/* One zero-phase pass of F over x[0..n) in place, n >= 1: forwards from the state zi x[0] (from rest if
+   from_rest), then backwards from zi y[n-1] (scipy.signal.sosfiltfilt with padtype=None). */
+static void {p}band_pass(double *x, size_t n, int from_rest)
 {{
+    const double x0 = from_rest ? 0.0 : x[0];
     double z[{ns}][2];
     size_t i;
 
     for (i = 0; i < {ns}; ++i) {{
-        z[i][0] = {p}band_zi[i][0] * x[0];
-        z[i][1] = {p}band_zi[i][1] * x[0];
+        z[i][0] = {p}band_zi[i][0] * x0;
+        z[i][1] = {p}band_zi[i][1] * x0;
     }}
     {p}sections({p}band_sos, {ns}, z, x, n, 0);
     for (i = 0; i < {ns}; ++i) {{
