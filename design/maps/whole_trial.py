@@ -21,6 +21,7 @@ argument and the measured figures.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
@@ -30,7 +31,7 @@ from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import LoopSystem, build_loop
 from ilcdob.specs import PlantSpec
 
-from .finite_horizon import PairTrials
+from .finite_horizon import PairTrials, causal_map
 
 __all__ = ["CORNERS", "GUST_S", "WholeTrialFigure", "stress_plants", "stress_disturbances", "whole_trial_figure"]
 
@@ -189,7 +190,7 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
     corners = sorted({*w_worst, *(a for a in CORNERS if a < nyq / 3)})
     spec = source.nominal.spec
     model = spec.model or spec.plant
-    nominal_target = target.nominal
+    base = PairTrials(source.nominal, target.nominal, n)  # the target's maps, shared by every plant
     disturbances = stress_disturbances(n, ts, w_worst)
     rows, labels, skipped = [], [], []
     for label, plant in stress_plants(model, bound, corners):
@@ -202,7 +203,8 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
         if why:
             skipped.append(f"{label}: {why}")
             continue
-        trials = PairTrials(loop, nominal_target, n)
+        trials = copy.copy(base)
+        trials.gd_s = causal_map(loop.G_d, n)
         rows.append([trials.ratio(law, d) for _, d in disturbances])
         labels.append(label)
     ratios = np.asarray(rows, float).reshape(len(labels), len(disturbances))

@@ -122,7 +122,7 @@ import time
 import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import cvxpy as cp
 import numpy as np
@@ -151,7 +151,7 @@ if TYPE_CHECKING:
     from ..maps.finite_horizon import FiniteHorizonRatio, LinearMap
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
-           "design_robust_set", "check_whole_trial", "bound_on_grid", "admissible", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
+           "design_robust_set", "check_whole_trial", "bound_on_grid", "admissible", "admissibility", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
 
 _OK = ("optimal", "optimal_inaccurate")
 _INFEASIBLE = ("infeasible", "infeasible_inaccurate", "user_limit")  # user_limit: no certificate either way
@@ -452,22 +452,50 @@ def admissible(source: LoopSystem, source_true: LoopSystem, w_bound: np.ndarray,
     why : str
         Empty when admissible, else what fails and where.
     """
+    why = admissibility(source, w_bound, bound, margin, n)(source_true)
+    return not why, why
+
+
+def admissibility(source: LoopSystem, w_bound: np.ndarray, bound: np.ndarray, margin: float = 0.5,
+                  n: int = 3000) -> Callable[[LoopSystem], str]:
+    """:func:`admissible` for many true plants of one source: the model's frequency responses computed once.
+
+    Parameters
+    ----------
+    source : LoopSystem
+        System j-1 (its model is used).
+    w_bound, bound : array
+        The Delta set's bound ``W`` (:func:`bound_on_grid`).
+    margin : float
+        The design's stability margin.
+    n : int
+        Frequencies checked.
+
+    Returns
+    -------
+    callable
+        ``true loop -> why``: empty when admissible, else what fails and where.
+    """
     nyq = np.pi / source.ts
     w = np.logspace(-3, np.log10(nyq * (1 - 1e-9)), n)
-    nom = source.nominal
-    delta = freqresp(source_true.P, w) / freqresp(nom.P, w) - 1
+    p_hat = freqresp(source.nominal.P, w)
     W = bound_on_grid(w_bound, bound, w)
     _, _, _, t0, _ = uncertainty_cones(source, w, W, margin)
-    over = np.abs(delta) > W * (1 + 1e-6) + 1e-12
-    if np.any(over):
-        i = int(np.argmax(np.abs(delta) - W))
-        return False, f"|Delta| = {abs(delta[i]):.4g} > W = {W[i]:.4g} at {w[i]:.4g} rad/s"
     zone = W * np.abs(t0) > 1 - margin
-    close = zone & (np.abs(1 + t0 * delta) < margin)
-    if np.any(close):
-        i = int(np.flatnonzero(close)[np.argmin(np.abs(1 + t0 * delta)[close])])
-        return False, f"|1 + T0 Delta| = {abs(1 + t0[i] * delta[i]):.4g} < margin {margin:g} at {w[i]:.4g} rad/s"
-    return True, ""
+
+    def why(source_true: LoopSystem) -> str:
+        delta = freqresp(source_true.P, w) / p_hat - 1
+        over = np.abs(delta) > W * (1 + 1e-6) + 1e-12
+        if np.any(over):
+            i = int(np.argmax(np.abs(delta) - W))
+            return f"|Delta| = {abs(delta[i]):.4g} > W = {W[i]:.4g} at {w[i]:.4g} rad/s"
+        close = zone & (np.abs(1 + t0 * delta) < margin)
+        if np.any(close):
+            i = int(np.flatnonzero(close)[np.argmin(np.abs(1 + t0 * delta)[close])])
+            return f"|1 + T0 Delta| = {abs(1 + t0[i] * delta[i]):.4g} < margin {margin:g} at {w[i]:.4g} rad/s"
+        return ""
+
+    return why
 
 
 @dataclass(frozen=True)
@@ -925,12 +953,8 @@ def _whole_trial(design: RobustSetDesign, source: LoopSystem, target: LoopSystem
 
     w_worst = [float(design.w[np.nanargmax(design.worst)])]
     stated = 0.0 if structure is not None else float(np.min(bound))  # the sampled radius at low frequency
-
-    def keep(loop: LoopSystem) -> str:
-        return admissible(source, loop, w_bound, bound, o.margin)[1]
-
     return whole_trial_figure(law_map(design, int(round(o.whole_trial_s / source.ts))), source, target, stated,
-                              w_worst, o.whole_trial_s, keep)
+                              w_worst, o.whole_trial_s, admissibility(source, w_bound, bound, o.margin))
 
 
 def check_whole_trial(design: RobustSetDesign, source: object, target: object, o: RobustSetOptions) -> None:
