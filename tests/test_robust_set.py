@@ -27,7 +27,7 @@ from ilcdob.loop import build_loop, freqresp
 from ilcdob.specs import PlantSpec
 
 # small FIR and grids keep each design at a few seconds; the method is the same as the default's
-FAST = dict(n_taps=101, n_grid=80, n_verify=3000)
+FAST = dict(n_taps=101, n_grid=80, n_verify=3000, whole_trial_s=0.0)  # whole trials: tests/test_whole_trial.py
 
 
 @pytest.fixture(scope="module")
