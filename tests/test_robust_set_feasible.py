@@ -21,7 +21,7 @@ from ilcdob.design.pair import design_pair, fleet_delta_sets
 
 
 def _design(flt, deltas, rho):
-    opts = RobustSetOptions(rho=rho, finite_trial_s=0.0, delta_set="disc")
+    opts = RobustSetOptions(rho=rho, finite_trial_s=0.0, whole_trial_s=0.0, delta_set="disc")
     return design_pair(flt, "UAV2", "UAV3", RobustSet(opts, deltas=deltas)).filters
 
 
