@@ -52,6 +52,7 @@ start.
 
 from __future__ import annotations
 
+import copy
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -696,6 +697,18 @@ class PairTrials:
         self.gd_s = causal_map(source.G_d, self.n)
         self.gd_t = causal_map(target.G_d, self.n)
         self.gf_t = causal_map(target.G_f, self.n)
+
+    def with_source(self, source: LoopSystem) -> "PairTrials":
+        """The same target's trials with another source loop (the target's maps are shared, not recomputed).
+
+        Parameters
+        ----------
+        source : LoopSystem
+            True loop of vehicle j-1.
+        """
+        out = copy.copy(self)
+        out.gd_s = causal_map(source.G_d, self.n)
+        return out
 
     def errors(self, learn: Callable[[np.ndarray], np.ndarray], d: object) -> tuple[np.ndarray, np.ndarray]:
         """``(e_j, e'_j)`` of one trial of disturbance ``d`` (hover at 0), m.

@@ -21,7 +21,6 @@ argument and the measured figures.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
@@ -31,7 +30,7 @@ from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import LoopSystem, build_loop
 from ilcdob.specs import PlantSpec
 
-from .finite_horizon import PairTrials, causal_map
+from .finite_horizon import PairTrials
 
 __all__ = ["CORNERS", "GUST_S", "WholeTrialFigure", "stress_plants", "stress_disturbances", "whole_trial_figure"]
 
@@ -203,8 +202,7 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
         if why:
             skipped.append(f"{label}: {why}")
             continue
-        trials = copy.copy(base)
-        trials.gd_s = causal_map(loop.G_d, n)
+        trials = base.with_source(loop)
         rows.append([trials.ratio(law, d) for _, d in disturbances])
         labels.append(label)
     ratios = np.asarray(rows, float).reshape(len(labels), len(disturbances))
