@@ -11,6 +11,8 @@ exact worst case itself is held to an independent Moebius-disc and brute-force c
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -115,3 +117,25 @@ def test_a_channel_pair_band_closes_where_its_fit_is_not_trusted():
         assert (band.cutoff is not None) == needs_band, band.describe()
         assert channel_check(src, tgt, band=band).holds
         assert channel_check(src, tgt).holds == (not needs_band)
+
+
+def test_design_exits_1_where_its_band_says_not_guaranteed(tmp_path, capsys):
+    """``ilcdob design`` writes the folder either way; where the band says the improvement is not guaranteed (the
+    right-half-plane-zero source at B = 0.5, whose set reaches its loop's stability boundary) it exits 1 and says
+    why, as ``check`` does; at B = 0.3, where the band keeps the exact worst case within 1 + 0.01, it exits 0."""
+    from ilcdob.app.cli import main
+    from ilcdob.fleet_io import fleet_to_toml
+
+    for bound, status in ((0.5, 1), (0.3, 0)):
+        path = tmp_path / f"fleet_{bound}.toml"
+        path.write_text(fleet_to_toml(0.01, list(_fleet(0.01, bound, TEN_MS).systems)))
+        out = tmp_path / f"rhp_drag_{bound}"
+        assert main(["--quiet", "design", "--fleet", str(path), "--from", "rhp", "--to", "drag", "--out",
+                     str(out)]) == status
+        written = json.loads((out / "filters.json").read_text())
+        err = capsys.readouterr().err
+        if status:
+            assert "not guaranteed" in written["band"]["reason"]
+            assert f"design written to {out}, but the improvement is not guaranteed" in err, err
+        else:
+            assert "not guaranteed" not in written["band"]["reason"] and "not guaranteed" not in err

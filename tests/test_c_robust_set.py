@@ -150,6 +150,9 @@ def test_float_variant_of_a_robust_set_design_is_refused(designs):
     ("law_maps", [1, 2], "expected a mapping"),
     ("F", {"num": [1.0, float("nan")], "advance": 1}, "finite"),
     ("trial_ends", {"fade_samples": -1}, "fade_samples"),
+    ("trial_ends.start", {"kind": "fold"}, "expected {'kind': 'matched'"),
+    ("trial_ends.start", {"kind": "matched", "target_map": {"A": [[0.5]], "B": [[1.0]], "C": [[1.0]], "D": 0.0},
+                          "gain": [[1.0, 2.0]]}, "1 states"),
     ("law_maps.source_gf", {"A": [[1.0, 0.0]], "B": [1.0], "C": [1.0], "D": 0.0}, "A of shape"),
     ("law_maps.one_minus_q", {"A": [[0.5]], "B": [1.0], "C": [float("inf")], "D": 1.0}, "non-finite"),
 ])
@@ -162,3 +165,27 @@ def test_robust_set_entries_are_checked(designs, key, value, why):
         filters[key] = value
     with pytest.raises(SpecError, match=why):
         check_filters(filters, "filters.json")
+
+
+def test_a_file_without_the_start_entry_keeps_the_fold(cc, tmp_path):
+    """``trial_ends.start`` (the continuation of F's output before t = 0, design/filters/trial_edges.py) changes the
+    law only where it acts. On the right-half-plane-zero source of tests/test_band_exact.py (10 ms, bound 0.3; its F
+    is far from a delta, where the built-in UAV1's is within 3e-8 of one) the signals with and without it differ
+    over the first second by a share of the peak, and agree past the continuation and the target's 1 - Q (1e-9 of
+    the peak after 5 s). The file without it is what its C code computes (1e-10), as files written before the
+    entry existed run; with it, C computes the law with the continuation (1e-10)."""
+    from test_band_exact import TEN_MS, _fleet
+
+    design = design_pair(_fleet(0.01, 0.3, TEN_MS), "rhp", "drag", method="robust-set", band=None)
+    filters = {k: v for k, v in json.loads(json.dumps(design.filters)).items() if k != "limit"}
+    start = filters["trial_ends"]["start"]
+    assert start["kind"] == "matched" and len(start["gain"]) == 100   # 1 s at 100 Hz
+    old = {**filters, "trial_ends": {k: v for k, v in filters["trial_ends"].items() if k != "start"}}
+    e, df = _trial(3000, filters["sample_time"], fade_in=0.0)
+    new_d, old_d = apply_learning(filters, e, df), apply_learning(old, e, df)
+    peak = np.max(np.abs(new_d))
+    assert np.max(np.abs(new_d - old_d)[:100]) > 1e-2 * peak
+    assert np.max(np.abs(new_d - old_d)[500:]) < 1e-9 * peak
+    for name, f, ref in (("old", old, old_d), ("new", filters, new_d)):
+        (tmp_path / name).mkdir()
+        assert _rel(_run_learn(_build_learn(cc, tmp_path / name, f), e, df), ref) < 1e-10, name

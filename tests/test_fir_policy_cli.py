@@ -40,7 +40,9 @@ def test_no_harm_default_writes_the_folder_and_warns_with_the_flag(tmp_path, cap
     out_dir = tmp_path / "d"
     rc = main([*FIR, *flag, "--out", str(out_dir)])
     out, err = capsys.readouterr()
-    assert rc == 0, err[-3000:]
+    # exit 1 with the folder written: at bound 0.6 the band says the improvement is not guaranteed (UAV1's set
+    # reaches its loop's stability boundary), as `ilcdob check` does
+    assert rc == 1 and "design written to" in err and "not guaranteed" in err, err[-3000:]
     warning = [line for line in err.splitlines() if line.startswith("ilcdob: warning: ")]
     assert len(warning) == 1 and "given up at" in warning[0] and BAND.search(warning[0]), err
     assert "--fir-unattainable refuse" in warning[0], warning[0]

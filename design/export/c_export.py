@@ -58,7 +58,10 @@ A robust-set design (:mod:`..methods.robust_set`, ``filters.json`` keys ``law_ma
 with ``Gf`` and ``1 - Q_j`` run as state space from rest, ``Ginv = Gd_hat_{j-1}^{-1}`` as the
 apply function ``PREFIX_ginv_apply`` above, ``d_hat`` continued past the trial's end along its
 Hann-weighted trend (:func:`~ilcdob.design.filters.trial_edges.end_continuation`) and the FIR ``Fr``'s
-output before ``t = 0`` folded onto the first samples; band, ``W`` and fold around it as above.
+output before ``t = 0`` replaced by its matched continuation over the first samples
+(:class:`~ilcdob.design.filters.trial_edges.StartMatch`, ``trial_ends.start``: the state it leaves in the
+target's ``Gf_hat_j (1 - Q_j)`` times a gain table; files without it fold that output onto the first
+samples); band, ``W`` and fold around it as above.
 Its scratch is ``3 (n + 2 pad) + advance(Fr)`` doubles, and it uses ``cos`` (``-lm``).
 
 With ``float_variant`` the source also has ``PREFIX_l1_apply_f`` (``float`` data,

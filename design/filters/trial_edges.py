@@ -1,21 +1,37 @@
 """The ends of a trial for a non-causal filter: the reconstructed disturbance continued past the
-trial's end along its trend, a look-ahead FIR run over the trial with its output before
-``t = 0`` folded back in (the robust-set law, :meth:`~..methods.robust_set.RobustSetDesign.apply`),
-and the check that a learning signal's ends stay near its interior (:func:`end_peaks`).
+trial's end along its trend, a look-ahead FIR run over the trial with its output before ``t = 0``
+replaced by the signal over the first samples that has the same effect on the target's error
+(:class:`StartMatch`; older designs fold it back in), the robust-set law
+(:meth:`~..methods.robust_set.RobustSetDesign.apply`), and the check that a learning signal's ends stay
+near its interior (:func:`end_peaks`). docs/theory.md section 6 derives the start's continuation.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
-from ilcdob.errors import LearningEndWarning
+import control as ct
+import numpy as np
+
+from ilcdob.errors import LearningEndWarning, SpecError
+from ilcdob.lifted import markov_parameters
 
 from .band import END_FIT_S, fade_out, fold_start
+from .entries import check_state_space
 
-__all__ = ["trend_weights", "end_continuation", "fir_on_trial", "EndPeaks", "end_peaks", "END_PEAK_FACTOR"]
+__all__ = ["trend_weights", "end_continuation", "fir_on_trial", "StartMatch", "START_SPAN_S", "START_WINDOW",
+           "START_RIDGE", "EndPeaks", "end_peaks", "END_PEAK_FACTOR"]
+
+#: Longest span over the trial's first samples that takes the learning signal's part before ``t = 0``, s
+#: (at most the FIR's look-ahead; :class:`StartMatch`).
+START_SPAN_S = 1.0
+#: The window over which the start's effect on the target's error is matched, in spans.
+START_WINDOW = 3
+#: Ridge of the start's least squares, relative to the mean diagonal of its normal matrix: what keeps the
+#: continuation smooth (1e-6 put a peak of 1.15x the interior at the start; 1e-2 none, with trials as good).
+START_RIDGE = 1e-2
 
 #: An end of a learning signal whose peak exceeds its interior peak this many times is flagged (:func:`end_peaks`).
 END_PEAK_FACTOR = 2.0
@@ -72,13 +88,144 @@ def end_continuation(d_hat: np.ndarray, advance: int, fade: int) -> np.ndarray:
     return out
 
 
-def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> np.ndarray:
+@dataclass(frozen=True)
+class StartMatch:
+    """What a look-ahead filter's output before ``t = 0`` does to the target, done over the trial's first samples.
+
+    Over an infinite horizon the learning signal starts before the trial; on a trial it cannot. Its part
+    before ``t = 0``, ``p``, would leave the map ``H`` from this signal to the target's error (the target
+    model's ``Gf_hat_j (1 - Q_j)``) in the state ``x0`` at ``t = 0``, whose free response ``O x0`` is what
+    the error over the trial misses. The continuation ``c`` over the first :attr:`span` samples is the
+    ridge-regularised least-squares input with that effect, ``c = argmin ||H_M c - O x0||^2 + r ||c||^2``
+    over :data:`START_WINDOW` spans (``r``: :data:`START_RIDGE` x the mean diagonal of ``H_M^T H_M``), so
+    ``c = gain x0``; docs/theory.md section 6 gives the derivation and the figures it changed.
+
+    Attributes
+    ----------
+    a, b : numpy.ndarray
+        ``H``'s state matrices ``A`` (n x n) and ``B`` (n values): ``x(k + 1) = A x(k) + B p(k)`` from rest.
+    c, d : numpy.ndarray
+        Its output matrices (kept so the entry is the whole map ``H``).
+    gain : numpy.ndarray
+        ``(span, n)``: the continuation per unit of ``x0``.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+    gain: np.ndarray
+
+    @classmethod
+    def design(cls, target_map: ct.StateSpace, advance: int) -> "StartMatch":
+        """The continuation for a look-ahead of ``advance`` samples into ``target_map`` (``H``, discrete).
+
+        Parameters
+        ----------
+        target_map : control.StateSpace
+            ``H``: the learning signal (before the target's ``1 - Q``) to the target model's error.
+        advance : int
+            The FIR's look-ahead, samples (>= 1).
+
+        Returns
+        -------
+        StartMatch
+        """
+        a, b, c, d = (np.asarray(x, float) for x in (target_map.A, target_map.B, target_map.C, target_map.D))
+        m = max(1, min(int(advance), int(round(START_SPAN_S / target_map.dt))))
+        n_w = START_WINDOW * m
+        mk = markov_parameters(target_map, n_w)
+        hm = np.zeros((n_w, m))
+        for i in range(m):  # lower-triangular Toeplitz: H from rest over the window
+            hm[i:, i] = mk[:n_w - i]
+        obs = np.empty((n_w, a.shape[0]))
+        row = c.reshape(1, -1)
+        for k in range(n_w):
+            obs[k] = row
+            row = row @ a
+        g = hm.T @ hm
+        ridge = START_RIDGE * np.trace(g) / m
+        gain = np.linalg.solve(g + ridge * np.eye(m), hm.T @ obs)
+        return cls(a, b.reshape(-1), c.reshape(-1), d.reshape(-1), gain)
+
+    @property
+    def span(self) -> int:
+        """Samples of the continuation."""
+        return self.gain.shape[0]
+
+    def state(self, pre: np.ndarray) -> np.ndarray:
+        """``x0``: ``H``'s state after ``pre`` (the signal before ``t = 0``, oldest first) from rest.
+
+        Parameters
+        ----------
+        pre : numpy.ndarray
+            The signal before the trial.
+        """
+        x = np.zeros(self.b.size)
+        for p in pre:
+            x = self.a @ x + self.b * p
+        return x
+
+    def matrix(self, advance: int) -> np.ndarray:
+        """``(span, advance)``: the continuation as a matrix on the ``advance`` samples before ``t = 0``.
+
+        Parameters
+        ----------
+        advance : int
+            Samples before the trial.
+        """
+        cols = np.empty((self.b.size, int(advance)))
+        v = self.b.copy()
+        for k in range(int(advance) - 1, -1, -1):  # x0 = sum_k A^(advance - 1 - k) B p(k)
+            cols[:, k] = v
+            v = self.a @ v
+        return self.gain @ cols
+
+    def to_dict(self) -> dict[str, Any]:
+        """``filters.json`` entry ``trial_ends.start``."""
+        return {"kind": "matched", "target_map": {"A": self.a.tolist(), "B": self.b.reshape(-1, 1).tolist(),
+                                                  "C": self.c.reshape(1, -1).tolist(), "D": float(self.d[0])},
+                "gain": self.gain.tolist()}
+
+    @classmethod
+    def from_dict(cls, entry: object, key: str = "trial_ends.start") -> "StartMatch":
+        """The entry :meth:`to_dict` writes, checked.
+
+        Parameters
+        ----------
+        entry : object
+            The entry.
+        key : str
+            Its name, for messages.
+
+        Raises
+        ------
+        SpecError
+            Not a ``"matched"`` entry, a bad state space, or a gain not of ``(span >= 1, states)`` finite values.
+        """
+        if not isinstance(entry, dict) or entry.get("kind") != "matched":
+            raise SpecError(f"`{key}`: got {entry!r:.80}, expected {{'kind': 'matched', 'target_map': ..., "
+                            "'gain': ...}")
+        a, b, c, d = check_state_space(entry.get("target_map"), f"{key}.target_map")
+        try:
+            gain = np.asarray(entry.get("gain"), dtype=float)
+        except (TypeError, ValueError):
+            gain = np.empty(0)
+        if gain.ndim != 2 or gain.shape[0] < 1 or gain.shape[1] != b.size or not np.all(np.isfinite(gain)):
+            raise SpecError(f"`{key}.gain`: got shape {gain.shape}, expected finite values of (span >= 1, "
+                            f"{b.size} states)")
+        return cls(a, b, c, d, gain)
+
+
+def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int,
+                 start: StartMatch | None = None) -> np.ndarray:
     """The robustness FIR over a trial of the reconstructed disturbance
     (:meth:`~..methods.robust_set.RobustSetDesign.apply`, extended).
 
     ``d_hat`` is continued past the trial along its trend (:func:`end_continuation`), taken as zero
     before it, and filtered by ``output(k) = sum_i h[i] d_hat(k + advance - i)``; the output before
-    ``t = 0`` is added, time-reversed, to the trial's first samples (:func:`~.band.fold_start`).
+    ``t = 0`` is replaced by ``start``'s continuation over the first samples (:class:`StartMatch`), or
+    without one (designs written before it) added, time-reversed, to them (:func:`~.band.fold_start`).
 
     Parameters
     ----------
@@ -90,6 +237,8 @@ def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> n
         Its look-ahead, samples.
     fade : int
         Samples at the end blended into the trend (:attr:`~..methods.robust_set.RobustSetDesign.end_fade`).
+    start : StartMatch, optional
+        The start's continuation; None folds.
 
     Returns
     -------
@@ -97,10 +246,15 @@ def fir_on_trial(d_hat: np.ndarray, h: np.ndarray, advance: int, fade: int) -> n
         ``n`` samples.
     """
     n = d_hat.size
-    if advance:
-        d_hat = end_continuation(d_hat, advance, fade)
-    full = np.convolve(d_hat, h)  # F's output at times -advance, -advance + 1, ...
-    return fold_start(full[:advance + n], advance, n) if advance else full[:n].copy()
+    if not advance:
+        return np.convolve(d_hat, h)[:n]
+    full = np.convolve(end_continuation(d_hat, advance, fade), h)  # F's output at times -advance, -advance + 1, ...
+    if start is None:
+        return fold_start(full[:advance + n], advance, n)
+    out = full[advance:advance + n].copy()
+    m = min(start.span, n)
+    out[:m] += (start.gain @ start.state(full[:advance]))[:m]
+    return out
 
 
 @dataclass(frozen=True)

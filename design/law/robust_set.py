@@ -15,7 +15,7 @@ from ..filters.entries import check_count, check_filter_entry, check_state_space
 from ..filters.coefficients import apply_coefficients, apply_state_space, state_space_to_dict, zpk_to_coefficients
 from ..maps.closed_form import LearningFilters, inverse_gd_filter, one_minus
 from ..maps.finite_horizon import LinearMap, causal_map, fir_map, identity_map, trend_map
-from ..filters.trial_edges import fir_on_trial
+from ..filters.trial_edges import StartMatch, fir_on_trial
 from .filters import coefficients_map
 from .stage import CORE_PLACE, CParts, LawContext, Signals, Stage, hstack_maps, register
 
@@ -56,6 +56,9 @@ class RobustSetMaps(Stage):
         ``Gd_hat_{j-1}^{-1}`` in coefficient form.
     gf, omq : tuple of numpy.ndarray
         ``Gf_hat_{j-1}`` and ``1 - Q_j`` as ``(A, B, C, D)``.
+    start : StartMatch or None
+        ``trial_ends.start``: ``F``'s output before ``t = 0`` continued over the first samples
+        (:class:`~..filters.trial_edges.StartMatch`); absent (files written before it), folded onto them.
     """
 
     kind = "robust-set maps"
@@ -63,9 +66,9 @@ class RobustSetMaps(Stage):
     keys = ("law_maps", "F", "trial_ends")
 
     def __init__(self, entries: dict[str, Any], h: np.ndarray, advance: int, fade: int, ginv: dict[str, Any],
-                 gf: tuple[np.ndarray, ...], omq: tuple[np.ndarray, ...]):
+                 gf: tuple[np.ndarray, ...], omq: tuple[np.ndarray, ...], start: StartMatch | None = None):
         self.entries, self.h, self.advance, self.fade = entries, h, advance, fade
-        self.ginv, self.gf, self.omq = ginv, gf, omq
+        self.ginv, self.gf, self.omq, self.start = ginv, gf, omq, start
 
     @classmethod
     def from_dict(cls, filters: dict[str, Any], ctx: LawContext) -> "RobustSetMaps | None":  # noqa: D102
@@ -85,10 +88,11 @@ class RobustSetMaps(Stage):
         if not isinstance(ends, dict):
             raise SpecError(f"`trial_ends`: got {ends!r:.80}, expected a mapping with `fade_samples`")
         fade = check_count(ends.get("fade_samples"), "trial_ends.fade_samples", 0)
+        start = None if ends.get("start") is None else StartMatch.from_dict(ends["start"])
         check_filter_entry(maps.get("inverse_gd"), "law_maps.inverse_gd")
         return cls({k: filters[k] for k in cls.keys}, h, int(fir["advance"]), fade, maps["inverse_gd"],
                    check_state_space(maps.get("source_gf"), "law_maps.source_gf"),
-                   check_state_space(maps.get("one_minus_q"), "law_maps.one_minus_q"))
+                   check_state_space(maps.get("one_minus_q"), "law_maps.one_minus_q"), start)
 
     def to_dict(self) -> dict[str, Any]:  # noqa: D102 - Stage.to_dict
         return dict(self.entries)
@@ -98,7 +102,8 @@ class RobustSetMaps(Stage):
         e, df = x
         e_virtual = e + apply_state_space(maps["source_gf"], df) if np.any(df) else e
         d_hat = -apply_coefficients(self.ginv, e_virtual)
-        return (apply_state_space(maps["one_minus_q"], fir_on_trial(d_hat, self.h, self.advance, self.fade)),)
+        return (apply_state_space(maps["one_minus_q"], fir_on_trial(d_hat, self.h, self.advance, self.fade,
+                                                                             self.start)),)
 
     def shape(self, m: int, k: int, n: int) -> tuple[int, int]:  # noqa: D102 - Stage.shape
         return m, 1
@@ -108,7 +113,7 @@ class RobustSetMaps(Stage):
         steps = [-coefficients_map(self.ginv, m)]
         if a:
             steps.append(trend_map(m, a, self.fade))
-        steps.append(fir_map(self.h, a, m, n_in=m + a))
+        steps.append(fir_map(self.h, a, m, n_in=m + a, start=self.start))
         steps.append(state_space_map(self.omq, m, "1 - Q_j"))
         out = steps[0]
         for s in steps[1:]:
@@ -127,6 +132,13 @@ def _robust_c(prefix: str, rp: "RobustSetMaps") -> str:
            state_space_c(prefix, "omq", "1 - Q of the target (the part of a disturbance its DOB leaves)", rp.omq),
            f"\n/* F, the robustness filter: FIR of {rp.h.size} taps, out(k) = sum_i h_i in(k + {macro}F_ADVANCE - i). */\n",
            array_c(DOUBLE, f"{prefix}rs_h", rp.h)]
+    if rp.advance and rp.start is not None:
+        st = rp.start
+        out += [f"\n/* The start's continuation (ilcdob.design.filters.trial_edges.StartMatch): the state x0 of\n"
+                f"   H = Gf_hat_j (1 - Q_j) ({st.b.size} states, x(k + 1) = A x(k) + B p(k) from rest) after F's\n"
+                f"   output p before t = 0; gain x0 is added to the first {st.span} samples. */\n",
+                array_c(DOUBLE, f"{prefix}rs_sa", st.a), array_c(DOUBLE, f"{prefix}rs_sb", st.b),
+                array_c(DOUBLE, f"{prefix}rs_sg", st.gain)]
     if rp.advance:
         out.append(f"""
 /* d[0..n) continued {macro}F_ADVANCE samples past its end into d[n..n + F_ADVANCE) along its trend
@@ -205,7 +217,7 @@ static void {prefix}rs_core(double *a, double *b, size_t len, double *d)
     {prefix}ginv_apply(a, d, len);
     for (k = 0; k < len; ++k)
         d[k] = -d[k];
-""" + (f"""\
+""" + (_start_c(prefix, rp) if rp.advance and rp.start is not None else f"""\
     {prefix}rs_trend(d, len);
     for (k = 0; k < len; ++k) {{
         a[k] = {prefix}rs_conv(d, len + {macro}F_ADVANCE, {macro}F_ADVANCE + k);
@@ -220,6 +232,37 @@ static void {prefix}rs_core(double *a, double *b, size_t len, double *d)
 }}
 """)
     return "".join(out)
+
+
+def _start_c(prefix: str, rp: "RobustSetMaps") -> str:
+    """``rs_core``'s trend, FIR and start continuation (:class:`~..filters.trial_edges.StartMatch`) in C."""
+    macro, ns, span = prefix.upper(), rp.start.b.size, rp.start.span
+    return f"""\
+    {prefix}rs_trend(d, len);
+    {{
+        double x[{ns}] = {{0.0}}, t[{ns}];
+        size_t i, j;
+
+        for (k = 0; k < {macro}F_ADVANCE; ++k) {{   /* F's output before t = 0 drives H from rest */
+            const double p = {prefix}rs_conv(d, len + {macro}F_ADVANCE, k);
+            for (i = 0; i < {ns}; ++i) {{
+                double v = {prefix}rs_sb[i] * p;
+                for (j = 0; j < {ns}; ++j)
+                    v = v + {prefix}rs_sa[i][j] * x[j];
+                t[i] = v;
+            }}
+            for (i = 0; i < {ns}; ++i)
+                x[i] = t[i];
+        }}
+        for (k = 0; k < len; ++k) {{
+            a[k] = {prefix}rs_conv(d, len + {macro}F_ADVANCE, {macro}F_ADVANCE + k);
+            if (k < {span}) {{
+                for (j = 0; j < {ns}; ++j)
+                    a[k] = a[k] + {prefix}rs_sg[k][j] * x[j];
+            }}
+        }}
+    }}
+"""
 
 
 def robust_set_maps(lf: LearningFilters) -> dict[str, Any]:

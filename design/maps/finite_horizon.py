@@ -72,7 +72,7 @@ from ilcdob.signals import as_signal
 from ..filters.band import fade_out
 from .closed_form import LearningFilters, inverse_gd_filter
 from ..filters.noncausal import ZPKFilter, lookahead
-from ..filters.trial_edges import trend_weights
+from ..filters.trial_edges import StartMatch, trend_weights
 
 __all__ = ["LinearMap", "identity_map", "causal_map", "sos_map", "zpk_map", "fir_map",
            "trend_map", "odd_start_map", "extension_map", "crop_map", "fold_map", "law_map", "error_maps", "invisible_disturbances", "FiniteHorizonRatio",
@@ -328,10 +328,12 @@ def zpk_map(f: ZPKFilter, n: int) -> LinearMap:
     return LinearMap(n, n, out.fwd, out.adj, "zpk")
 
 
-def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | None = None) -> LinearMap:
+def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | None = None,
+            start: StartMatch | None = None) -> LinearMap:
     """``out[k] = sum_i h[i] x[k + advance - i]``, ``k < n``, with ``x = 0`` before ``t = 0`` and after its
-    ``n_in`` samples (default ``n``; more: the input's continuation past the trial); with ``fold``,
-    the output before ``t = 0`` added time-reversed to the first samples (:meth:`RobustSetDesign.apply
+    ``n_in`` samples (default ``n``; more: the input's continuation past the trial); the output before
+    ``t = 0`` replaced by ``start``'s continuation over the first samples, or with ``fold`` (and no
+    ``start``) added time-reversed to them (:meth:`RobustSetDesign.apply
     <ilcdob.design.methods.robust_set.RobustSetDesign.apply>`).
 
     Parameters
@@ -346,13 +348,16 @@ def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | 
         Fold the output before ``t = 0`` onto the first samples.
     n_in : int, optional
         Input samples (default ``n``).
+    start : StartMatch, optional
+        :class:`~ilcdob.design.filters.trial_edges.StartMatch` of the law (``advance`` >= 1).
     """
     h = np.asarray(h, float)
     a = int(advance)
     L = h.size
     n_x = n if n_in is None else int(n_in)
     big_n = n_x + L - 1  # length of the full convolution; output time k sits at index k + a
-    m = min(a, n) if fold else 0
+    m = min(a, n) if fold and start is None else 0
+    k_start = start.matrix(a)[:n] if start is not None and a else None  # (span, a): the part before t = 0 -> start
 
     def fwd(x: np.ndarray) -> np.ndarray:
         full = np.convolve(x, h)
@@ -361,6 +366,8 @@ def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | 
         out[:hi - a] = full[a:hi]
         if m:
             out[:m] += full[a - m:a][::-1]
+        if k_start is not None:
+            out[:k_start.shape[0]] += k_start @ full[:a]
         return out
 
     def adj(y: np.ndarray) -> np.ndarray:
@@ -369,6 +376,8 @@ def fir_map(h: np.ndarray, advance: int, n: int, fold: bool = True, n_in: int | 
         big[a:hi] = y[:hi - a]
         if m:
             big[a - m:a] += y[:m][::-1]
+        if k_start is not None:
+            big[:a] += k_start.T @ y[:k_start.shape[0]]
         return np.correlate(big, h, "valid")[:n_x]
 
     return LinearMap(n_x, n, fwd, adj, "FIR")

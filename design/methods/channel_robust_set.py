@@ -45,9 +45,10 @@ class ChannelRobustSetDesign(RobustSetDesign):
     filters : LearningFilters
         The Theorem's channel pair (:func:`~..maps.channel_filters.channel_filters`).
     F, rho, rho_best, rho_design, rho_guaranteed, feasible, nominal_worst, margin_bands, w, worst, exchanges, \
-solve_time, delta_set, finite, trial, whole_trial
+solve_time, delta_set, finite, trial, whole_trial, start
         As :class:`~.robust_set.RobustSetDesign` (``finite`` and ``whole_trial`` None: no whole-trial figure is
-        computed).
+        computed; ``start`` None: the output before ``t = 0`` is folded onto the first samples, the channel law's
+        start not being matched to its target).
     """
 
     @cached_property

@@ -124,6 +124,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Callable
 
+import control as ct
 import cvxpy as cp
 import numpy as np
 from scipy.signal import fftconvolve
@@ -138,7 +139,7 @@ from ..maps.closed_form import (LearningFilters, closed_form_filters, inverse_gd
 from .fir import FIRFilter
 from ..filters.frequency_grid import FitWeighting, check_advance, check_count, check_w_min, log_linear_grid
 from ..filters.noncausal import lookahead
-from ..filters.trial_edges import fir_on_trial
+from ..filters.trial_edges import StartMatch, fir_on_trial
 from ..filters.trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
 from ..sets.value_set import BoundFamily, EllipseFamily, family_cones, worst_over_set
 from ..sets.worst_case import mask_intervals, uncertainty_cones
@@ -549,6 +550,10 @@ class RobustSetDesign:
         ``rho_guaranteed`` holds per frequency (an infinite horizon); ``rho_N`` is what a whole
         trial can reach for its worst disturbance, which for this zero-phase ``F`` lies at an end
         of the trial (module docstring, gap (b)).
+    start : StartMatch or None
+        The extended law's continuation of ``F``'s output before ``t = 0`` over the trial's first samples,
+        matched to its effect on the target model (:class:`~..filters.trial_edges.StartMatch`); set by
+        :func:`design_robust_set`; None (a causal ``F``, the projected law, or a design without it) folds.
     """
 
     filters: LearningFilters | None
@@ -568,6 +573,7 @@ class RobustSetDesign:
     finite: FiniteHorizonRatio | None = None
     trial: str = "extended"
     whole_trial: WholeTrialFigure | None = None
+    start: StartMatch | None = None
 
     @property
     def claimed(self) -> float:
@@ -604,7 +610,7 @@ class RobustSetDesign:
         steps = [-inv]
         if a:
             steps.append(trend_map(n, a, self.end_fade))
-        steps.append(fir_map(self.F.h, a, n, n_in=n + a))
+        steps.append(fir_map(self.F.h, a, n, n_in=n + a, start=self.start))
         steps.append(causal_map(one_minus(self.filters.target.Q), n, "1 - Q_j"))
         out = steps[0]
         for s in steps[1:]:
@@ -634,9 +640,13 @@ class RobustSetDesign:
         smaller error ratios than ``F`` after or before ``L1`` (measured: docs/performance.md, "Measured
         figures behind the design's choices").
 
-        Trial ends. ``F`` looks ``F.advance`` samples (3 s for 301 taps) past every sample. Before
-        the trial ``d_hat`` is zero (the vehicle at rest) and what ``F`` puts before ``t = 0`` is
-        folded onto the trial's first samples (:func:`~..filters.band.fold_start`). After it ``d_hat``
+        Trial ends. ``F`` looks ``F.advance`` samples (1.5 s for 301 taps at 10 ms) past every sample.
+        Before the trial ``d_hat`` is zero (the vehicle at rest); what ``F`` puts before ``t = 0`` would
+        have set the target going before the trial, so it is replaced by the signal over the first
+        samples whose effect on the target model's error matches that one's (:attr:`start`,
+        :class:`~..filters.trial_edges.StartMatch`; folding it onto the first samples, as designs
+        written before did, let a disturbance at the trial's start reach 1.16 times the error without
+        learning, docs/theory.md section 6). After it ``d_hat``
         continues along its trend (:func:`end_continuation`): the line fitted (Hann-weighted least
         squares) to the ``2 F.advance`` samples before its last :attr:`end_fade` ones (those the
         stable inversion built from the error continued past the end), blended into over them. A line is what the
@@ -671,7 +681,7 @@ class RobustSetDesign:
             y = fftconvolve(markov_parameters(self.filters.target.nominal.G_d, n), d_hat)[:n]  # as the lifted map
             m = min(a, n)  # F on y extended as an odd function before t = 0 (its output starts near 0)
             return -self.trial_inverse(n).solve(np.convolve(np.concatenate([-y[:m][::-1], y]), h)[a + m:a + m + n])
-        return simulate_map(one_minus(self.filters.target.Q), fir_on_trial(d_hat, h, a, self.end_fade))
+        return simulate_map(one_minus(self.filters.target.Q), fir_on_trial(d_hat, h, a, self.end_fade, self.start))
 
     def projected(self, n: int) -> bool:
         """Whether a trial of ``n`` samples is treated by least squares (:meth:`apply`); warns when it is too long.
@@ -763,7 +773,11 @@ class RobustSetDesign:
                                        "numpy.hanning(L + 2)[1:-1] on the squared residuals, d_hat[n-m+k] becomes "
                                        "l + w_k (d_hat - l) with w_k = 0.5 (1 + cos(pi (k + 1)/(m + 1))), "
                                        "k = 0..m-1, and l continues it for F's advance past the end; F's output "
-                                       "before t = 0 is added, time-reversed, to the trial's first samples"},
+                                       "before t = 0, p, is replaced by gain x0 added to the first samples (as "
+                                       "many as gain has rows), x0 the state of target_map (Gf_hat_j (1 - Q_j)) "
+                                       "run from rest over p (design/filters/trial_edges.py StartMatch); "
+                                       "without start, p is added time-reversed to the first samples",
+                               **({} if self.start is None else {"start": self.start.to_dict()})},
                 "whole_trial": None if self.whole_trial is None else
                 {**self.whole_trial.to_dict(), "guaranteed": self.trial_guaranteed, "claimed": self.claimed,
                  "meaning": "largest ||e_j|| / ||e'_j|| over whole trials of the stated set's extreme plants "
@@ -933,7 +947,7 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         _CACHE[key] = _design_filter(source, target, w_bound, bound, o, structure)
     design = _CACHE[key]
     check_feasible(design, source, target, o)
-    design = replace(design, filters=lf)
+    design = replace(design, filters=lf, start=_start_match(design, lf))
     n_trial = int(round(o.finite_trial_s / source.ts))
     if n_trial >= 2:
         from ..maps.finite_horizon import finite_horizon_ratio, law_map
@@ -943,6 +957,14 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         design = replace(design, whole_trial=_whole_trial(design, source, target, w_bound, bound, o, structure))
         check_whole_trial(design, source, target, o)
     return design
+
+
+def _start_match(design: RobustSetDesign, lf: LearningFilters) -> StartMatch | None:
+    """The extended law's continuation of ``F``'s output before ``t = 0`` into the target model
+    (:class:`~..filters.trial_edges.StartMatch`); None for the projected law or a causal ``F``."""
+    if design.trial != "extended" or not design.F.advance:
+        return None
+    return StartMatch.design(ct.series(one_minus(lf.target.Q), lf.target.nominal.G_f), design.F.advance)
 
 
 def _whole_trial(design: RobustSetDesign, source: LoopSystem, target: LoopSystem, w_bound: np.ndarray,

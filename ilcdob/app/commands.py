@@ -42,7 +42,7 @@ from .html import build_report, report_files
 from .output import OutputError, OutputFolder, Provenance, check_output_path, verify_manifest, write_file
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "compare_orders",
-           "identify_fleet_to_folder", "design_to_folder", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
+           "identify_fleet_to_folder", "design_to_folder", "design_shortfalls", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
            "add_to_fleet", "report_to_html", "LogClock", "IdentifyInputs", "learn_to_folder", "TrialColumns"]
 
 #: ``progress(done, total, what)``: called as long work advances.
@@ -895,10 +895,48 @@ fir_unattainable, lifted
     data = _design_trial(options, chosen, flt)
     design = _pair_design(flt, source, target, chosen, options, data)
     filters = {**design.filters, "axis": options.axis}
+    if chosen.name in _WHOLE_TRIAL_METHODS and options.law == "paper" and options.disturbance == "command":
+        from ilcdob.design.checks.whole_trial import pair_whole_trial
+
+        entry = pair_whole_trial(flt, design, source, target)
+        if entry is not None:
+            filters["whole_trial"] = entry
     others = _design_outputs(design, data, filters, flt, source, target, options)
     files, written = design_files(filters, list(others), prefix=options.c_prefix, float_variant=options.c_float)
     output.write(others, files, digest=digest, law=options.law)
     return design, written
+
+
+#: Methods whose written law ``design`` flies on whole trials over the stated set (robust-set records its own; the
+#: norm-optimal and robust designs claim nothing beyond their trial and models).
+_WHOLE_TRIAL_METHODS = ("closed-form", "fir")
+
+
+def design_shortfalls(filters: dict[str, Any]) -> list[str]:
+    """What a written design does not guarantee: its learning band's verdict and its whole trials.
+
+    Parameters
+    ----------
+    filters : dict
+        ``filters.json`` as written (:func:`design_to_folder`).
+
+    Returns
+    -------
+    list of str
+        One line per shortfall (empty: the design keeps what it claims): the band's reason where it says the
+        improvement is not guaranteed (docs/theory.md section 6), and a ``whole_trial`` entry whose worst
+        trial exceeds the design's claim (robust-set).
+    """
+    out = []
+    reason = str((filters.get("band") or {}).get("reason", ""))
+    if "not guaranteed" in reason:
+        out.append(f"learning band: {reason}")
+    trials = filters.get("whole_trial") or {}
+    if trials.get("guaranteed") is False:
+        out.append(f"whole trials of {trials['duration_s']:g} s: ||e_j|| / ||e'_j|| reaches {trials['ratio']:.4g} "
+                   f"({trials['worst_plant']}, {trials['worst_disturbance']}), above the {trials['claimed']:.4g} "
+                   "claimed per frequency")
+    return out
 
 
 def _checked_design_options(o: DesignOptions) -> tuple[Any, DesignOptions]:

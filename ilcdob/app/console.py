@@ -267,6 +267,9 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     summary["disturbance"] = written["disturbance"]["at"]
     print(json.dumps(summary))
     con.note(f"wrote {a.out}")
+    short = uc.design_shortfalls(written)
+    if short:
+        raise CheckFailed(f"design written to {a.out}, but the improvement is not guaranteed: {'; '.join(short)}")
     return 0
 
 
