@@ -32,12 +32,16 @@ from ilcdob.specs import PlantSpec
 
 from .finite_horizon import PairTrials
 
-__all__ = ["CORNERS", "GUST_S", "WholeTrialFigure", "stress_plants", "stress_disturbances", "whole_trial_figure"]
+__all__ = ["CORNERS", "GUST_S", "INSIDE", "WholeTrialFigure", "stress_plants", "family_members", "stress_disturbances",
+           "whole_trial_figure"]
 
 #: Corners (rad/s) of the all-pass errors beside the worst frequencies, kept below a third of Nyquist.
 CORNERS = (0.3, 1.0, 3.0, 10.0, 30.0)
 #: Length of the gusts at the trial's ends, s (at most a quarter of the trial).
 GUST_S = 3.0
+#: Where a structured family's admissible range ends at a stability or margin limit (not at the bound), its member
+#: is taken at this share of the limit: the limits are found on a grid, within 1 % (:func:`family_members`).
+INSIDE = 0.97
 
 
 @dataclass(frozen=True)
@@ -122,6 +126,57 @@ def stress_plants(model: PlantSpec, bound: float, corners: list[float]) -> list[
     return out
 
 
+def family_members(model: PlantSpec, bound: float, taus: list[float], lo: np.ndarray,
+                   hi: np.ndarray) -> list[tuple[str, PlantSpec]]:
+    """A structured family's extreme members: the model, and per error shape (the gain ``Delta = r``, the
+    high-pass errors ``Delta(s) = r s tau/(s tau + 1)``) the two ends of its admissible ``r``.
+
+    ``r`` runs over ``[max(-B, lo), min(B, hi)]``; an end set by ``lo`` or ``hi`` (a stability or margin limit) is
+    taken at :data:`INSIDE` of it, inside the set the guarantee covers.
+
+    Parameters
+    ----------
+    model : PlantSpec
+        ``P_hat``, continuous.
+    bound : float
+        The family's ``|r| <= B`` (> 0).
+    taus : list of float
+        High-pass time constants, s (> 0).
+    lo, hi : numpy.ndarray
+        ``1 + len(taus)`` admissible limits, the gain's first
+        (:func:`~ilcdob.design.sets.value_set.admissible_range`).
+
+    Returns
+    -------
+    list of (str, PlantSpec)
+        Label and plant.
+
+    Raises
+    ------
+    SpecError
+        A bound <= 0, a time constant <= 0, or limits of another length.
+    """
+    if not (np.isfinite(bound) and bound > 0):
+        raise SpecError(f"`bound`: got {bound!r}, expected a family bound > 0")
+    if any(not (np.isfinite(t) and t > 0) for t in taus):
+        raise SpecError(f"`taus`: got {list(taus)}, expected high-pass time constants > 0 s")
+    lo, hi = np.asarray(lo, float).reshape(-1), np.asarray(hi, float).reshape(-1)
+    if lo.size != len(taus) + 1 or hi.size != lo.size:
+        raise SpecError(f"`lo`, `hi`: got {lo.size} and {hi.size} limits, expected {len(taus) + 1} (the gain's, then "
+                        "one per time constant)")
+    num, den = np.asarray(model.num, float), np.asarray(model.den, float)
+    out = [("model", model)]
+    for k, tau in enumerate([None, *taus]):
+        for r in (-bound if lo[k] <= -bound else INSIDE * lo[k], bound if hi[k] >= bound else INSIDE * hi[k]):
+            if tau is None:
+                out.append((f"gain {1 + r:.4g}", PlantSpec(tuple(num * (1 + r)), model.den, model.delay)))
+            else:  # 1 + r s tau/(s tau + 1) = ((1 + r) tau s + 1)/(tau s + 1)
+                out.append((f"high-pass {r:+.4g} at tau {tau:.3g} s",
+                            PlantSpec(tuple(np.polymul(num, [(1 + r) * tau, 1.0])), tuple(np.polymul(den, [tau, 1.0])),
+                                      model.delay)))
+    return out
+
+
 def stress_disturbances(n: int, ts: float, w_worst: list[float]) -> list[tuple[str, np.ndarray]]:
     """Gusts over the trial's last and first :data:`GUST_S` seconds, sinusoids at ``w_worst`` from ``t = 0``,
     a constant.
@@ -153,7 +208,8 @@ def stress_disturbances(n: int, ts: float, w_worst: list[float]) -> list[tuple[s
 
 def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSystem, target: LoopSystem,
                        bound: float, w_worst: list[float], duration_s: float,
-                       keep: Callable[[LoopSystem], str] | None = None) -> WholeTrialFigure:
+                       keep: Callable[[LoopSystem], str] | None = None,
+                       members: list[tuple[str, PlantSpec]] | None = None) -> WholeTrialFigure:
     """Fly whole trials of ``law`` for the stated set's extreme plants of the source (module docstring).
 
     Parameters
@@ -170,6 +226,8 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
         Trial length, s.
     keep : callable, optional
         ``true source loop -> reason`` ("" keeps the plant): the plants a guarantee covers (e.g. a stability margin).
+    members : list of (str, PlantSpec), optional
+        The source's plants to fly in place of :func:`stress_plants` of ``bound`` (e.g. :func:`family_members`).
 
     Returns
     -------
@@ -192,7 +250,7 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
     base = PairTrials(source.nominal, target.nominal, n)  # the target's maps, shared by every plant
     disturbances = stress_disturbances(n, ts, w_worst)
     rows, labels, skipped = [], [], []
-    for label, plant in stress_plants(model, bound, corners):
+    for label, plant in stress_plants(model, bound, corners) if members is None else members:
         try:
             loop = build_loop(replace(spec, plant=plant, model=model), ts)
         except UnstableLoopError:

@@ -141,9 +141,9 @@ from ..filters.frequency_grid import FitWeighting, check_advance, check_count, c
 from ..filters.noncausal import lookahead
 from ..filters.trial_edges import StartMatch, fir_on_trial
 from ..filters.trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
-from ..sets.value_set import BoundFamily, EllipseFamily, family_cones, worst_over_set
+from ..sets.value_set import TAU_RANGE, BoundFamily, EllipseFamily, admissible_range, family_cones, worst_over_set
 from ..sets.worst_case import mask_intervals, uncertainty_cones
-from ..maps.whole_trial import WholeTrialFigure, whole_trial_figure
+from ..maps.whole_trial import WholeTrialFigure, family_members, whole_trial_figure
 
 #: A structured Delta set of the source (:mod:`..sets.value_set`).
 StructuredSet = BoundFamily | EllipseFamily
@@ -969,14 +969,23 @@ def _start_match(design: RobustSetDesign, lf: LearningFilters) -> StartMatch | N
 
 def _whole_trial(design: RobustSetDesign, source: LoopSystem, target: LoopSystem, w_bound: np.ndarray,
                  bound: np.ndarray, o: RobustSetOptions, structure: StructuredSet | None) -> WholeTrialFigure:
-    """Whole trials of the design's law for the set's extreme plants that keep the margin (:mod:`..maps.whole_trial`);
-    a structured set flies the model only (its members are not the disc's all-pass errors)."""
+    """Whole trials of the design's law for the set's extreme plants that keep the margin (:mod:`..maps.whole_trial`):
+    the disc's gains and all-pass errors at the bound; the fleet-bound family's gains and high-pass errors at the
+    ends of their admissible range (:func:`~..maps.whole_trial.family_members`, time constants at the ends and the
+    middle of :data:`~..sets.value_set.TAU_RANGE`); an identification's ellipsoid, the model only."""
     from ..maps.finite_horizon import law_map
 
+    law = law_map(design, int(round(o.whole_trial_s / source.ts)))
     w_worst = [float(design.w[np.nanargmax(design.worst)])]
+    if isinstance(structure, BoundFamily):
+        taus = [TAU_RANGE[0], float(np.sqrt(TAU_RANGE[0] * TAU_RANGE[1])), TAU_RANGE[1]]
+        lo, hi = admissible_range(source, tuple(taus), o.margin)
+        spec = source.nominal.spec
+        members = family_members(spec.model or spec.plant, structure.bound, taus, lo, hi)
+        return whole_trial_figure(law, source, target, structure.bound, w_worst, o.whole_trial_s, members=members)
     stated = 0.0 if structure is not None else float(np.min(bound))  # the sampled radius at low frequency
-    return whole_trial_figure(law_map(design, int(round(o.whole_trial_s / source.ts))), source, target, stated,
-                              w_worst, o.whole_trial_s, admissibility(source, w_bound, bound, o.margin))
+    return whole_trial_figure(law, source, target, stated, w_worst, o.whole_trial_s,
+                              admissibility(source, w_bound, bound, o.margin))
 
 
 def check_whole_trial(design: RobustSetDesign, source: object, target: object, o: RobustSetOptions) -> None:
