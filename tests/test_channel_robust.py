@@ -81,7 +81,7 @@ def test_robust_set_guarantees_the_disc_on_whole_trials(tmp_path):
     it agrees with `rho_guaranteed` to 1e-6 and is 0.3 (the closed form itself, F = 1, is the best an FIR can
     do). Whole 30 s hover trials of the same design with the source's truth at the set's edge (gain errors
     +-0.3 and an all-pass error of 0.3, flown by python-control) leave at most rho_guaranteed + 0.01 (the
-    trial's ends; measured 0.29-0.30)."""
+    trial's ends; measured 0.29-0.30), as do the design's own recorded 60 s trials (0.3004 and 0.3005, measured)."""
     from ilcdob.app.cli import main
 
     fleet = tmp_path / "fleet.toml"
@@ -104,6 +104,9 @@ def test_robust_set_guarantees_the_disc_on_whole_trials(tmp_path):
         g_ch = {"a": ([4.0], [0.1, 1.0, 3.0, 4.0]), "c": ([1.0], [0.2, 1.0, 1.2, 4.8])}[source]
         worst = np.max(np.abs(1 - f) + alias_radius(*g_ch, 0.0, TS, w, 0.3, aliases=200) * np.abs(f))
         assert worst == pytest.approx(filters["rho_guaranteed"], abs=1e-6) and worst <= 0.3 + 2e-3
+        wt = filters["whole_trial"]  # the design's own 60 s trials of the disc's extreme maps of G_ch
+        assert wt["guaranteed"] is True and wt["plants"] == 15 and wt["ratio"] <= filters["rho_guaranteed"] + 0.01, wt
+        assert filters["trial_ends"]["start"]["kind"] == "matched"
         deltas = {n: channel_delta_set(flt.loop(n), 1, bound=0.3) for n in (source, target)}
         design = design_pair(flt, source, target, RobustSet(deltas=deltas), band=None)
         src, tgt = flt.loop(source), flt.loop(target)

@@ -26,6 +26,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ilcdob.channel_loop import ChannelLoop, channel_loop
 from ilcdob.errors import SpecError, UnstableLoopError
 from ilcdob.loop import LoopSystem, build_loop
 from ilcdob.specs import PlantSpec
@@ -206,7 +207,20 @@ def stress_disturbances(n: int, ts: float, w_worst: list[float]) -> list[tuple[s
     return out
 
 
-def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSystem, target: LoopSystem,
+def _true_loops(source: LoopSystem | ChannelLoop) -> tuple[PlantSpec, Callable[[PlantSpec], Any]]:
+    """The map the stated set perturbs (the plant model; a vehicle on its own controller: its channel map
+    ``G_ch``) and the source's loop rebuilt around a true one of it."""
+    if isinstance(source, ChannelLoop):
+        return source.channel_plant(), lambda plant: channel_loop(
+            source.name, source.ts, source.channel, plant, source.channel_gain, source.airframe, source.dob,
+            source.identification, source.reference_map)
+    spec = source.nominal.spec
+    model = spec.model or spec.plant
+    return model, lambda plant: build_loop(replace(spec, plant=plant, model=model), source.ts)
+
+
+def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSystem | ChannelLoop,
+                       target: LoopSystem | ChannelLoop,
                        bound: float, w_worst: list[float], duration_s: float,
                        keep: Callable[[LoopSystem], str] | None = None,
                        members: list[tuple[str, PlantSpec]] | None = None) -> WholeTrialFigure:
@@ -216,8 +230,9 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
     ----------
     law : callable
         ``e'_{j-1} -> d_f,j`` over a trial of ``round(duration_s / Ts)`` samples (e.g. a :class:`LinearMap`).
-    source, target : LoopSystem
-        Systems j-1 and j; their models are used (the target's plant does not enter the ratio per frequency).
+    source, target : LoopSystem or ChannelLoop
+        Systems j-1 and j; their models are used (the target's plant does not enter the ratio per frequency). For a
+        vehicle on its own controller the stated set perturbs its channel map ``G_ch``.
     bound : float
         The source's stated bound ``B`` on ``|Delta(jw)|``.
     w_worst : list of float
@@ -245,14 +260,13 @@ def whole_trial_figure(law: Callable[[np.ndarray], np.ndarray], source: LoopSyst
     nyq = np.pi / ts
     w_worst = [float(w) for w in w_worst if 0 < w < nyq]
     corners = sorted({*w_worst, *(a for a in CORNERS if a < nyq / 3)})
-    spec = source.nominal.spec
-    model = spec.model or spec.plant
+    model, true_loop = _true_loops(source)
     base = PairTrials(source.nominal, target.nominal, n)  # the target's maps, shared by every plant
     disturbances = stress_disturbances(n, ts, w_worst)
     rows, labels, skipped = [], [], []
     for label, plant in stress_plants(model, bound, corners) if members is None else members:
         try:
-            loop = build_loop(replace(spec, plant=plant, model=model), ts)
+            loop = true_loop(plant)
         except UnstableLoopError:
             skipped.append(f"{label}: the source's DOB loop is unstable with it")
             continue

@@ -11,8 +11,10 @@ radius ``W``, and ``max |T| = |1 - F| + W |F|`` exactly. The same SOCP and excha
     d_hat = -Gd_hat_{j-1}^{-1}{e_{j-1} + Gf_hat_{j-1}{u_{j-1}}},      u_j = -F{d_hat} / K_j
 
 ``F`` acting on the reconstructed disturbance continued past the trial's end along its trend, as the paper
-loop's extended law (:func:`~ilcdob.design.filters.trial_edges.fir_on_trial`). Built for vehicles without the
-add-on DOB; the guarantee is per frequency (an infinite horizon), the trial's ends as for the paper loop.
+loop's extended law (:func:`~ilcdob.design.filters.trial_edges.fir_on_trial`, its output before ``t = 0``
+continued into the first samples by its effect on the target model, ``StartMatch``). Built for vehicles without
+the add-on DOB; the guarantee is per frequency (an infinite horizon); the design flies whole trials of the disc's
+extreme maps (:mod:`..maps.whole_trial`) and says where one exceeds it, as for the paper loop.
 """
 
 from __future__ import annotations
@@ -27,11 +29,12 @@ from ilcdob.errors import SpecError
 from ilcdob.signals import as_signal
 
 from ..filters.noncausal import ZPKFilter, lookahead
-from ..filters.trial_edges import fir_on_trial
+from ..filters.trial_edges import StartMatch, fir_on_trial
 from ..maps.channel_filters import channel_filters, channel_view
 from ..maps.closed_form import matched, simulate_map
-from ..maps.finite_horizon import LinearMap, fir_map, trend_map, zpk_map
-from .robust_set import RobustSetDesign, RobustSetOptions, _design_filter, check_feasible
+from ..maps.finite_horizon import LinearMap, fir_map, law_map, trend_map, zpk_map
+from ..maps.whole_trial import whole_trial_figure
+from .robust_set import RobustSetDesign, RobustSetOptions, _design_filter, check_feasible, check_whole_trial
 
 __all__ = ["ChannelRobustSetDesign", "design_channel_robust_set"]
 
@@ -46,9 +49,10 @@ class ChannelRobustSetDesign(RobustSetDesign):
         The Theorem's channel pair (:func:`~..maps.channel_filters.channel_filters`).
     F, rho, rho_best, rho_design, rho_guaranteed, feasible, nominal_worst, margin_bands, w, worst, exchanges, \
 solve_time, delta_set, finite, trial, whole_trial, start
-        As :class:`~.robust_set.RobustSetDesign` (``finite`` and ``whole_trial`` None: no whole-trial figure is
-        computed; ``start`` None: the output before ``t = 0`` is folded onto the first samples, the channel law's
-        start not being matched to its target).
+        As :class:`~.robust_set.RobustSetDesign` (``finite`` None: no figure over every disturbance; ``start``
+        matched to the target model's ``Gd``, which ``-1/K_j`` and ``Gf = K_j Gd`` leave as the map from ``F``'s
+        output to its error up to sign; ``whole_trial`` over the disc's gains and all-pass errors at the
+        bound's smallest value, of the channel map ``G_ch``).
     """
 
     @cached_property
@@ -93,7 +97,8 @@ solve_time, delta_set, finite, trial, whole_trial, start
             In the target's channel unit, same length.
         """
         d_hat = self._d_hat(e_prev, df_prev)
-        return -fir_on_trial(d_hat, self.F.h, self.F.advance, self.end_fade) / self.filters.target.gain.constant
+        return (-fir_on_trial(d_hat, self.F.h, self.F.advance, self.end_fade, self.start)
+                / self.filters.target.gain.constant)
 
     def trial_map(self, n: int) -> LinearMap:
         """:meth:`apply` on a trial of ``n`` samples, the source flying without learning, as a linear map
@@ -108,11 +113,11 @@ solve_time, delta_set, finite, trial, whole_trial, start
         out = -zpk_map(self.inverse, n)
         if a:
             out = trend_map(n, a, self.end_fade) @ out
-        out = fir_map(self.F.h, a, n, n_in=n + a) @ out
+        out = fir_map(self.F.h, a, n, n_in=n + a, start=self.start) @ out
         return LinearMap(n, n, lambda x: -x / k, lambda y: -y / k, "-1/K_j") @ out
 
     def to_dict(self) -> dict:
-        """Summary for ``filters.json``: :meth:`RobustSetDesign.to_dict` (no whole-trial figure computed)."""
+        """Summary for ``filters.json``: :meth:`RobustSetDesign.to_dict` (no figure over every disturbance)."""
         return {**super().to_dict(), "finite_trial": None}
 
 
@@ -155,4 +160,12 @@ def design_channel_robust_set(source: ChannelLoop, target: ChannelLoop, w_bound:
     made = _design_filter(source, target, w_bound, bound, o, None)
     design = ChannelRobustSetDesign(**{f.name: getattr(made, f.name) for f in fields(made)})
     check_feasible(design, source, target, o)
-    return replace(design, filters=channel_filters(source, target))
+    start = StartMatch.design(target.nominal.G_d, design.F.advance) if design.F.advance else None
+    design = replace(design, filters=channel_filters(source, target), start=start)
+    n = int(round(o.whole_trial_s / source.ts))
+    if n >= 10:
+        w_worst = [float(design.w[np.nanargmax(design.worst)])]
+        design = replace(design, whole_trial=whole_trial_figure(law_map(design, n), source, target,
+                                                                float(np.min(bound)), w_worst, o.whole_trial_s))
+        check_whole_trial(design, source, target, o)
+    return design
