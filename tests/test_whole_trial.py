@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import re
 import warnings
-from dataclasses import replace
 
 import control as ct
 import numpy as np
@@ -32,10 +31,9 @@ from ilcdob.design.checks.theorem import bound_delta_sets, theorem_check
 from ilcdob.design.law.band import band_spec
 from ilcdob.design.filters.trial_edges import end_continuation, fir_on_trial
 from ilcdob.design.maps.closed_form import one_minus, reconstruct_disturbance
-from ilcdob.design.maps.finite_horizon import law_map
 from ilcdob.design.maps.whole_trial import GUST_S, stress_plants, whole_trial_figure
-from ilcdob.design.methods.robust_set import (RobustSetInfeasibleError, RobustSetOptions, admissibility,
-                                             check_whole_trial, design_robust_set)
+from ilcdob.design.methods.robust_set import (RobustSetInfeasibleError, RobustSetOptions, check_whole_trial,
+                                             design_robust_set)
 from ilcdob.design.pair import design_pair, fleet_delta_sets
 from ilcdob.errors import SpecError
 from ilcdob.specs import PlantSpec
@@ -141,24 +139,23 @@ def test_recorded_worst_trial_is_what_python_control_flies(ts, systems, src, tgt
 
 def test_a_design_whose_whole_trial_exceeds_its_guarantee_says_so():
     """rhp -> drag is 'never worse' per frequency (1.0016) and, with its start continuation, on every whole trial
-    (0.984, measured). The same law with ``F``'s output before ``t = 0`` folded onto the first samples (as designs
-    written before the continuation) reaches 1.125 (an all-pass error at 0.3 rad/s, sin(275 t) switched on at
-    t = 0): the check warns, ``guaranteed`` is false, and with ``relax=False`` it refuses."""
+    (0.984, measured), the continuation chosen by ``start="auto"`` because the fold exceeds the claim. With
+    ``start="fold"`` (F's output before ``t = 0`` folded onto the first samples, as designs written before the
+    continuation) it reaches 1.125 (an all-pass error at 0.3 rad/s, sin(275 t) switched on at
+    t = 0): the design warns, ``guaranteed`` is false, and with ``relax=False`` the check refuses."""
     fleet, d, said = _design(0.01, TEN_MS, "rhp", "drag")
     assert d.trial_guaranteed is True and d.whole_trial.ratio <= d.claimed and d.start is not None
+    assert d.fold_worst == pytest.approx(1.1255, abs=0.005)  # "auto": the fold exceeded the claim, so matched
+    assert d.to_dict()["trial_ends"]["start_law"] == "matched"
     assert not any("whole trial" in m for m in said) and d.to_dict()["whole_trial"]["guaranteed"] is True
-    source, target = fleet.loop("rhp"), fleet.loop("drag")
-    ds = fleet_delta_sets(fleet, list(fleet.names), k=1)["rhp"]
-    folded = replace(d, start=None)
-    f = whole_trial_figure(law_map(folded, 6000), source, target, BOUND, [float(d.w[np.nanargmax(d.worst)])], 60.0,
-                           admissibility(source, ds.w, ds.bound, RobustSetOptions().margin))
-    folded = replace(folded, whole_trial=f)
-    assert folded.trial_guaranteed is False and f.ratio == pytest.approx(1.1255, abs=0.005), (f.ratio, f.plant)
-    assert folded.to_dict()["whole_trial"]["guaranteed"] is False
-    with pytest.warns(RuntimeWarning, match="not guaranteed on a whole trial of 60 s"):
-        check_whole_trial(folded, source, target, RobustSetOptions())
+    _, folded, said = _design(0.01, TEN_MS, "rhp", "drag", start="fold")
+    f = folded.whole_trial
+    assert folded.start is None and folded.trial_guaranteed is False
+    assert f.ratio == pytest.approx(1.1255, abs=0.005) and f.plant == "all-pass -0.3 at 0.3 rad/s", (f.ratio, f.plant)
+    assert any("not guaranteed on a whole trial of 60 s" in m for m in said), said
+    assert folded.to_dict()["whole_trial"]["guaranteed"] is False and "start" not in folded.to_dict()["trial_ends"]
     with pytest.raises(RobustSetInfeasibleError, match="not guaranteed on a whole trial"):
-        check_whole_trial(folded, source, target, RobustSetOptions(relax=False))
+        check_whole_trial(folded, fleet.loop("rhp"), fleet.loop("drag"), RobustSetOptions(relax=False))
     _, ok, said = _design(0.01, TEN_MS, "stiff", "rhp")
     assert ok.feasible and ok.trial_guaranteed is True and ok.whole_trial.ratio <= ok.rho
     assert not any("whole trial" in m for m in said)
@@ -172,7 +169,7 @@ def test_the_start_continuation_does_what_the_signal_before_the_trial_would(ts, 
     horizon (``F``'s output from ``-advance`` on, flown by python-control from there) against the trial's law. Dropping
     the part before ``t = 0`` misses its effect; the continuation leaves at most ``most`` of that miss (measured 0.36
     and 0.47: the ridge keeps it smooth), folding it back more than all of it (1.49 and 1.26, measured)."""
-    fleet, d, _ = _design(ts, systems, src, tgt)
+    fleet, d, _ = _design(ts, systems, src, tgt, start="matched")
     n, a = int(round(20 / ts)), d.F.advance
     impulse = np.zeros(n)
     impulse[0] = 1.0

@@ -33,8 +33,9 @@ from ..filters.trial_edges import StartMatch, fir_on_trial
 from ..maps.channel_filters import channel_filters, channel_view
 from ..maps.closed_form import matched, simulate_map
 from ..maps.finite_horizon import LinearMap, fir_map, law_map, trend_map, zpk_map
-from ..maps.whole_trial import whole_trial_figure
-from .robust_set import RobustSetDesign, RobustSetOptions, _design_filter, check_feasible, check_whole_trial
+from ..maps.whole_trial import WholeTrialFigure, whole_trial_figure
+from .robust_set import (RobustSetDesign, RobustSetOptions, _design_filter, check_feasible, check_whole_trial,
+                         choose_start)
 
 __all__ = ["ChannelRobustSetDesign", "design_channel_robust_set"]
 
@@ -48,9 +49,9 @@ class ChannelRobustSetDesign(RobustSetDesign):
     filters : LearningFilters
         The Theorem's channel pair (:func:`~..maps.channel_filters.channel_filters`).
     F, rho, rho_best, rho_design, rho_guaranteed, feasible, nominal_worst, margin_bands, w, worst, exchanges, \
-solve_time, delta_set, finite, trial, whole_trial, start
+solve_time, delta_set, finite, trial, whole_trial, start, fold_worst
         As :class:`~.robust_set.RobustSetDesign` (``finite`` None: no figure over every disturbance; ``start``
-        matched to the target model's ``Gd``, which ``-1/K_j`` and ``Gf = K_j Gd`` leave as the map from ``F``'s
+        as :attr:`~.robust_set.RobustSetOptions.start` chooses, matched to the target model's ``Gd``, which ``-1/K_j`` and ``Gf = K_j Gd`` leave as the map from ``F``'s
         output to its error up to sign; ``whole_trial`` over the disc's gains and all-pass errors at the
         bound's smallest value, of the channel map ``G_ch``).
     """
@@ -161,11 +162,14 @@ def design_channel_robust_set(source: ChannelLoop, target: ChannelLoop, w_bound:
     design = ChannelRobustSetDesign(**{f.name: getattr(made, f.name) for f in fields(made)})
     check_feasible(design, source, target, o)
     start = StartMatch.design(target.nominal.G_d, design.F.advance) if design.F.advance else None
-    design = replace(design, filters=channel_filters(source, target), start=start)
     n = int(round(o.whole_trial_s / source.ts))
-    if n >= 10:
-        w_worst = [float(design.w[np.nanargmax(design.worst)])]
-        design = replace(design, whole_trial=whole_trial_figure(law_map(design, n), source, target,
-                                                                float(np.min(bound)), w_worst, o.whole_trial_s))
-        check_whole_trial(design, source, target, o)
+    w_worst = [float(design.w[np.nanargmax(design.worst)])]
+
+    def fly(d: ChannelRobustSetDesign) -> WholeTrialFigure | None:
+        if n < 10:
+            return None
+        return whole_trial_figure(law_map(d, n), source, target, float(np.min(bound)), w_worst, o.whole_trial_s)
+
+    design = choose_start(replace(design, filters=channel_filters(source, target)), start, o, fly)
+    check_whole_trial(design, source, target, o)
     return design

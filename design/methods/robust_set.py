@@ -152,7 +152,7 @@ if TYPE_CHECKING:
     from ..maps.finite_horizon import FiniteHorizonRatio, LinearMap
 
 __all__ = ["RobustSetOptions", "RobustSetDesign", "RobustSetInfeasibleError", "RobustSetSolverError",
-           "design_robust_set", "check_whole_trial", "bound_on_grid", "admissible", "admissibility", "structured_set", "DELTA_SETS", "TRIAL_LAWS"]
+           "design_robust_set", "check_whole_trial", "bound_on_grid", "admissible", "admissibility", "structured_set", "DELTA_SETS", "TRIAL_LAWS", "START_LAWS", "choose_start"]
 
 _OK = ("optimal", "optimal_inaccurate")
 _INFEASIBLE = ("infeasible", "infeasible_inaccurate", "user_limit")  # user_limit: no certificate either way
@@ -165,6 +165,8 @@ _ITERATIONS = 200  # Clarabel's default
 DELTA_SETS = ("auto", "disc", "structured")
 #: Choices of :attr:`RobustSetOptions.trial`.
 TRIAL_LAWS = ("extended", "projected")
+#: Choices of :attr:`RobustSetOptions.start`.
+START_LAWS = ("auto", "matched", "fold")
 #: Supporting directions of a structured set's polygon in the SOCP: a coarser polygon than the verification's
 #: (:data:`~..sets.value_set.DIRECTIONS`), containing it, so fewer and better conditioned cones (64 per frequency
 #: made Clarabel stall) and a design that the verification rarely sends back.
@@ -276,6 +278,14 @@ class RobustSetOptions(FitWeighting):
         ``"disc"`` the frequency-wise disc ``|Delta| <= W``; ``"structured"`` the set the bound or the
         identification stands for (:mod:`..sets.value_set`); ``"auto"`` the identification's parameter
         ellipsoid when the source carries one, else the disc.
+    start : {"auto", "matched", "fold"}
+        The extended law's treatment of ``F``'s output before ``t = 0`` (:attr:`RobustSetDesign.start`):
+        ``"fold"`` adds it time-reversed to the first samples, exact for a disturbance that steps on at ``t = 0``
+        and keeps on (a constant wind from the start) but up to 1.16 times the error without learning for one that
+        switches on abruptly; ``"matched"`` continues it into the first second by its effect on the target model,
+        which keeps those trials at the price of the step's (docs/theory.md section 6, "The trial's start");
+        ``"auto"`` (default) the fold unless its whole trials exceed the claim, then the continuation
+        (:func:`choose_start`; without whole trials, the fold).
     """
 
     rho: float = 0.95
@@ -296,6 +306,7 @@ class RobustSetOptions(FitWeighting):
     whole_trial_s: float = 60.0
     trial: str = "extended"
     delta_set: str = "auto"
+    start: str = "auto"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.rho) and 0 < self.rho <= 1):
@@ -318,6 +329,8 @@ class RobustSetOptions(FitWeighting):
             raise SpecError(f"`delta_set`: got {self.delta_set!r}, expected one of {list(DELTA_SETS)}")
         if self.trial not in TRIAL_LAWS:
             raise SpecError(f"`trial`: got {self.trial!r}, expected one of {list(TRIAL_LAWS)}")
+        if self.start not in START_LAWS:
+            raise SpecError(f"`start`: got {self.start!r}, expected one of {list(START_LAWS)}")
         for name in ("finite_trial_s", "whole_trial_s"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
@@ -554,6 +567,9 @@ class RobustSetDesign:
         The extended law's continuation of ``F``'s output before ``t = 0`` over the trial's first samples,
         matched to its effect on the target model (:class:`~..filters.trial_edges.StartMatch`); set by
         :func:`design_robust_set`; None (a causal ``F``, the projected law, or a design without it) folds.
+    fold_worst : float or None
+        Where :attr:`RobustSetOptions.start` ``"auto"`` chose the continuation: the worst whole trial of the fold,
+        which exceeded the claim; None otherwise.
     """
 
     filters: LearningFilters | None
@@ -574,6 +590,7 @@ class RobustSetDesign:
     trial: str = "extended"
     whole_trial: WholeTrialFigure | None = None
     start: StartMatch | None = None
+    fold_worst: float | None = None
 
     @property
     def claimed(self) -> float:
@@ -642,11 +659,12 @@ class RobustSetDesign:
 
         Trial ends. ``F`` looks ``F.advance`` samples (1.5 s for 301 taps at 10 ms) past every sample.
         Before the trial ``d_hat`` is zero (the vehicle at rest); what ``F`` puts before ``t = 0`` would
-        have set the target going before the trial, so it is replaced by the signal over the first
-        samples whose effect on the target model's error matches that one's (:attr:`start`,
-        :class:`~..filters.trial_edges.StartMatch`; folding it onto the first samples, as designs
-        written before did, let a disturbance at the trial's start reach 1.16 times the error without
-        learning, docs/theory.md section 6). After it ``d_hat``
+        have set the target going before the trial. It is folded onto the trial's first samples, exact for
+        a wind that steps on at ``t = 0``, or, where the design's whole trials show the fold exceeding its
+        claim (a disturbance switching on abruptly at the start reached 1.16 times the error without
+        learning), replaced by the signal over the first samples whose effect on the target model's error
+        matches that one's (:attr:`start`, :class:`~..filters.trial_edges.StartMatch`,
+        :attr:`RobustSetOptions.start`, docs/theory.md section 6). After it ``d_hat``
         continues along its trend (:func:`end_continuation`): the line fitted (Hann-weighted least
         squares) to the ``2 F.advance`` samples before its last :attr:`end_fade` ones (those the
         stable inversion built from the error continued past the end), blended into over them. A line is what the
@@ -777,6 +795,8 @@ class RobustSetDesign:
                                        "many as gain has rows), x0 the state of target_map (Gf_hat_j (1 - Q_j)) "
                                        "run from rest over p (design/filters/trial_edges.py StartMatch); "
                                        "without start, p is added time-reversed to the first samples",
+                               "start_law": "fold" if self.start is None else "matched",
+                               **({} if self.fold_worst is None else {"fold_worst_trial": self.fold_worst}),
                                **({} if self.start is None else {"start": self.start.to_dict()})},
                 "whole_trial": None if self.whole_trial is None else
                 {**self.whole_trial.to_dict(), "guaranteed": self.trial_guaranteed, "claimed": self.claimed,
@@ -947,16 +967,45 @@ def design_robust_set(source: LoopSystem, target: LoopSystem, w_bound: np.ndarra
         _CACHE[key] = _design_filter(source, target, w_bound, bound, o, structure)
     design = _CACHE[key]
     check_feasible(design, source, target, o)
-    design = replace(design, filters=lf, start=_start_match(design, lf))
+    flies = int(round(o.whole_trial_s / source.ts)) >= 10
+    design = choose_start(replace(design, filters=lf), _start_match(design, lf), o,
+                          lambda d: _whole_trial(d, source, target, w_bound, bound, o, structure) if flies else None)
     n_trial = int(round(o.finite_trial_s / source.ts))
     if n_trial >= 2:
         from ..maps.finite_horizon import finite_horizon_ratio, law_map
 
         design = replace(design, finite=finite_horizon_ratio(law_map(design, n_trial), source.nominal, target.nominal))
-    if int(round(o.whole_trial_s / source.ts)) >= 10:
-        design = replace(design, whole_trial=_whole_trial(design, source, target, w_bound, bound, o, structure))
-        check_whole_trial(design, source, target, o)
+    check_whole_trial(design, source, target, o)
     return design
+
+
+def choose_start(design: RobustSetDesign, start: StartMatch | None, o: RobustSetOptions,
+                 fly: Callable[[RobustSetDesign], WholeTrialFigure | None]) -> RobustSetDesign:
+    """``design`` with the start law of ``o.start`` (:attr:`RobustSetOptions.start`) and its whole trials.
+
+    ``"auto"``: the fold, unless its whole trials exceed the claim and a continuation exists; then the matched
+    continuation, the fold's worst trial kept in :attr:`RobustSetDesign.fold_worst`.
+
+    Parameters
+    ----------
+    design : RobustSetDesign
+        With its filters.
+    start : StartMatch or None
+        The matched continuation (None: a causal ``F`` or the projected law).
+    o : RobustSetOptions
+    fly : callable
+        ``design -> WholeTrialFigure`` of its law, or None where no whole trials are flown.
+
+    Returns
+    -------
+    RobustSetDesign
+    """
+    first = replace(design, start=start if o.start == "matched" else None)
+    first = replace(first, whole_trial=fly(first))
+    if o.start != "auto" or start is None or first.trial_guaranteed is not False:
+        return first
+    matched = replace(design, start=start, fold_worst=first.whole_trial.ratio)
+    return replace(matched, whole_trial=fly(matched))
 
 
 def _start_match(design: RobustSetDesign, lf: LearningFilters) -> StartMatch | None:
