@@ -234,6 +234,7 @@ def _hover(tt):
     return np.array([float(scenario(1).disturbance(np.array([tt]))[0]), 0.0, 0.0])
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_rotorpy_on_its_own_controller_learns_in_hover(rotorpy_pair):
     """rotorpy's SE3 controller holds the two vehicles (:func:`rotorpy_pair`), the paper's hover disturbance: the
     first learning flight of each leaves <= 10 % of its error without learning. In Dryden turbulence through

@@ -41,6 +41,7 @@ def _lab_quad() -> dict:
             "rotor_pos": {k: 1.5 * np.asarray(v) for k, v in base["rotor_pos"].items()}}
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_the_channel_maps_have_the_loops_static_gain():
     """Held-out fits >= 95 % (15 s flights, 0.5 mm noise) and static gains within 3 % of the loop's
     (1/kp on the acceleration channel, 1 on the position channel): rotorpy's gains, gains of one's own and a

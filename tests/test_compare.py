@@ -72,6 +72,7 @@ def test_every_design_improves_inside_the_identified_uncertainty(identified):
         assert len(m.ratios) == 5 and m.design_time_s > 0
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_robust_never_worse_than_its_bound_on_its_own_sample_set(fleet):
     """Large errors (|Delta| <= 0.6): the closed form's worst case exceeds rho, the robust design's does not
     (both learn through their learning band, which the 0.6 bound closes at a few rad/s).

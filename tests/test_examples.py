@@ -25,6 +25,7 @@ def test_every_example_is_tested():
                                                              "identify_a_log.py", "run_a_campaign.py"]
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_identify_a_channel(tmp_path):
     """Short flights of one vehicle of one's own making: every channel and axis fits, static gains near the
     loop's (4 % at 12 s; the 30 s table of docs/closed_loop.md is within 1.6 %)."""
@@ -54,6 +55,7 @@ def test_design_for_your_fleet(tmp_path):
     assert json.loads((folder / "filters.json").read_text())["from"] == "heavy"
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 @pytest.mark.parametrize("samples", [2])
 def test_run_a_campaign_and_resume(tmp_path, samples):
     _run("run_a_campaign.py", tmp_path, str(samples))

@@ -256,6 +256,7 @@ def test_never_worse_under_admissible_deltas(fleet, bound):
     assert count > 1500
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_projected_trial_law_keeps_the_bound_for_every_disturbance(fleet):
     """``trial="projected"``: the learning map of the target inverted over the trial by least squares.
     With exact models ``e_j = P (I - F_N) e'_j`` with ``P`` a projection and ``F_N`` the FIR on the odd

@@ -105,6 +105,7 @@ def test_identified_systems_keep_unidentified_systems(identified, fleet):
     assert systems[1].controller == fleet.systems[1].controller
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_identify_fleet_cli_fits_every_vehicle(tmp_path, capsys):
     out = tmp_path / "id"
     assert main(["identify-fleet", "--out", str(out)]) == 0

@@ -63,6 +63,7 @@ def test_reproduce_survives_sigkill(tmp_path):
     _folder_command_survives_kills(tmp_path, ["reproduce", "--scenarios", "1,4", "--iterations", "1"])
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_design_survives_sigkill(tmp_path):
     _folder_command_survives_kills(tmp_path, ["design", "--from", "UAV1", "--to", "UAV2", "--method", "fir",
                                               "--samples", "2"])

@@ -47,6 +47,7 @@ def test_the_probe_holds_every_family_and_at_least_300_distinct_cases():
         and not probe.select(cases, "no such case")
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_the_subset_runs_and_behaves(tmp_path):
     cases = [c for c in probe.build_cases() if c.name in SUBSET]
     outcomes = probe.run_cases(cases, tmp_path / "probe", jobs=2)

@@ -25,6 +25,7 @@ def _design(flt, deltas, rho):
     return design_pair(flt, "UAV2", "UAV3", RobustSet(opts, deltas=deltas)).filters
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_feasible_means_the_verified_guarantee_meets_the_asked_rho():
     flt = ilcdob.default_fleet()
     deltas = fleet_delta_sets(flt, flt.names, k=1, bound=0.3)

@@ -160,6 +160,7 @@ def _fly_fleet(fleet, name, n, d_f=None, **disturbance):
                        {"x": loop, "y": loop, "z": loop}, np.zeros((n, 3)), learning=None if d_f is None else {"x": d_f})
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_learning_between_rotorpy_vehicles_identified_from_their_flights(identified_rotorpy):
     """The paper's pipeline on two rotorpy vehicles, nothing of their simulator known to ilcdob: each x
     plant identified from its own chirp flights (:func:`identified_rotorpy`), the closed-form filters
@@ -181,6 +182,7 @@ def test_learning_between_rotorpy_vehicles_identified_from_their_flights(identif
     assert learned < 0.1 * dob_only, (learned, dob_only)
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_wind_through_the_drag_is_learned_through_the_drag_ratio(identified_rotorpy):
     """One 2 m/s sinusoidal wind (0.94 rad/s) through rotorpy's drag, both directions between the
     crazyflie and the hummingbird (identified in still air: drag poles 0.29 and 0.51 1/s). The paper's
@@ -205,6 +207,7 @@ def test_wind_through_the_drag_is_learned_through_the_drag_ratio(identified_roto
         assert ratio["wind"] <= 0.3 and ratio["wind"] <= 0.5 * ratio["command"], (src, tgt, ratio)
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_fly_log_learn_fly_on_rotorpy_through_files_only(tmp_path):
     """The loop a lab runs, as a user would, with only files passing between the steps: a fleet file
     of two rotorpy vehicles (the rough model, their own PIDs), ``ilcdob design``, the crazyflie's

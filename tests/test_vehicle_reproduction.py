@@ -32,6 +32,7 @@ def short():
     return res, seen
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_the_report_holds_every_flight_and_its_acceptance(short):
     """Every disturbance x law x scenario is in results.json and the README tables, with the numbers of the
     flights (RMSE recomputed from each flight's error); the acceptance rows restate those ratios; the
