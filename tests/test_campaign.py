@@ -152,6 +152,7 @@ def test_files_are_the_report_content(fleet):
     assert isinstance(files["campaign_ratios.png"], Figure)
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_settings_guard_and_extension(fleet, tmp_path):
     out = tmp_path / "c"
     first = run_campaign(fleet, SMALL, out, workers=1)

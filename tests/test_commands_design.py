@@ -196,6 +196,7 @@ int main(void) {{
     return np.array(run.stdout.split(), float)
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 @pytest.mark.parametrize("plant", ["linear", "nonlinear"])
 def test_noisy_trials_learn_through_the_cli_and_the_c_code(fleet, tmp_path, plant):
     """The built-in pipeline with 0.5 mm of position noise on the measured output: the first pair of every

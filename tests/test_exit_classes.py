@@ -312,6 +312,7 @@ def _flight(tmp_path: Path) -> str:
     return str(path)
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_campaign_worker_failure_is_one_line(tmp_path, capfd):
     # true plants 10^6 standard deviations out: every draw unstable, the sample fails on its worker; the
     # worker's "Compute Failed" log and traceback used to reach stderr ahead of the error line

@@ -151,6 +151,7 @@ def test_pair_trials_are_the_flown_trials(fleet):
     assert pt.ratio(_learn(d), dist) == pytest.approx(flown, rel=1e-9)
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_whole_trials_with_exact_models(fleet):
     """Exact models, 60 s trials of sin(w t), w = 1-30 rad/s, the winds of scenarios 1, 3, 4, a
     constant and a ramp, every pair of the cycle, the law as users get it: no whole trial of the

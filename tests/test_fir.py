@@ -275,6 +275,7 @@ def test_scenario1_refused_on_request_in_a_fraction_of_a_second(scenario1):
         design_fir(a, b, da, db, FIROptions(unattainable="refuse"))
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 @pytest.mark.parametrize("which", ["fleet", "unequal_fleet", "feedforward_fleet"])
 def test_status_table_over_the_fleets_has_no_failure(request, which):
     """Every ordered pair, with the model only and with the comparison's Delta set (bound 0.6; 2 samples of each

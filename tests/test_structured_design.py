@@ -102,6 +102,7 @@ def test_structured_design_holds_for_every_flown_plant_of_the_set():
     assert abs(1 - design.response(np.array([0.3]))[0]) < 0.2
 
 
+@pytest.mark.slow  # > 15 s on 2 cores: the default suite stays under 10 minutes
 def test_every_plant_the_sampler_keeps_is_covered():
     """The campaigns' sampler (:func:`delta_set` with the margin: flown loops, peak of ``|Gd/Gd_hat|``) and
     the design's set (admissible ranges, sampled responses) are separate constructions. Bound 0.9 on
