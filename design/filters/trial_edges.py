@@ -161,10 +161,7 @@ class StartMatch:
         pre : numpy.ndarray
             The signal before the trial.
         """
-        x = np.zeros(self.b.size)
-        for p in pre:
-            x = self.a @ x + self.b * p
-        return x
+        return self._columns(len(pre)) @ np.asarray(pre, float)
 
     def matrix(self, advance: int) -> np.ndarray:
         """``(span, advance)``: the continuation as a matrix on the ``advance`` samples before ``t = 0``.
@@ -174,12 +171,16 @@ class StartMatch:
         advance : int
             Samples before the trial.
         """
+        return self.gain @ self._columns(advance)
+
+    def _columns(self, advance: int) -> np.ndarray:
+        """``(n, advance)``: ``x0 = sum_k A^(advance - 1 - k) B p(k)`` as a matrix on the samples before ``t = 0``."""
         cols = np.empty((self.b.size, int(advance)))
         v = self.b.copy()
-        for k in range(int(advance) - 1, -1, -1):  # x0 = sum_k A^(advance - 1 - k) B p(k)
+        for k in range(int(advance) - 1, -1, -1):
             cols[:, k] = v
             v = self.a @ v
-        return self.gain @ cols
+        return cols
 
     def to_dict(self) -> dict[str, Any]:
         """``filters.json`` entry ``trial_ends.start``."""
