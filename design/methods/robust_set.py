@@ -141,6 +141,7 @@ from ..filters.frequency_grid import FitWeighting, check_advance, check_count, c
 from ..filters.noncausal import lookahead
 from ..filters.trial_edges import StartMatch, fir_on_trial
 from ..filters.trial_inverse import MAX_TRIAL_SAMPLES, TrialInverse, trial_inverse
+from ..sets.delta import disturbance_peak
 from ..sets.value_set import TAU_RANGE, BoundFamily, EllipseFamily, admissible_range, family_cones, worst_over_set
 from ..sets.worst_case import mask_intervals, uncertainty_cones
 from ..maps.whole_trial import WholeTrialFigure, family_members, whole_trial_figure
@@ -801,7 +802,8 @@ class RobustSetDesign:
                 "whole_trial": None if self.whole_trial is None else
                 {**self.whole_trial.to_dict(), "guaranteed": self.trial_guaranteed, "claimed": self.claimed,
                  "meaning": "largest ||e_j|| / ||e'_j|| over whole trials of the stated set's extreme plants "
-                            "(gains and all-pass errors at the bound; the model only for a structured set) and "
+                            "(the disc: gains and all-pass errors at the bound; a structured family: its members at the ends "
+                            "of their admissible range; an ellipsoid: the ends of its principal axes) and "
                             "disturbances meeting the trial's ends (design/maps/whole_trial.py); guaranteed: "
                             "at most what the design claims per frequency"},
                 "finite_trial": None if self.finite is None else
@@ -1021,7 +1023,8 @@ def _whole_trial(design: RobustSetDesign, source: LoopSystem, target: LoopSystem
     """Whole trials of the design's law for the set's extreme plants that keep the margin (:mod:`..maps.whole_trial`):
     the disc's gains and all-pass errors at the bound; the fleet-bound family's gains and high-pass errors at the
     ends of their admissible range (:func:`~..maps.whole_trial.family_members`, time constants at the ends and the
-    middle of :data:`~..sets.value_set.TAU_RANGE`); an identification's ellipsoid, the model only."""
+    middle of :data:`~..sets.value_set.TAU_RANGE`); an identification's ellipsoid, the model and the ends of its
+    principal axes (:meth:`~..sets.value_set.EllipseFamily.members`) that keep the margin."""
     from ..maps.finite_horizon import law_map
 
     law = law_map(design, int(round(o.whole_trial_s / source.ts)))
@@ -1032,8 +1035,17 @@ def _whole_trial(design: RobustSetDesign, source: LoopSystem, target: LoopSystem
         spec = source.nominal.spec
         members = family_members(spec.model or spec.plant, structure.bound, taus, lo, hi)
         return whole_trial_figure(law, source, target, structure.bound, w_worst, o.whole_trial_s, members=members)
-    stated = 0.0 if structure is not None else float(np.min(bound))  # the sampled radius at low frequency
-    return whole_trial_figure(law, source, target, stated, w_worst, o.whole_trial_s,
+    if isinstance(structure, EllipseFamily):  # the margin is the set's only cut (value by value, module docstring)
+        spec = source.nominal.spec
+
+        def keep(loop: LoopSystem) -> str:
+            peak = disturbance_peak(loop, source.nominal) if o.margin > 0 else 0.0
+            return f"|Gd/Gd_hat| peaks at {peak:.4g} > 1/margin {1 / o.margin:.4g}" if peak * o.margin > 1 else ""
+
+        return whole_trial_figure(law, source, target, 0.0, w_worst, o.whole_trial_s, keep,
+                                  members=[("model", spec.model or spec.plant), *structure.members()])
+    # the disc: its sampled radius at low frequency
+    return whole_trial_figure(law, source, target, float(np.min(bound)), w_worst, o.whole_trial_s,
                               admissibility(source, w_bound, bound, o.margin))
 
 

@@ -637,6 +637,42 @@ class EllipseFamily:
         return Boundary(ValueSet(w, (ring[:, None, :],), self.describe()), ring[:, :-1], np.ones(w.size, bool),
                         axes=axes)
 
+    def plant(self, x: np.ndarray) -> PlantSpec:
+        """The continuous plant of parameters ``x`` (``theta``, then the delay in s when it is estimated).
+
+        Parameters
+        ----------
+        x : array_like
+            ``len(theta)`` parameters, one more when ``delay_estimated`` (a negative delay is taken as 0).
+
+        Returns
+        -------
+        PlantSpec
+        """
+        x = np.asarray(x, float).reshape(-1)
+        th, d = (x[:-1], max(0.0, float(x[-1]))) if self.delay_estimated else (x, self.delay)
+        den, num = self.structure.split(th)
+        return PlantSpec(tuple(num), tuple(den), d)
+
+    def members(self) -> list[tuple[str, PlantSpec]]:
+        """The ellipsoid's extreme parameter vectors: ``x0 +- k sigma_i v_i`` along each principal axis ``v_i`` of
+        the covariance (``sigma_i^2`` its eigenvalue, ``k`` :attr:`k`), the plants a whole trial flies
+        (docs/theory.md section 6). Axes of zero variance are left out.
+
+        Returns
+        -------
+        list of (str, PlantSpec)
+            Label and continuous plant, two per axis.
+        """
+        x0 = np.concatenate([self.theta, [self.delay]]) if self.delay_estimated else np.asarray(self.theta, float)
+        out = []
+        for i in range(self._sqrt_cov.shape[1]):
+            step = self.k * self._sqrt_cov[:, i]
+            if np.any(step != 0):
+                out += [(f"ellipsoid axis {i + 1} {sign}{self.k:.3g} sigma", self.plant(x0 + s * step))
+                        for sign, s in (("+", 1.0), ("-", -1.0))]
+        return out
+
     def describe(self) -> str:
         """One line for reports."""
         return (f"structured: the identification's {100 * self.confidence:g} % parameter ellipsoid "
@@ -649,9 +685,7 @@ def _perturbed_blocks(family: EllipseFamily, ts: float) -> tuple:
     x0 = np.concatenate([family.theta, [family.delay]]) if family.delay_estimated else np.asarray(family.theta, float)
 
     def block(x: np.ndarray):
-        th, d = (x[:-1], max(0.0, float(x[-1]))) if family.delay_estimated else (x, family.delay)
-        den, num = family.structure.split(th)
-        return plant_block(PlantSpec(tuple(num), tuple(den), d), ts)
+        return plant_block(family.plant(x), ts)
 
     moved = []
     for i in range(x0.size):
