@@ -49,7 +49,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Sequence
 
 import clarabel
 import control as ct
@@ -74,6 +74,9 @@ _DIRECT_METHOD = "faer"  # supernodal, multithreaded; faster than qdldl on these
 #: share the cores with each other.
 CLARABEL_THREADS = 0
 _INFEASIBLE = ("infeasible", "infeasible_inaccurate")
+#: Clarabel's static KKT regularisation, tried in turn while the solve ends in :data:`_RETRY` (``_run_direct``).
+_STATIC_REGULARIZATION = (1e-10, 1e-8)
+_RETRY = ("NumericalError",)
 _CLARABEL_STATUS = {"Solved": "optimal", "AlmostSolved": "optimal_inaccurate",
                     "PrimalInfeasible": "infeasible", "AlmostPrimalInfeasible": "infeasible_inaccurate",
                     "DualInfeasible": "unbounded", "AlmostDualInfeasible": "unbounded_inaccurate"}
@@ -397,28 +400,36 @@ class RobustDesigner:
                 return np.concatenate([[1.0, -1.0], w2 * e0[i]])
             return np.concatenate([[0.0], e0[i]])
 
-        b = [fill(part) for part in c["b"]]
+        b = np.concatenate([fill(part) for part in c["b"]])
+        t0 = time.perf_counter()
+        # smaller static regularisation than Clarabel's 1e-8 first: with near-perfect learning the optimum is ~1e-6
+        # and the default lets the primal residual of the state equations creep up (AlmostSolved at K=20, N=1000);
+        # where that small one leaves the KKT factorisation in numerical trouble (relative degree 4 at 2 ms: a
+        # NumericalError after 8 iterations), Clarabel's default solves it (16 iterations)
+        for reg in _STATIC_REGULARIZATION:
+            status, sol = self._clarabel(b, reg, rho)
+            if status not in _RETRY:
+                break
+        self._z = np.asarray(sol.x, dtype=float)
+        self._iters = int(sol.iterations)
+        return status, time.perf_counter() - t0
+
+    def _clarabel(self, b: np.ndarray, regularization: float, rho: float) -> tuple[str, Any]:
+        """One Clarabel solve of the conic data with right-hand side ``b``: its status (cvxpy's names) and solution."""
+        c = self._conic
         settings = clarabel.DefaultSettings()
         settings.verbose = bool(self.options.verbose)
         settings.direct_solve_method = _DIRECT_METHOD
         settings.max_threads = CLARABEL_THREADS
-        # smaller static regularisation than Clarabel's 1e-8: with near-perfect learning the optimum is ~1e-6
-        # and the default lets the primal residual of the state equations creep up (AlmostSolved at K=20, N=1000)
-        settings.static_regularization_constant = 1e-10
-        t0 = time.perf_counter()
+        settings.static_regularization_constant = regularization
         try:  # a fresh solver per trial: updating b in a persistent one reuses the first trial's equilibration,
             # which made designs depend on solve history (~20 % faster; campaigns must reproduce samples exactly)
-            solver = clarabel.DefaultSolver(c["P"], c["q"], c["A"], np.concatenate(b), c["cones"], settings)
-            sol = solver.solve()
+            sol = clarabel.DefaultSolver(c["P"], c["q"], c["A"], b, c["cones"], settings).solve()
         except Exception as exc:  # Clarabel raises on malformed data or internal failures
             raise RobustSolverError(
                 f"robust design: Clarabel failed at rho = {rho:g} ({exc}). Next steps: try backend='cvxpy', "
                 "solver='SCS', scale the signals (e0 in m, d_f in m/s^2), raise lam/mu, or verbose=True") from exc
-        elapsed = time.perf_counter() - t0
-        status = _CLARABEL_STATUS.get(str(sol.status), str(sol.status))
-        self._z = np.asarray(sol.x, dtype=float)
-        self._iters = int(sol.iterations)
-        return status, elapsed
+        return _CLARABEL_STATUS.get(str(sol.status), str(sol.status)), sol
 
     def _check_e0(self, e0: object) -> np.ndarray:
         e0 = np.asarray(e0, dtype=float)
