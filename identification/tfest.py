@@ -552,6 +552,12 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
 
 # ---------------------------------------------------------------- initialisation
 
+#: The pole grid's slowest real pole and slowest pair, in rad per sample (``p Ts``, ``w_n Ts``): the grid is in
+#: the data's units, so a fit does not depend on the unit of time (0.3 and 1 rad/s at the built-in Ts = 20 ms).
+GRID_LOWEST_POLE = 0.006
+GRID_LOWEST_PAIR = 0.02
+
+
 def _grid_denominators(structure: ModelStructure, ts: float) -> list[np.ndarray]:
     return list(_pole_grid(structure.n_free_poles, ts))
 
@@ -562,9 +568,9 @@ def _pole_grid(nf: int, ts: float) -> tuple[np.ndarray, ...]:
     if nf == 0:
         return (np.zeros(0),)
     nyq = np.pi / ts
-    out = [np.real(np.poly(np.full(nf, -p)))[1:] for p in np.geomspace(0.3, 0.5 * nyq, 7)]
+    out = [np.real(np.poly(np.full(nf, -p)))[1:] for p in np.geomspace(GRID_LOWEST_POLE / ts, 0.5 * nyq, 7)]
     if nf >= 2:  # lightly damped pairs
-        for wn in np.geomspace(1.0, 0.3 * nyq, 4):
+        for wn in np.geomspace(GRID_LOWEST_PAIR / ts, 0.3 * nyq, 4):
             rest = np.real(np.poly(np.full(nf - 2, -wn)))
             out.append(np.polymul([1.0, 0.6 * wn, wn**2], rest)[1:])
     for a in out:
@@ -900,7 +906,7 @@ def _ranked(model: _Model, dens: list[np.ndarray], delay: float) -> list[_Point]
                     rows[:nb] = _allpole(sections[c], coef[c] @ shifted)
                     if model.n_beta:
                         span = m if radius[c] >= 1.0 else min(
-                            m, int(math.ceil(math.log(1e-14) / math.log(radius[c]))) + n)
+                            m, int(math.ceil(math.log(1e-14) / math.log(max(radius[c], 1e-300)))) + n)
                         drive = np.zeros((n, span))
                         k = min(n + 1, span)
                         drive[:, :k] = free[c][:, :k]
@@ -1118,29 +1124,54 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
                  deadline: float, say: Progress) -> list[_Point]:
     """The criterion minimised over the model at each delay of a grid on ``[0, max_delay]``,
     each point a short LM warm-started from its neighbour's solution (never a fit from
-    scratch per point). Returns the points at the local minima of this profile, best first,
-    with the delay as their last parameter."""
+    scratch per point), then coarse to fine: around each competitive local minimum (within
+    :data:`SECONDARY_START_RATIO` of the best) a grid of the same size over the neighbouring interval,
+    until its step is one sample. Returns the points at the local minima, best first, with the delay as
+    their last parameter (docs/identification.md, "The search")."""
     fixed = _Model(structure, exps, ts, opts, estimate_delay=False)
     count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
-    prof = []
-    a = start.alpha[: structure.n_free_poles]
-    for i, d in enumerate(np.linspace(0.0, opts.max_delay, count)):
-        p0 = fixed.evaluate(a, float(d))
-        if not math.isfinite(p0.sse):
-            say(i + 1, count, f"delay sweep: {d:.3g} s, model diverges")
-            continue
-        p = _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
-        a = p.alpha
-        p.cols = None                # keep the profile light: signals are recomputed for the starts
-        prof.append(p)
-        say(i + 1, count, f"delay sweep: {p.delay:.3g} s, SSE {p.sse:.4g}")
+    done = [0]
+    total = [count]
+
+    def sweep(delays: np.ndarray, a: np.ndarray) -> list[_Point]:
+        out = []
+        for d in delays:
+            done[0] += 1
+            p0 = fixed.evaluate(a, float(d))
+            if not math.isfinite(p0.sse):
+                say(done[0], total[0], f"delay sweep: {d:.3g} s, model diverges")
+                continue
+            p = _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
+            a = p.alpha
+            p.cols = None                # keep the profile light: signals are recomputed for the starts
+            out.append(p)
+            say(done[0], total[0], f"delay sweep: {p.delay:.3g} s, SSE {p.sse:.4g}")
+        return out
+
+    def minima(prof: list[_Point]) -> list[_Point]:
+        sse = [p.sse for p in prof]
+        return [prof[i] for i in range(len(prof))
+                if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
+
+    step = opts.max_delay / max(count - 1, 1)
+    prof = sweep(np.linspace(0.0, opts.max_delay, count), start.alpha[: structure.n_free_poles])
     if not prof:
         return [start]
-    sse = [p.sse for p in prof]
-    minima = [prof[i] for i in range(len(prof))
-              if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
+    found = minima(prof)
+    while step > ts * (1 + 1e-9) and found:
+        best = min(p.sse for p in found)
+        keep = [p for p in found if p.sse <= SECONDARY_START_RATIO * best]
+        finer = 2 * step / (count - 1)
+        refined = []
+        for p in keep:  # the interval between its two neighbours, the point itself already known
+            grid = [d for d in np.linspace(p.delay - step, p.delay + step, count)
+                    if 0.0 <= d <= opts.max_delay and abs(d - p.delay) > 1e-9 * ts]
+            total[0] += len(grid)
+            local = sorted([p, *sweep(np.asarray(grid), p.alpha)], key=lambda q: q.delay)
+            refined += minima(local)
+        found, step = refined, finer
     return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.cols)
-            for p in sorted(minima, key=lambda p: p.sse)]
+            for p in sorted(found, key=lambda p: p.sse)]
 
 
 # ---------------------------------------------------------------- public entry
