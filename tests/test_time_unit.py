@@ -4,7 +4,8 @@ The same records with their time stamps multiplied by 1000 and by 1/1000 (second
 kiloseconds) must give the same model in the new unit: the same held-out fit (within 0.05 points, the
 acceptance) and the poles and delay scaled by the factor (relative 1e-4: the search runs in the data's
 units, so only rounding and the stopping point differ; measured: fits within 5e-7 points, poles within
-1.2e-6). The cases are slow processes, whose poles lie below any grid stated in rad/s (Ts 10 s and 2 s, delays of several samples), and two of the hard cases at 10 ms.
+1.2e-6). The cases: slow processes, whose poles lie below any grid stated in rad/s (Ts 10 s and 2 s,
+delays of several samples, one lightly damped), and a hard case at 10 ms (coloured noise, a fractional delay).
 Each model is also held to the true plant's own held-out fit (MATLAB ``compare``, same initial-condition
 and trend handling) within 0.5 points.
 """
