@@ -21,7 +21,8 @@ from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicativ
 
 from .oe import discretise, response, simulate_zoh
 
-__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis"]
+__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis",
+           "MARGINAL_DAMPING", "unidentified_poles"]
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -457,6 +458,39 @@ class TFEstimate:
 DELAY_BOUND_GAIN = 4.0
 #: A file whose own fit is this many points below the median file's is flagged (:func:`fit_diagnostics`).
 FILE_FIT_GAP = 20.0
+#: A pole pair damped less than this is marginal: a record of finite length cannot tell it from an undamped
+#: one or from a sinusoid in the data, and a held-out score that refits the initial state hides it
+#: (:func:`unidentified_poles`).
+MARGINAL_DAMPING = 0.005
+
+
+def unidentified_poles(est: TFEstimate) -> list[str]:
+    """The fit's poles the data cannot show: beyond the Nyquist frequency, or pairs damped less than
+    :data:`MARGINAL_DAMPING` (the model's integrators are structure, not estimates, and are not listed).
+
+    Parameters
+    ----------
+    est : TFEstimate
+
+    Returns
+    -------
+    list of str
+        One line per such pole (its value in rad/s and why); empty when every pole is identified.
+    """
+    s = est.structure
+    free = np.asarray(est.den, float)[: s.n_free_poles + 1]
+    roots = np.roots(free) if free.size > 1 else np.zeros(0)
+    nyquist = np.pi / est.ts
+    out = []
+    for r in roots[np.argsort(-np.abs(roots))]:
+        if r.imag < 0:
+            continue
+        mag = abs(r)
+        if mag > nyquist:
+            out.append(f"{r:.4g} rad/s: beyond the Nyquist frequency {nyquist:.4g} rad/s")
+        elif r.imag > 0 and -r.real / mag < MARGINAL_DAMPING:
+            out.append(f"{r:.4g} rad/s: damping {-r.real / mag:.2g}, below {MARGINAL_DAMPING:g} (marginal)")
+    return out
 
 
 def fit_diagnostics(est: TFEstimate) -> list[str]:
@@ -464,6 +498,7 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
 
     * the estimated delay on a bound of its search: ``max_delay``, or 0 when a negative delay
       would fit significantly better (:data:`DELAY_BOUND_GAIN`, from ``solver["delay_lower_bound_gain"]``);
+    * a pole pair damped less than :data:`MARGINAL_DAMPING` (marginal: not identified);
     * a pole or zero beyond the Nyquist frequency (the data cannot show it: fewer poles/zeros);
     * residuals not white (fewer than half the lags inside the 99 % band: coloured noise or
       missing dynamics, and the covariance-based Delta set understates the model error);
@@ -492,6 +527,11 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                        "zero; check the time stamps of the signals, or fit one zero more")
         elif (max_delay := est.solver.get("max_delay")) is not None and est.delay >= max_delay * (1 - 1e-6):
             out.append(f"the delay ended on its upper bound {max_delay:g} s: raise --max-delay (FitOptions.max_delay)")
+    marginal = [p for p in unidentified_poles(est) if "marginal" in p]
+    if marginal:
+        out.append(f"pole pair(s) at {'; '.join(marginal)}: not identified (a mode this lightly damped, or a "
+                   "sinusoid in the data, fits from a refitted initial state but not from rest); try fewer "
+                   "poles or check the log for a periodic disturbance")
     nyquist = np.pi / est.ts
     for what, poly in (("pole", est.den), ("zero", est.num)):
         roots = np.roots(poly) if np.size(poly) > 1 else np.zeros(0)

@@ -202,7 +202,7 @@ def test_an_unstable_plant_needs_allow_unstable(tmp_path, capsys):
 def test_pole_range_compares_orders_and_writes_the_chosen_one(tmp_path, capsys):
     """``--poles 2..5`` on data of 1/(s^2 (s/7 + 1)) with a 0.04 s delay (2 integrators): every order is fitted;
     the true order 3 fits as well as the larger ones (within 0.5 points held out) with fewer parameters and is
-    written; the table and model.json's order_comparison agree with a separate fit of each order."""
+    written; every order fits its estimation data at least as well as fitted alone and as the orders it contains."""
     est, val = tmp_path / "chirp.csv", tmp_path / "val.csv"
     _flight(est, 0, 4.0)
     _flight(val, 1, 3.0)
@@ -214,10 +214,14 @@ def test_pole_range_compares_orders_and_writes_the_chosen_one(tmp_path, capsys):
     rows = model["solver"]["order_comparison"]
     assert [r["poles"] for r in rows] == [3, 4, 5] and [r["chosen"] for r in rows] == [True, False, False]
     assert model["structure"]["poles"] == 3 and "<- chosen" in out
-    for r in rows:
+    for r in rows:  # each order also starts from the best it contains: never worse than fitted alone
         assert main(["identify", *common, "--poles", str(r["poles"]), "--out", str(tmp_path / "one.json")]) == 0
         one = json.loads((tmp_path / "one.json").read_text())
-        assert one["fit_percent"]["validation"] == pytest.approx(r["fit_validation"], abs=1e-9)
+        assert r["fit_estimation"] >= one["fit_percent"]["estimation"] - 1e-9
+    # monotone to 1e-6 points: the contained model's extra poles start 100x beyond Nyquist, a lag of 0.3 % of a
+    # sample that the search leaves where the data have nothing more to show (measured 7e-10 points)
+    assert all(a["fit_estimation"] >= b["fit_estimation"] - 1e-6 for b, a in zip(rows, rows[1:])), rows
+    assert [bool(r["not_identified"]) for r in rows] == [False, True, True]  # the extra poles beyond Nyquist
     assert max(r["fit_validation"] for r in rows) - rows[0]["fit_validation"] <= 0.5
     assert main(["identify", *common, "--poles", "5..2", "--out", str(tmp_path / "x.json")]) == 2
 

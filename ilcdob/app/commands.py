@@ -41,7 +41,7 @@ from ilcdob.inputs import MAX_LOG_BYTES, check_input, read_bytes, read_json
 from .html import build_report, report_files
 from .output import OutputError, OutputFolder, Provenance, check_output_path, verify_manifest, write_file
 
-__all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json", "compare_orders",
+__all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json",
            "identify_fleet_to_folder", "design_to_folder", "design_shortfalls", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
            "add_to_fleet", "report_to_html", "LogClock", "IdentifyInputs", "learn_to_folder", "TrialColumns"]
 
@@ -593,7 +593,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     inputs : IdentifyInputs
         Signals and clock of the files.
     structure : ilcdob.uncertainty.ModelStructure or sequence of them
-        Model orders; several: each is fitted and compared (:func:`compare_orders`), the chosen one
+        Model orders; several: each is fitted and compared (:func:`~ilcdob.identification.orders.compare_orders`), the chosen one
         written with the comparison in ``solver["order_comparison"]``.
     options : ilcdob.identification.FitOptions
         Fit settings (delay, trend, limits).
@@ -623,6 +623,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
         A window of ``inputs.segment`` holds fewer samples than the fit needs
         (:func:`ilcdob.identification.tfest.min_samples`); ``zero_at_origin`` where the data refuse it.
     """
+    from ilcdob.identification.orders import compare_orders, fit_orders
     from ilcdob.identification.origin_zero import with_zero_at_origin
     from ilcdob.identification.plots import fit_figures
     from ilcdob.identification.tfest import min_samples, tfest
@@ -642,8 +643,8 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
         need = max(min_samples(st) for st in structures)
         est_data = segments(est_data, inputs.segment, min_samples=need, name="--segment")
         val_data = segments(val_data, inputs.segment, min_samples=need, name="--segment")
-    fits = [tfest(est_data, "u", "y", st, options, validation=val_data or None, progress=progress)
-            for st in structures]
+    fits = fit_orders(lambda st, opts: tfest(est_data, "u", "y", st, opts, validation=val_data or None,
+                                             progress=progress), structures, options)
     est = compare_orders(fits, sum(len(fd) for fd in est_data)) if len(fits) > 1 else fits[0]
     est = with_zero_at_origin(est, est_data, val_data) if zero_at_origin else est
     prov = _provenance("identify", argv)
@@ -660,49 +661,6 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
             folder.seal()
             write_file(out, data)
     return est, est_data, val_data
-
-
-#: Held-out fit (points) within which the order with fewer parameters is chosen (:func:`compare_orders`).
-ORDER_FIT_MARGIN = 0.5
-
-
-def compare_orders(fits: Sequence[Any], n_samples: int) -> Any:
-    """Choose among fits of several orders and record the comparison.
-
-    Each row: poles, zeros, integrators, parameter count ``k`` (with the delay when estimated),
-    estimation and held-out fit %, and ``AIC = N ln(sigma^2) + 2 k`` (``N`` estimation samples).
-    Chosen: with held-out data, the fewest parameters within :data:`ORDER_FIT_MARGIN` points of the
-    best held-out fit; without, the lowest AIC.
-
-    Parameters
-    ----------
-    fits : sequence of TFEstimate
-        One per order.
-    n_samples : int
-        Estimation samples.
-
-    Returns
-    -------
-    TFEstimate
-        The chosen fit, with ``solver["order_comparison"]`` (the rows, ``chosen`` marked).
-    """
-    rows = []
-    for est in fits:
-        k = est.structure.n_params + (1 if est.delay_estimated else 0)
-        rows.append({"poles": est.structure.n_poles, "zeros": est.structure.n_zeros,
-                     "integrators": est.structure.n_integrators, "parameters": k,
-                     "fit_estimation": est.fit_estimation, "fit_validation": est.fit_validation,
-                     "aic": float(n_samples * np.log(max(est.sigma2, 1e-300)) + 2 * k), "chosen": False})
-    if all(r["fit_validation"] is not None for r in rows):
-        best = max(r["fit_validation"] for r in rows)
-        pick = min((i for i, r in enumerate(rows) if r["fit_validation"] >= best - ORDER_FIT_MARGIN),
-                   key=lambda i: rows[i]["parameters"])
-    else:
-        pick = min(range(len(rows)), key=lambda i: rows[i]["aic"])
-    rows[pick]["chosen"] = True
-    chosen = fits[pick]
-    chosen.solver["order_comparison"] = rows
-    return chosen
 
 
 def identify_fleet_to_folder(out: str | Path, *, fleet: str | Path | None = None, seed: int = 0,

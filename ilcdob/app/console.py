@@ -234,7 +234,8 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
         for row in est.solver["order_comparison"]:
             print(f"  {row['poles']} poles: estimation {row['fit_estimation']:.2f}, held-out "
                   + ("-" if row["fit_validation"] is None else f"{row['fit_validation']:.2f}")
-                  + f", AIC {row['aic']:.1f}" + ("  <- chosen" if row["chosen"] else ""))
+                  + f", AIC {row['aic']:.1f}" + ("  <- chosen" if row["chosen"] else "")
+                  + ("" if not row["not_identified"] else "  (not identified: " + "; ".join(row["not_identified"]) + ")"))
     print(est.summary())
     if est.solver.get("status") != "converged":
         why = {"max_iter": "at its iteration limit (--max-iter)", "time_limit": "at its time limit (--time-limit)",
