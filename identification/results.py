@@ -21,7 +21,7 @@ from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicativ
 
 from .oe import discretise, response, simulate_zoh
 
-__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis",
+__all__ = ["TFEstimate", "ResidualTest", "compare", "from_rest", "trend_basis", "fit_percent", "free_response_basis",
            "MARGINAL_DAMPING", "unidentified_poles"]
 
 
@@ -150,6 +150,9 @@ class TFEstimate:
     diagnostics : list of str
         What a careful engineer would want to know about the fit (:func:`fit_diagnostics`);
         empty when nothing stands out.
+    fit_validation_rest : float or None
+        Fit % on the held-out experiments simulated from rest (the trend still fitted, the initial state
+        not: :func:`from_rest`), beside :attr:`fit_validation`, whose initial state is refitted.
     """
 
     structure: ModelStructure
@@ -171,6 +174,7 @@ class TFEstimate:
     trend: int | None = None
     file_fits: list = field(default_factory=list)
     diagnostics: list = field(default_factory=list)
+    fit_validation_rest: float | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -226,21 +230,23 @@ class TFEstimate:
         white = ResidualTest(lags, _xcorr(resid, resid, lags), bound)
         xl = np.arange(-25, 26)
         xcor = ResidualTest(xl, _xcorr(resid, u_all, xl), bound)
-        fit_val = None
+        fit_val = fit_rest = None
         if validation is not None:
             vals = [validation] if isinstance(validation, FlightData) else list(validation)
-            yv, yhv = [], []
+            yv, yhv, yrv = [], [], []
             for fd in vals:
                 u = fd[input]
                 yv.append(fd[output])
                 yhv.append(compare(structure, theta, delay, fd.ts, u, fd[output], trend))
+                yrv.append(from_rest(structure, theta, delay, fd.ts, u, fd[output], trend))
             fit_val = fit_percent(np.concatenate(yv), np.concatenate(yhv))
+            fit_rest = fit_percent(np.concatenate(yv), np.concatenate(yrv))
         file_fits = [fit_percent(y, yh) for y, yh in zip(ys, yhats)]
         est = cls(structure=structure, theta=np.asarray(theta, float), num=num, den=den, delay=float(delay),
                   covariance=np.asarray(covariance, float), delay_estimated=bool(delay_estimated),
                   sigma2=float(sigma2), ts=float(ts), fit_estimation=fit_percent(y_all, yh_all),
                   fit_validation=fit_val, whiteness=white, input_correlation=xcor, input=input,
-                  output=output, solver=dict(solver), trend=trend, file_fits=file_fits)
+                  output=output, solver=dict(solver), trend=trend, file_fits=file_fits, fit_validation_rest=fit_rest)
         est.diagnostics.extend(fit_diagnostics(est))
         return est
 
@@ -403,7 +409,8 @@ class TFEstimate:
             "parameters": [float(v) for v in self.theta],
             "std": [float(v) for v in self.std],
             "delay_estimated": self.delay_estimated,
-            "fit_percent": {"estimation": self.fit_estimation, "validation": self.fit_validation},
+            "fit_percent": {"estimation": self.fit_estimation, "validation": self.fit_validation,
+                            "validation_from_rest": self.fit_validation_rest},
             "covariance": self.covariance.tolist(),
             "noise_variance": self.sigma2,
             "sample_time": self.ts,
@@ -446,7 +453,9 @@ class TFEstimate:
         for nme, v, sd in zip(names, vals, self.std):
             lines.append(f"  {nme:>5} = {v: .6g} +- {sd:.3g} (1 sigma)")
         lines.append(f"fit: estimation {self.fit_estimation:.2f} %"
-                     + (f", validation {self.fit_validation:.2f} %" if self.fit_validation is not None else ""))
+                     + (f", validation {self.fit_validation:.2f} %" if self.fit_validation is not None else "")
+                     + (f" ({self.fit_validation_rest:.2f} % from rest)" if self.fit_validation_rest is not None
+                        else ""))
         lines.append(f"residuals: whiteness {100 * self.whiteness.share_inside:.0f} % of lags inside the 99 % band, "
                      f"input correlation {100 * self.input_correlation.share_inside:.0f} %")
         lines += [f"note: {d}" for d in self.diagnostics]
@@ -458,6 +467,8 @@ class TFEstimate:
 DELAY_BOUND_GAIN = 4.0
 #: A file whose own fit is this many points below the median file's is flagged (:func:`fit_diagnostics`).
 FILE_FIT_GAP = 20.0
+#: Estimation and held-out fits, and held-out fits refitted and from rest, this many points apart are noted.
+FIT_GAP = 30.0
 #: A pole pair damped less than this is marginal: a record of finite length cannot tell it from an undamped
 #: one or from a sinusoid in the data, and a held-out score that refits the initial state hides it
 #: (:func:`unidentified_poles`).
@@ -500,9 +511,11 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
       would fit significantly better (:data:`DELAY_BOUND_GAIN`, from ``solver["delay_lower_bound_gain"]``);
     * a pole pair damped less than :data:`MARGINAL_DAMPING` (marginal: not identified);
     * a pole or zero beyond the Nyquist frequency (the data cannot show it: fewer poles/zeros);
-    * residuals not white (fewer than half the lags inside the 99 % band: coloured noise or
-      missing dynamics, and the covariance-based Delta set understates the model error);
-    * residuals correlated with the input (fewer than 80 % of lags inside: missing dynamics);
+    * residuals not white (the whiteness test fails, fewer than 95 % of the lags inside the 99 % band:
+      coloured noise or missing dynamics, and the covariance-based Delta set understates the model error);
+    * residuals correlated with the input (the same test on the cross-correlation: missing dynamics);
+    * an estimation fit more than :data:`FIT_GAP` points above the held-out fit, or a held-out fit with the
+      initial state refitted that far above the same from rest;
     * an estimation file fitting :data:`FILE_FIT_GAP` points or more below the median file;
     * samples left out of the fit as gross errors (``solver["gross_errors"]``, see
       ``FitOptions.outlier_sigmas``), named by file and sample.
@@ -539,13 +552,23 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
         if far.size:
             out.append(f"{what}(s) at {', '.join(f'{r:.4g}' for r in far)} rad/s lie beyond the Nyquist frequency "
                        f"{nyquist:.4g} rad/s: the data cannot show them; try fewer {what}s")
-    if est.whiteness.share_inside < 0.5:
+    if not est.whiteness.passed:
         out.append(f"the residuals are not white ({100 * est.whiteness.share_inside:.0f} % of lags inside the 99 % "
-                   "band): coloured noise or missing dynamics; the Delta set from the covariance then understates "
-                   "the model error (state a bound, fleet `uncertainty`)")
-    if est.input_correlation.share_inside < 0.8:
+                   "band, the test needs 95 %): coloured noise or missing dynamics; the Delta set from the covariance "
+                   "then understates the model error (state a bound, fleet `uncertainty`)")
+    if not est.input_correlation.passed:
         out.append(f"the residuals correlate with the input ({100 * est.input_correlation.share_inside:.0f} % of "
-                   "lags inside the 99 % band): dynamics the structure misses; compare other orders")
+                   "lags inside the 99 % band, the test needs 95 %): dynamics the structure misses; compare other "
+                   "orders")
+    if est.fit_validation is not None and est.fit_estimation - est.fit_validation > FIT_GAP:
+        out.append(f"the estimation fit {est.fit_estimation:.1f} % is far above the held-out fit "
+                   f"{est.fit_validation:.1f} %: the model follows the estimation data's noise or disturbances "
+                   "(fewer poles or zeros), or the held-out data come from other conditions")
+    if est.fit_validation is not None and est.fit_validation_rest is not None and \
+            est.fit_validation - est.fit_validation_rest > FIT_GAP:
+        out.append(f"the held-out fit is {est.fit_validation:.1f} % with the initial state refitted but "
+                   f"{est.fit_validation_rest:.1f} % from rest: the free response carries the score (a marginal or "
+                   "very slow mode), or the held-out data do not start at rest")
     for d in est.solver.get("gross_errors", []):
         out.append(f"{d['samples']} samples of {d['source']} (samples {d['first']}-{d['last']}) lay far off the "
                    "model (gross errors: a glitch or corrupt samples in the log) and were left out of the fit, the "
@@ -587,6 +610,39 @@ def trend_basis(n: int, degree: int) -> np.ndarray:
         ``n x (degree + 1)``, columns of degree 0..``degree`` on ``[-1, 1]``.
     """
     return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, n), degree)
+
+
+def from_rest(structure: ModelStructure, theta: np.ndarray, delay: float, ts: float, u: np.ndarray, y: np.ndarray,
+              trend: int | None = None) -> np.ndarray:
+    """Simulated output from rest, with only a trend chosen by least squares (:func:`compare` without the initial
+    state).
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        The model's orders.
+    theta : numpy.ndarray
+        Its parameters.
+    delay : float
+        Input delay, s.
+    ts : float
+        Sample time, s.
+    u, y : numpy.ndarray
+        Input and measured output, same length.
+    trend : int, optional
+        Degree of a polynomial output trend fitted (None: none).
+
+    Returns
+    -------
+    numpy.ndarray
+        The model output from a zero initial state (plus the fitted trend).
+    """
+    forced = simulate_zoh(structure, theta, u, ts, delay)
+    if trend is None:
+        return forced
+    basis = trend_basis(u.size, trend)
+    coef, *_ = np.linalg.lstsq(basis, y - forced, rcond=None)
+    return forced + basis @ coef
 
 
 def compare(structure: ModelStructure, theta: np.ndarray, delay: float, ts: float, u: np.ndarray, y: np.ndarray,
