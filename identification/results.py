@@ -518,7 +518,8 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
       initial state refitted that far above the same from rest;
     * an estimation file fitting :data:`FILE_FIT_GAP` points or more below the median file;
     * samples left out of the fit as gross errors (``solver["gross_errors"]``, see
-      ``FitOptions.outlier_sigmas``), named by file and sample.
+      ``FitOptions.outlier_sigmas``), named by file and sample;
+    * a start-up transient kept in the fit (``solver["startup_transients"]``).
 
     Parameters
     ----------
@@ -574,6 +575,11 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                    "model (gross errors: a glitch or corrupt samples in the log) and were left out of the fit, the "
                    "record cut there; check that file, or keep them with --keep-outliers "
                    "(FitOptions(outlier_sigmas=None))")
+    for d in est.solver.get("startup_transients", []):
+        out.append(f"the first {d['samples']} samples of {d['source']} lie far off the model but move smoothly: a "
+                   "start-up transient (the vehicle not at rest when the log starts, or dynamics of the start the "
+                   "structure lacks), not a glitch; kept in the fit: cut them from the log if they are not the "
+                   "system's response to the input")
     if len(est.file_fits) >= 3:
         median = float(np.median(est.file_fits))
         for i, f in enumerate(est.file_fits):

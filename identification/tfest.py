@@ -1057,15 +1057,30 @@ def _fitted(model: _Model, p: _Point) -> list[np.ndarray]:
     return [p.theta[model.nf:] @ xr + loc @ lr for (xr, lr), loc in zip(model._cols(p), p.locals_)]
 
 
-def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list[_Exp], list[dict]]:
+def _smooth_start(r: np.ndarray, flags: np.ndarray, guard: int) -> int:
+    """How many leading samples of a residual ``r`` form a start-up transient rather than a glitch: a run of
+    flagged samples beginning within ``guard`` samples of the start (gaps up to ``guard`` joined) along which the
+    residual moves smoothly, no step between samples above half its peak (a glitch jumps; a start the model
+    misses, a climb from a state not at rest, does not). 0 when there is none."""
+    idx = np.flatnonzero(flags)
+    if idx.size < 2 or idx[0] > guard:
+        return 0
+    breaks = np.flatnonzero(np.diff(idx) > guard + 1)
+    k = int(idx[breaks[0]] if breaks.size else idx[-1]) + 1
+    seg = r[: min(k + 1, r.size)]
+    return k if k >= 2 and np.max(np.abs(np.diff(seg))) <= 0.5 * np.max(np.abs(seg)) else 0
+
+
+def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list[_Exp], list[dict], list[dict]]:
     """The experiments cut around samples whose residual at ``p`` lies more than ``sigmas`` robust
     standard deviations off, and what was left out (``source``, ``first``/``last`` sample of the
     experiment, ``samples``); unchanged experiments and no record when none is found or when the
     outliers exceed :data:`MAX_OUTLIER_SHARE`. Residuals below :data:`GROSS_ERROR_FLOOR` of the output's
     standard deviation never count, nor below half the largest one (each round takes the worst cluster: the
-    smaller errors a glitch spreads through a distorted fit go with the refit). Each flagged sample is widened by the model order on
-    both sides (the samples around a glitch carry its transient); good runs shorter than
-    :func:`min_samples` are left out with it."""
+    smaller errors a glitch spreads through a distorted fit go with the refit). Each flagged sample is widened by
+    the model order on both sides (the samples around a glitch carry its transient); good runs shorter than
+    :func:`min_samples` are left out with it. A smooth run at an experiment's start (:func:`_smooth_start`) is a
+    start-up transient, not a glitch: kept, and returned third (``source``, ``samples``)."""
     resid = [e.y - f for e, f in zip(model.exps, _fitted(model, p))]
     flat = np.concatenate(resid)
     centre = float(np.median(flat))
@@ -1075,9 +1090,15 @@ def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list
     # the worst cluster first: a fit distorted by a glitch spreads smaller errors that the refit removes
     limit = max(sigmas * scale, GROSS_ERROR_FLOOR * spread, 0.5 * worst)
     flags = [np.abs(r - centre) > limit for r in resid]
-    if not any(f.any() for f in flags):
-        return model.exps, []
     need, guard = min_samples(model.s), model.n
+    startup = []
+    for e, r, f in zip(model.exps, resid, flags):
+        k = _smooth_start(r - centre, f, guard)
+        if k:
+            f[:k] = False
+            startup.append({"source": e.source, "samples": k})
+    if not any(f.any() for f in flags):
+        return model.exps, [], startup
     pieces, left = [], []
     for e, f in zip(model.exps, flags):
         if not f.any():
@@ -1094,8 +1115,8 @@ def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list
         idx = np.flatnonzero(dropped)
         left.append({"source": e.source, "first": int(idx[0]), "last": int(idx[-1]), "samples": int(idx.size)})
     if sum(d["samples"] for d in left) > MAX_OUTLIER_SHARE * flat.size or not pieces:
-        return model.exps, []
-    return pieces, left
+        return model.exps, [], startup
+    return pieces, left, startup
 
 
 def _pair_frequency(a: np.ndarray, near: complex, default: float) -> float:
@@ -1342,9 +1363,9 @@ def _tfest(data: FlightData | list[FlightData], input: str, output: str, structu
     cands, ranking = _initial_points(model, delay0, say)
     runs: list[dict] = []
     best = _search(model, _lm_starts(model, cands, deadline, say), delay0, deadline, say, runs)
-    model, best, left_out = _refit_without_gross_errors(model, best, delay0, deadline, say, runs)
+    model, best, left_out, startup = _refit_without_gross_errors(model, best, delay0, deadline, say, runs)
     _warn_if_stopped(best)
-    return _result(model, best, input, output, validation, runs, ranking, left_out, t_start)
+    return _result(model, best, input, output, validation, runs, ranking, left_out, t_start, startup)
 
 
 def _fit_problem(data: FlightData | list[FlightData], input: str, output: str, structure: ModelStructure,
@@ -1570,7 +1591,7 @@ def _search(model: _Model, runs_from: list[_Point], delay0: float, deadline: flo
 
 
 def _refit_without_gross_errors(model: _Model, best: _LMResult, delay0: float, deadline: float, say: Progress,
-                                runs: list[dict]) -> tuple[_Model, _LMResult, list[dict]]:
+                                runs: list[dict]) -> tuple[_Model, _LMResult, list[dict], list[dict]]:
     """Up to :data:`OUTLIER_ROUNDS` refits with the worst cluster of gross errors left out.
 
     docs/identification.md, "The search", step 5. Only after a converged fit and with
@@ -1600,11 +1621,15 @@ def _refit_without_gross_errors(model: _Model, best: _LMResult, delay0: float, d
         The last refit (``best`` itself without a round).
     left_out : list of dict
         What every round left out (``source``, ``first``, ``last``, ``samples``).
+    startup : list of dict
+        The start-up transients the first round kept (``source``, ``samples``; :func:`_smooth_start`).
     """
     opts = model.opts
     left_out: list[dict] = []
+    startup: list[dict] | None = None
     for _ in range(OUTLIER_ROUNDS if opts.outlier_sigmas is not None and best.status == "converged" else 0):
-        pieces, left = _without_gross_errors(model, best.point, opts.outlier_sigmas)
+        pieces, left, kept = _without_gross_errors(model, best.point, opts.outlier_sigmas)
+        startup = kept if startup is None else startup
         cut = _Model(model.s, pieces, model.ts, opts, model.estimate_delay) if left else None
         p0 = cut.evaluate(best.point.alpha, delay0) if cut is not None else None
         if p0 is None or not math.isfinite(p0.sse):
@@ -1614,7 +1639,7 @@ def _refit_without_gross_errors(model: _Model, best: _LMResult, delay0: float, d
         model = cut
         left_out += left
         say(0, 0, f"gross errors: {samples} samples left out, LM {best.status}, SSE {best.point.sse:.6g}")
-    return model, best, left_out
+    return model, best, left_out, startup or []
 
 
 #: Why a search that did not converge stopped, by its status (:func:`_warn_if_stopped`).
@@ -1700,7 +1725,8 @@ def _covariance(model: _Model, p: _Point) -> tuple[float, np.ndarray]:
 
 
 def _result(model: _Model, best: _LMResult, input: str, output: str, validation: FlightData | list[FlightData] | None,
-            runs: list[dict], ranking: dict, left_out: list[dict], t_start: float) -> TFEstimate:
+            runs: list[dict], ranking: dict, left_out: list[dict], t_start: float,
+            startup: list[dict] | None = None) -> TFEstimate:
     """The fit as a :class:`TFEstimate`, refused when the output shows no response.
 
     Parameters
@@ -1721,13 +1747,15 @@ def _result(model: _Model, best: _LMResult, input: str, output: str, validation:
         The gross errors left out (:func:`_refit_without_gross_errors`; may be empty).
     t_start : float
         ``time.perf_counter()`` value at the start of the fit, s.
+    startup : list of dict, optional
+        Start-up transients kept in the fit (:func:`_refit_without_gross_errors`).
 
     Returns
     -------
     TFEstimate
         With ``solver``: engine, status, iterations, starts, then ``ranking``, ``max_delay``
-        (delay estimated), ``delay_lower_bound_gain`` (:func:`_delay_pull`) and ``gross_errors``
-        where they apply, and ``seconds``, the wall time since ``t_start``.
+        (delay estimated), ``delay_lower_bound_gain`` (:func:`_delay_pull`), ``gross_errors`` and
+        ``startup_transients`` where they apply, and ``seconds``, the wall time since ``t_start``.
 
     Raises
     ------
@@ -1746,6 +1774,7 @@ def _result(model: _Model, best: _LMResult, input: str, output: str, validation:
                                       "starts": runs, **({"ranking": ranking} if ranking else {}),
                                       **({"max_delay": opts.max_delay} if model.estimate_delay else {}), **pull,
                                       **({"gross_errors": left_out} if left_out else {}),
+                                      **({"startup_transients": startup} if startup else {}),
                                       "seconds": time.perf_counter() - t_start})
     if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:
         raise SignalError(f"{exps[0].source}: output `{output}` shows no response to input `{input}`: the best "

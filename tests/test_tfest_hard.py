@@ -593,3 +593,23 @@ def test_a_long_log_ranks_its_starts_decimated_and_reaches_the_same_optimum(name
     assert decimated.solver["status"] == whole.solver["status"] == "converged"
     assert np.max(np.abs(decimated.theta - whole.theta) / whole.std) < 0.05
     assert abs(decimated.fit_validation - whole.fit_validation) < 1e-3
+
+
+def test_a_smooth_start_up_transient_is_kept_and_named_a_step_at_the_start_is_cut():
+    """A log that starts with a smooth climb the model misses (a half-cosine decaying over its first 0.1 s, 10
+    samples, as large as the output's spread) is not a glitch: kept, and named as a start-up transient; the same
+    samples shifted by a constant 16 (a logger's first samples corrupt: a step) are cut as gross errors."""
+    structure, theta = _truth(STABLE)
+    rng = np.random.default_rng(5)
+    u = _excite(3000, 3)
+    y = simulate_zoh(structure, theta, u, TS, 0.0) + 0.02 * rng.standard_normal(u.size)
+    climb = y.copy()
+    climb[:10] += np.std(y) * 0.5 * (1 + np.cos(np.pi * np.arange(10) / 10))
+    est = tfest(_flight(u, climb, "climb"), "u", "y", structure, **QUIET)
+    assert "gross_errors" not in est.solver, est.solver.get("gross_errors")
+    assert est.solver["startup_transients"][0]["source"] == "climb"
+    assert any("start-up transient" in d for d in est.diagnostics), est.diagnostics
+    step = y.copy()
+    step[:10] += 16.0
+    cut = tfest(_flight(u, step, "step"), "u", "y", structure, **QUIET)
+    assert cut.solver["gross_errors"][0]["first"] == 0 and "startup_transients" not in cut.solver
