@@ -22,7 +22,7 @@ from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicativ
 from .oe import discretise, response, simulate_zoh
 
 __all__ = ["TFEstimate", "ResidualTest", "compare", "from_rest", "trend_basis", "fit_percent", "free_response_basis",
-           "MARGINAL_DAMPING", "unidentified_poles"]
+           "MARGINAL_DAMPING", "unidentified_poles", "pole_std"]
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -469,15 +469,65 @@ DELAY_BOUND_GAIN = 4.0
 FILE_FIT_GAP = 20.0
 #: Estimation and held-out fits, and held-out fits refitted and from rest, this many points apart are noted.
 FIT_GAP = 30.0
+#: An estimation fit below this (%) leaves more than half the output's variation unexplained: noted as an axis the
+#: log does not identify (too weak an excitation, or the wrong structure).
+WEAK_FIT = 50.0
+
+
+def _gain_spread(est: TFEstimate) -> str:
+    """The model's steady-state (or, with integrators, its lowest-order) gain ``b_0 / a_0`` with its 1-sigma
+    spread, linearised; "" where ``a_0`` is 0."""
+    n = est.structure.n_free_poles
+    a0 = float(est.den[n]) if n else 1.0
+    if a0 == 0:
+        return ""
+    b0 = float(est.num[-1])
+    g = np.zeros(len(est.theta))
+    g[-1] = 1 / a0
+    if n:
+        g[n - 1] = -b0 / a0 ** 2
+    cov = np.asarray(est.covariance, float)[: g.size, : g.size]
+    return f"{b0 / a0:.4g} +- {float(np.sqrt(max(g @ cov @ g, 0.0))):.2g} (1 sigma)"
 #: A pole pair damped less than this is marginal: a record of finite length cannot tell it from an undamped
 #: one or from a sinusoid in the data, and a held-out score that refits the initial state hides it
 #: (:func:`unidentified_poles`).
 MARGINAL_DAMPING = 0.005
 
 
+def pole_std(est: TFEstimate) -> tuple[np.ndarray, np.ndarray]:
+    """The fit's free poles and their 1-sigma uncertainty, rad/s, from the parameters' covariance, linearised:
+    a simple root ``r`` of ``A(s) = s^n + a_{n-1} s^{n-1} + ... + a_0`` moves by
+    ``dr = -sum_k r^k da_k / A'(r)``.
+
+    Parameters
+    ----------
+    est : TFEstimate
+
+    Returns
+    -------
+    poles : numpy.ndarray
+        The roots of ``A`` (complex).
+    std : numpy.ndarray
+        Their standard deviations (inf at a repeated root, where the linearisation fails).
+    """
+    n = est.structure.n_free_poles
+    a = np.asarray(est.den, float)[: n + 1]
+    roots = np.roots(a) if n else np.zeros(0, complex)
+    cov = np.asarray(est.covariance, float)[:n, :n]
+    da = np.polyder(a)
+    out = np.full(roots.size, np.inf)
+    for i, r in enumerate(roots):
+        slope = np.polyval(da, r)
+        if abs(slope) > 1e-12 * max(1.0, abs(r)) ** (n - 1):
+            g = -(r ** np.arange(n - 1, -1, -1)) / slope  # theta's a_{n-1} .. a_0
+            out[i] = float(np.sqrt(max(np.real(g @ cov @ np.conj(g)), 0.0)))
+    return roots, out
+
+
 def unidentified_poles(est: TFEstimate) -> list[str]:
-    """The fit's poles the data cannot show: beyond the Nyquist frequency, or pairs damped less than
-    :data:`MARGINAL_DAMPING` (the model's integrators are structure, not estimates, and are not listed).
+    """The fit's poles the data cannot show: beyond the Nyquist frequency, pairs damped less than
+    :data:`MARGINAL_DAMPING`, or poles whose 1-sigma uncertainty (:func:`pole_std`) exceeds their magnitude (the
+    model's integrators are structure, not estimates, and are not listed).
 
     Parameters
     ----------
@@ -488,12 +538,11 @@ def unidentified_poles(est: TFEstimate) -> list[str]:
     list of str
         One line per such pole (its value in rad/s and why); empty when every pole is identified.
     """
-    s = est.structure
-    free = np.asarray(est.den, float)[: s.n_free_poles + 1]
-    roots = np.roots(free) if free.size > 1 else np.zeros(0)
+    roots, std = pole_std(est)
     nyquist = np.pi / est.ts
     out = []
-    for r in roots[np.argsort(-np.abs(roots))]:
+    for k in np.argsort(-np.abs(roots)):
+        r = roots[k]
         if r.imag < 0:
             continue
         mag = abs(r)
@@ -501,6 +550,9 @@ def unidentified_poles(est: TFEstimate) -> list[str]:
             out.append(f"{r:.4g} rad/s: beyond the Nyquist frequency {nyquist:.4g} rad/s")
         elif r.imag > 0 and -r.real / mag < MARGINAL_DAMPING:
             out.append(f"{r:.4g} rad/s: damping {-r.real / mag:.2g}, below {MARGINAL_DAMPING:g} (marginal)")
+        elif np.isfinite(std[k]) and std[k] > mag:
+            out.append(f"{r:.4g} rad/s: 1-sigma uncertainty {std[k]:.3g} rad/s exceeds its magnitude (the data "
+                       "hardly constrain it)")
     return out
 
 
@@ -509,7 +561,9 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
 
     * the estimated delay on a bound of its search: ``max_delay``, or 0 when a negative delay
       would fit significantly better (:data:`DELAY_BOUND_GAIN`, from ``solver["delay_lower_bound_gain"]``);
-    * a pole pair damped less than :data:`MARGINAL_DAMPING` (marginal: not identified);
+    * a pole pair damped less than :data:`MARGINAL_DAMPING` (marginal: not identified), or a pole whose
+      uncertainty exceeds its magnitude (:func:`unidentified_poles`);
+    * an estimation fit below :data:`WEAK_FIT` %: the log does not identify this axis;
     * a pole or zero beyond the Nyquist frequency (the data cannot show it: fewer poles/zeros);
     * residuals not white (the whiteness test fails, fewer than 95 % of the lags inside the 99 % band:
       coloured noise or missing dynamics, and the covariance-based Delta set understates the model error);
@@ -541,7 +595,19 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                        "zero; check the time stamps of the signals, or fit one zero more")
         elif (max_delay := est.solver.get("max_delay")) is not None and est.delay >= max_delay * (1 - 1e-6):
             out.append(f"the delay ended on its upper bound {max_delay:g} s: raise --max-delay (FitOptions.max_delay)")
-    marginal = [p for p in unidentified_poles(est) if "marginal" in p]
+    unknown = unidentified_poles(est)
+    loose = [p for p in unknown if "uncertainty" in p]
+    if loose:
+        out.append(f"pole(s) at {'; '.join(loose)}: not identified; try fewer poles or a longer or richer "
+                   "excitation")
+    if est.fit_estimation < WEAK_FIT:
+        gain = _gain_spread(est)
+        out.append(f"the model explains little of the output (estimation fit {est.fit_estimation:.1f} %, below "
+                   f"{WEAK_FIT:g} %): the input moves this output weakly against noise and disturbances, or the "
+                   "structure misses its dynamics; such a fit is not an identification"
+                   + (f" (its gain is {gain})" if gain else "") + "; excite the axis more (a larger or longer "
+                   "chirp or steps) or check the signals")
+    marginal = [p for p in unknown if "marginal" in p]
     if marginal:
         out.append(f"pole pair(s) at {'; '.join(marginal)}: not identified (a mode this lightly damped, or a "
                    "sinusoid in the data, fits from a refitted initial state but not from rest); try fewer "
