@@ -971,8 +971,9 @@ def _candidates(model: _Model, delay: float, say: Progress) -> tuple[list[_Point
     s = model.s
     dens = []
     whole = _chunked(full)
-    try:
-        th = srivc(s, [(e.u, e.y) for e in whole.exps], whole.ts, delay=delay, iterations=4, tol=1e-4)
+    try:  # a diverging instrumental-variable pass overflows: its estimate is then not finite and left out
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            th = srivc(s, [(e.u, e.y) for e in whole.exps], whole.ts, delay=delay, iterations=4, tol=1e-4)
         if np.all(np.isfinite(th)):
             dens.append(th[: s.n_free_poles])
     except (np.linalg.LinAlgError, ValueError):
