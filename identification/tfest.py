@@ -1143,13 +1143,12 @@ def _distinct(cands: list[_Point], k: int) -> list[_Point]:
 
 
 def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: FitOptions, start: _Point,
-                 deadline: float, say: Progress) -> list[_Point]:
+                 deadline: float, say: Progress, refine: bool = True) -> list[_Point]:
     """The criterion minimised over the model at each delay of a grid on ``[0, max_delay]``,
     each point a short LM warm-started from its neighbour's solution (never a fit from
-    scratch per point), then coarse to fine: around each competitive local minimum (within
-    :data:`SECONDARY_START_RATIO` of the best) a grid of the same size over the neighbouring interval,
-    until its step is one sample. Returns the points at the local minima, best first, with the delay as
-    their last parameter (docs/identification.md, "The search")."""
+    scratch per point), then (``refine``) coarse to fine around the best minimum: the delays half a step to
+    either side, the step halved until it is one sample. Returns the points at the local minima (the best one
+    refined), best first, with the delay as their last parameter (docs/identification.md, "The search")."""
     fixed = _Model(structure, exps, ts, opts, estimate_delay=False)
     count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
     done = [0]
@@ -1180,18 +1179,13 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
     if not prof:
         return [start]
     found = minima(prof)
-    while step > ts * (1 + 1e-9) and found:
-        best = min(p.sse for p in found)
-        keep = [p for p in found if p.sse <= SECONDARY_START_RATIO * best]
-        finer = 2 * step / (count - 1)
-        refined = []
-        for p in keep:  # the interval between its two neighbours, the point itself already known
-            grid = [d for d in np.linspace(p.delay - step, p.delay + step, count)
-                    if 0.0 <= d <= opts.max_delay and abs(d - p.delay) > 1e-9 * ts]
-            total[0] += len(grid)
-            local = sorted([p, *sweep(np.asarray(grid), p.alpha)], key=lambda q: q.delay)
-            refined += minima(local)
-        found, step = refined, finer
+    coarse = best = min(found, key=lambda p: p.sse)
+    while refine and step > ts * (1 + 1e-9):  # bisect around the best minimum: half a step to each side
+        step *= 0.5
+        grid = [d for d in (best.delay - step, best.delay + step) if 0.0 <= d <= opts.max_delay]
+        total[0] += len(grid)
+        best = min([best, *sweep(np.asarray(grid), best.alpha)], key=lambda p: p.sse)
+    found = [best, *(p for p in found if p is not coarse)]
     return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.cols)
             for p in sorted(found, key=lambda p: p.sse)]
 
@@ -1502,8 +1496,8 @@ def _lm_starts(model: _Model, cands: list[_Point], deadline: float, say: Progres
     opts = model.opts
     starts = _distinct(cands, opts.starts)
     if model.estimate_delay:
-        swept = [q for p0 in _competitive(starts)
-                 for q in _delay_sweep(model.s, model.exps, model.ts, opts, p0, deadline, say)]
+        swept = [q for i, p0 in enumerate(_competitive(starts))  # the best start's profile refined
+                 for q in _delay_sweep(model.s, model.exps, model.ts, opts, p0, deadline, say, refine=i == 0)]
         starts = _distinct(sorted(swept, key=lambda q: q.sse), opts.starts)
     runs_from = _competitive(starts)
     say(0, len(runs_from), "initial estimate(s): " + ", ".join(
