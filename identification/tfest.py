@@ -1576,12 +1576,16 @@ def _search(model: _Model, runs_from: list[_Point], delay0: float, deadline: flo
         if res.status == "time_limit":
             break
     assert best is not None
+    ran = len(runs)
     if best.status == "converged":  # a lightly damped pair converged in a neighbouring basin: move it and refit
         moved = _retune_resonances(model, best.point, delay0)
         if moved.sse < best.point.sse:
             res = _lm_run(model, moved, delay0, deadline, say, runs, "resonances retuned")
             if res.point.sse < best.point.sse:
                 best = res
+    if len(runs_from) > 1 or len(runs) > ran:  # the last line printed is the model returned
+        say(len(runs_from), len(runs_from), f"LM: kept the best of {len(runs_from) + len(runs) - ran} runs, "
+            f"SSE {best.point.sse:.6g}")
     return best
 
 

@@ -143,3 +143,16 @@ def test_pole_uncertainty_matches_sampled_parameters(flexible):
     for p, sd in zip(poles, std):
         near = roots[np.arange(roots.shape[0]), np.argmin(np.abs(roots - p), axis=1)]
         assert sd == pytest.approx(np.sqrt(np.mean(np.abs(near - p) ** 2)), rel=0.05), (p, sd)
+
+
+def test_the_last_progress_line_is_the_model_returned(flexible):
+    """With several LM runs the last "LM:" line printed states the SSE of the returned model, the lowest run's
+    (not the last run's)."""
+    lines = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = tfest(flexible, "u", "y", ModelStructure(4, 1, 0), FitOptions(starts=3, outlier_sigmas=None),
+                    progress=lambda done, total, what: lines.append(what))
+    runs = [r["sse"] for r in est.solver["starts"]]
+    lm = [w for w in lines if w.startswith("LM:")]
+    assert len(runs) >= 2 and lm[-1].endswith(f"SSE {min(runs):.6g}"), (lm, runs)
