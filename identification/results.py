@@ -21,7 +21,7 @@ from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicativ
 
 from .oe import discretise, response, simulate_zoh
 
-__all__ = ["TFEstimate", "ResidualTest", "compare", "from_rest", "trend_basis", "fit_percent", "free_response_basis",
+__all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis",
            "MARGINAL_DAMPING", "unidentified_poles", "pole_std"]
 
 
@@ -152,7 +152,8 @@ class TFEstimate:
         empty when nothing stands out.
     fit_validation_rest : float or None
         Fit % on the held-out experiments simulated from rest (the trend still fitted, the initial state
-        not: :func:`from_rest`), beside :attr:`fit_validation`, whose initial state is refitted.
+        not: :func:`compare` with ``initial_state=False``), beside :attr:`fit_validation`, whose initial state is
+        refitted.
     """
 
     structure: ModelStructure
@@ -238,7 +239,7 @@ class TFEstimate:
                 u = fd[input]
                 yv.append(fd[output])
                 yhv.append(compare(structure, theta, delay, fd.ts, u, fd[output], trend))
-                yrv.append(from_rest(structure, theta, delay, fd.ts, u, fd[output], trend))
+                yrv.append(compare(structure, theta, delay, fd.ts, u, fd[output], trend, initial_state=False))
             fit_val = fit_percent(np.concatenate(yv), np.concatenate(yhv))
             fit_rest = fit_percent(np.concatenate(yv), np.concatenate(yrv))
         file_fits = [fit_percent(y, yh) for y, yh in zip(ys, yhats)]
@@ -684,41 +685,8 @@ def trend_basis(n: int, degree: int) -> np.ndarray:
     return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, n), degree)
 
 
-def from_rest(structure: ModelStructure, theta: np.ndarray, delay: float, ts: float, u: np.ndarray, y: np.ndarray,
-              trend: int | None = None) -> np.ndarray:
-    """Simulated output from rest, with only a trend chosen by least squares (:func:`compare` without the initial
-    state).
-
-    Parameters
-    ----------
-    structure : ModelStructure
-        The model's orders.
-    theta : numpy.ndarray
-        Its parameters.
-    delay : float
-        Input delay, s.
-    ts : float
-        Sample time, s.
-    u, y : numpy.ndarray
-        Input and measured output, same length.
-    trend : int, optional
-        Degree of a polynomial output trend fitted (None: none).
-
-    Returns
-    -------
-    numpy.ndarray
-        The model output from a zero initial state (plus the fitted trend).
-    """
-    forced = simulate_zoh(structure, theta, u, ts, delay)
-    if trend is None:
-        return forced
-    basis = trend_basis(u.size, trend)
-    coef, *_ = np.linalg.lstsq(basis, y - forced, rcond=None)
-    return forced + basis @ coef
-
-
 def compare(structure: ModelStructure, theta: np.ndarray, delay: float, ts: float, u: np.ndarray, y: np.ndarray,
-            trend: int | None = None) -> np.ndarray:
+            trend: int | None = None, initial_state: bool = True) -> np.ndarray:
     """Simulated output with the initial state (and a trend) chosen by least squares (MATLAB ``compare``).
 
     Parameters
@@ -737,6 +705,9 @@ def compare(structure: ModelStructure, theta: np.ndarray, delay: float, ts: floa
         Measured output, same length.
     trend : int, optional
         Degree of a polynomial output trend fitted too (None: none).
+    initial_state : bool
+        Fit the initial state (default); False: the model starts at rest, only the trend is fitted (the
+        held-out score from rest of :class:`TFEstimate`).
 
     Returns
     -------
@@ -744,9 +715,11 @@ def compare(structure: ModelStructure, theta: np.ndarray, delay: float, ts: floa
         The model output closest to ``y`` over initial states (and trends).
     """
     forced = simulate_zoh(structure, theta, u, ts, delay)
-    basis = free_response_basis(structure, theta, ts, u.size)
+    basis = free_response_basis(structure, theta, ts, u.size) if initial_state else np.zeros((u.size, 0))
     if trend is not None:
         basis = np.column_stack([basis, trend_basis(u.size, trend)])
+    if basis.shape[1] == 0:
+        return forced
     scale = np.linalg.norm(basis, axis=0)
     scale[scale == 0] = 1.0
     x0, *_ = np.linalg.lstsq(basis / scale, y - forced, rcond=None)
