@@ -1151,40 +1151,37 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
     refined), best first, with the delay as their last parameter (docs/identification.md, "The search")."""
     fixed = _Model(structure, exps, ts, opts, estimate_delay=False)
     count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
-    done = [0]
-    total = [count]
+    done, total = 0, count
 
-    def sweep(delays: np.ndarray, a: np.ndarray) -> list[_Point]:
+    def sweep(delays: list[float], a: np.ndarray) -> list[_Point]:
+        nonlocal done
         out = []
         for d in delays:
-            done[0] += 1
+            done += 1
             p0 = fixed.evaluate(a, float(d))
             if not math.isfinite(p0.sse):
-                say(done[0], total[0], f"delay sweep: {d:.3g} s, model diverges")
+                say(done, total, f"delay sweep: {d:.3g} s, model diverges")
                 continue
             p = _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
             a = p.alpha
             p.cols = None                # keep the profile light: signals are recomputed for the starts
             out.append(p)
-            say(done[0], total[0], f"delay sweep: {p.delay:.3g} s, SSE {p.sse:.4g}")
+            say(done, total, f"delay sweep: {p.delay:.3g} s, SSE {p.sse:.4g}")
         return out
 
-    def minima(prof: list[_Point]) -> list[_Point]:
-        sse = [p.sse for p in prof]
-        return [prof[i] for i in range(len(prof))
-                if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
-
-    step = opts.max_delay / max(count - 1, 1)
-    prof = sweep(np.linspace(0.0, opts.max_delay, count), start.alpha[: structure.n_free_poles])
+    prof = sweep(list(np.linspace(0.0, opts.max_delay, count)), start.alpha[: structure.n_free_poles])
     if not prof:
         return [start]
-    found = minima(prof)
+    sse = [p.sse for p in prof]
+    found = [prof[i] for i in range(len(prof))
+             if (i == 0 or sse[i] <= sse[i - 1]) and (i == len(prof) - 1 or sse[i] <= sse[i + 1])]
     coarse = best = min(found, key=lambda p: p.sse)
+    step = opts.max_delay / max(count - 1, 1)
     while refine and step > ts * (1 + 1e-9):  # bisect around the best minimum: half a step to each side
         step *= 0.5
         grid = [d for d in (best.delay - step, best.delay + step) if 0.0 <= d <= opts.max_delay]
-        total[0] += len(grid)
-        best = min([best, *sweep(np.asarray(grid), best.alpha)], key=lambda p: p.sse)
+        total += len(grid)
+        best = min([best, *sweep(grid, best.alpha)], key=lambda p: p.sse)
     found = [best, *(p for p in found if p is not coarse)]
     return [_Point(np.concatenate([p.alpha, [p.delay]]), p.theta, p.delay, p.locals_, p.sse, p.cols)
             for p in sorted(found, key=lambda p: p.sse)]
