@@ -580,6 +580,19 @@ class IdentifyInputs(LogClock):
         return self.load_fields(files, {"u": self.input, "y": self.output})
 
 
+def _identify_outputs(files: Sequence[str | Path], validate: Sequence[str | Path], out: str | Path,
+                      plot: str | Path | None) -> tuple[Path, Path | None]:
+    """``identify``'s model file and figure folder, checked against the flight files and each other."""
+    logs = {"flight file": list(files), "--validate": list(validate)}
+    out = check_output_path(out, folder=False, inputs=logs)
+    if plot is not None:
+        plot = check_output_path(plot, folder=True, inputs=logs, option="--plot")
+        if Path(os.path.realpath(out)).is_relative_to(os.path.realpath(plot)):
+            raise OutputError(f"`--out` ({out}): lies inside `--plot` ({plot}), a folder that is replaced as a whole; "
+                              "write the model beside the figure folder, not in it")
+    return out, plot
+
+
 def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, structure: Any, options: Any, out: str | Path,
                      *, validate: Sequence[str | Path] = (), plot: str | Path | None = None,
                      progress: Progress | None = None, argv: Sequence[str] | None = None,
@@ -629,13 +642,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     from ilcdob.identification.tfest import min_samples, tfest
     from ilcdob.signals import segments
 
-    logs = {"flight file": list(files), "--validate": list(validate)}
-    out = check_output_path(out, folder=False, inputs=logs)
-    if plot is not None:
-        plot = check_output_path(plot, folder=True, inputs=logs, option="--plot")
-        if Path(os.path.realpath(out)).is_relative_to(os.path.realpath(plot)):
-            raise OutputError(f"`--out` ({out}): lies inside `--plot` ({plot}), a folder that is replaced as a whole; "
-                              "write the model beside the figure folder, not in it")
+    out, plot = _identify_outputs(files, validate, out, plot)
     structures = list(structure) if isinstance(structure, (list, tuple)) else [structure]
     est_data = inputs.load(files)
     val_data = inputs.load(validate)
