@@ -167,6 +167,7 @@ def test_robust_set_entries_are_checked(designs, key, value, why):
         check_filters(filters, "filters.json")
 
 
+@pytest.mark.slow  # 9 s (-m slow); the Python law keeps a file's start law by default in test_whole_trial
 def test_a_file_without_the_start_entry_keeps_the_fold(cc, tmp_path):
     """``trial_ends.start`` (the continuation of F's output before t = 0, design/filters/trial_edges.py) changes the
     law only where it acts. On the right-half-plane-zero source of tests/test_band_exact.py (10 ms, bound 0.3; its F

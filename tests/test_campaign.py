@@ -233,6 +233,7 @@ def test_bad_inputs(fleet, fleet_file, tmp_path, capsys):
     assert "--samples: got '0', expected an integer >= 1" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 7 s (-m slow); the campaign's cluster path, the rest of the campaign runs by default
 def test_runs_on_an_existing_cluster(fleet, tmp_path):
     """``--scheduler tcp://HOST:PORT``: the samples go to that cluster's workers, and give the same records."""
     from distributed import LocalCluster

@@ -125,6 +125,7 @@ def test_every_plant_the_sampler_keeps_is_covered():
         delta_set(spec, TS, 1, bound=0.9, margin=1.0)
 
 
+@pytest.mark.slow  # 9 s (-m slow); structured sets fly their family by default in test_whole_trial
 def test_structured_design_learns_where_the_disc_does_not():
     """The same bound 0.9 as a disc: the guarantee forces the filter off (|1 - F| near 1) in the band."""
     src, tgt = FLEET.loop("UAV1"), FLEET.loop("UAV2")

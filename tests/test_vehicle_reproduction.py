@@ -67,6 +67,7 @@ def test_the_report_holds_every_flight_and_its_acceptance(short):
         hover.learning[0].rmse / hover.dob.rmse, rel=1e-12)
 
 
+@pytest.mark.slow  # 37 s (-m slow): the rotorpy vehicles learn by default in test_vehicle_interface
 def test_short_flights_learn(short):
     """Measured on the 10 s flights: identification 98.8 / 98.9 % held out (crazyflie / PX4); the paper's
     disturbance in hover learned to 0.42 % / 0.42 % of DOB-only at iteration 1; Dryden hover with the wind

@@ -237,9 +237,12 @@ def test_a_file_without_output_start_keeps_its_law():
         band_spec({**pd.filters, "band": {**pd.filters["band"], "output_start": "steady"}})
 
 
-@pytest.mark.parametrize("ts, systems, src, tgt", [(0.01, TEN_MS, "rhp", "drag"), (0.002, TWO_MS, "damped", "fast")],
-                         ids=["10ms", "2ms"])
-@pytest.mark.parametrize("method", ["closed-form", "fir"])
+@pytest.mark.parametrize("ts, systems, src, tgt, method", [
+    pytest.param(0.01, TEN_MS, "rhp", "drag", "closed-form", id="closed-form-10ms"),
+    pytest.param(0.002, TWO_MS, "damped", "fast", "closed-form", id="closed-form-2ms"),
+    pytest.param(0.01, TEN_MS, "rhp", "drag", "fir", id="fir-10ms"),
+    pytest.param(0.002, TWO_MS, "damped", "fast", "fir", id="fir-2ms", marks=pytest.mark.slow),  # 13 s (-m slow)
+])
 def test_design_records_the_whole_trial_of_the_law_it_writes(tmp_path, ts, systems, src, tgt, method):
     """``ilcdob design`` (closed form and FIR, each through its default band) records ``whole_trial`` in
     ``filters.json``: the worst, flown again by python-control with the learning signal of the written file, agrees
