@@ -15,14 +15,33 @@ structure and its uncertainty in :mod:`ilcdob.uncertainty` (both re-exported her
 * :mod:`.plots` - compare / residual / Bode-with-uncertainty figures.
 """
 
-from ilcdob.signals import FlightData
-from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
+import importlib
+from typing import Any
 
-from .excitation import Chirp, StepSequence, suggest_band, suggest_band_for_loop, write_setpoint_csv
-from .loaders import load_csv, load_dataflash, load_flight, load_parquet, load_ulog
-from .oe import simulate_zoh
-from .results import ResidualTest, TFEstimate, fit_percent
-from .tfest import FitOptions, tfest
+# Re-exported lazily (PEP 562): ``import ilcdob.identification.tfest`` does not load the loaders'
+# pandas, the excitation tools' loop models or python-control.
+_EXPORTS = {
+    "FlightData": "ilcdob.signals", "ModelStructure": "ilcdob.uncertainty",
+    "frequency_response": "ilcdob.uncertainty", "multiplicative_bound": "ilcdob.uncertainty",
+    **dict.fromkeys(("Chirp", "StepSequence", "suggest_band", "suggest_band_for_loop", "write_setpoint_csv"),
+                    ".excitation"),
+    **dict.fromkeys(("load_csv", "load_dataflash", "load_flight", "load_parquet", "load_ulog"), ".loaders"),
+    "simulate_zoh": ".oe", **dict.fromkeys(("ResidualTest", "TFEstimate", "fit_percent"), ".results"),
+    "FitOptions": ".tfest", "tfest": ".tfest",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name], __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
 
 __all__ = [
     "FlightData", "Chirp", "StepSequence", "suggest_band", "suggest_band_for_loop", "write_setpoint_csv",

@@ -23,7 +23,6 @@ from typing import Sequence
 
 import numpy as np
 
-from ilcdob.channel_loop import SLOWEST_ROOT
 from ilcdob.errors import SpecError
 from ilcdob.signals import FlightData
 
@@ -94,6 +93,8 @@ def with_zero_at_origin(est: TFEstimate, data: Sequence[FlightData],
     cov_c = cov - np.outer(cov[:, i], cov[i, :]) / var
     cov_c[i, :] = cov_c[:, i] = 0.0
     theta = full[: s.n_params]
+    from ilcdob.channel_loop import SLOWEST_ROOT  # here: the channel loop's python-control stays unloaded
+
     slow = [p for p in np.roots(s.split(theta)[0]) if abs(p) < SLOWEST_ROOT]
     if slow:
         raise SpecError(f"`--zero-at-origin`: the fit puts a pole at s = {complex(slow[0]):.3g} beside the zero at "

@@ -9,9 +9,8 @@ experiment's initial state estimated by linear least squares, as ``compare`` doe
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import control as ct
 import numpy as np
 
 from ilcdob.display import html_table
@@ -20,6 +19,9 @@ from ilcdob.specs import IdentificationSpec
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
 
 from .oe import discretise, response, simulate_zoh
+
+if TYPE_CHECKING:
+    import control as ct
 
 __all__ = ["TFEstimate", "ResidualTest", "compare", "trend_basis", "fit_percent", "free_response_basis",
            "MARGINAL_DAMPING", "unidentified_poles", "pole_std"]
@@ -265,6 +267,8 @@ class TFEstimate:
         :meth:`to_control` to receive it beside the system, or :meth:`frequency_response`,
         which includes it.
         """
+        import control as ct
+
         sys = ct.tf(self.num, self.den, inputs=[self.input.replace(".", "_")],
                     outputs=[self.output.replace(".", "_")])
         sys.input_delay = self.delay

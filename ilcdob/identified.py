@@ -19,9 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import control as ct
 import numpy as np
 
 from .errors import ModelFileError, SpecError
@@ -29,6 +28,9 @@ from .inputs import read_json
 from .uncertainty import ModelStructure
 from .specs import (DOBSpec, IdentificationSpec, NoiseSpec, PIDSpec, PlantSpec, SystemSpec, UncertaintySpec,
                     as_polynomial, check_covariance)
+
+if TYPE_CHECKING:
+    import control as ct
 
 
 __all__ = ["IdentifiedModel", "load_model", "model_from_dict", "REQUIRED_KEYS"]
@@ -209,6 +211,8 @@ class IdentifiedModel:
         """
         def label(text: str) -> list[str] | None:
             return [text.replace(".", "_")] if text else None
+
+        import control as ct
 
         name = None if self.source == "<memory>" else Path(self.source).stem.replace(".", "_") or None
         sys = ct.tf(list(self.num), list(self.den), inputs=label(self.input), outputs=label(self.output), name=name)

@@ -12,14 +12,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from sys import modules as _modules
+from typing import TYPE_CHECKING, Any
 
-import control as ct
 import numpy as np
 
 from .errors import SpecError
 from .names import check_name
 from .uncertainty import ModelStructure, multiplicative_bound
+
+if TYPE_CHECKING:
+    import control as ct
 
 __all__ = ["PlantSpec", "PIDSpec", "DOBSpec", "NoiseSpec", "IdentificationSpec", "UncertaintySpec", "LimitSpec",
            "SensorSpec", "SystemSpec", "GRAVITY", "check_noise_std",
@@ -36,6 +39,13 @@ GRAVITY = 9.80665
 #: a symmetric matrix may differ in the last one.
 COVARIANCE_RTOL = 1e-6
 
+
+
+def is_lti(value: Any) -> bool:
+    """Whether ``value`` is a python-control system; python-control is not imported for the question (an LTI
+    object exists only once its caller has imported it)."""
+    ct = _modules.get("control")
+    return ct is not None and isinstance(value, ct.LTI)
 
 def _real(name: str, value: object) -> float:
     """``value`` as a float; SpecError naming ``name`` for text, booleans and other non-numbers."""
@@ -152,6 +162,8 @@ def _lti_description(sys: Any) -> str:
 
 def _lti_polys(sys: Any) -> tuple[np.ndarray, np.ndarray]:
     """(num, den) of a continuous-time SISO strictly proper python-control system."""
+    import control as ct
+
     if not isinstance(sys, (ct.TransferFunction, ct.StateSpace)):
         raise SpecError(f"`plant`: got a {_lti_description(sys)}; expected a python-control TransferFunction or "
                         "StateSpace, or num and den polynomials")
@@ -215,7 +227,7 @@ class PlantSpec:
     delay: float = 0.0
 
     def __post_init__(self) -> None:
-        if isinstance(self.num, ct.LTI):
+        if is_lti(self.num):
             den_given = not (isinstance(self.den, tuple) and len(self.den) == 0)
             if den_given:
                 raise SpecError(f"`plant.den`: got {self.den!r} together with a python-control system as `num`; "
@@ -255,7 +267,7 @@ class PlantSpec:
             ``sys`` is not a TransferFunction/StateSpace, is discrete-time, MIMO or not
             strictly proper, or ``delay`` is negative.
         """
-        if not isinstance(sys, ct.LTI):
+        if not is_lti(sys):
             raise SpecError(f"`plant`: got {type(sys).__name__} {sys!r}; expected a python-control "
                             "TransferFunction or StateSpace")
         return cls(sys, delay=delay)
@@ -263,6 +275,8 @@ class PlantSpec:
     @property
     def transfer_function(self) -> ct.TransferFunction:
         """``num(s)/den(s)`` as a python-control transfer function (without the delay)."""
+        import control as ct
+
         return ct.tf(list(self.num), list(self.den))
 
     @property
@@ -626,7 +640,7 @@ class SystemSpec:
             value = getattr(self, key)
             if value is None and key == "model":
                 continue
-            if isinstance(value, ct.LTI):
+            if is_lti(value):
                 try:
                     object.__setattr__(self, key, PlantSpec.from_lti(value))
                 except SpecError as exc:

@@ -15,11 +15,14 @@ flight-vehicle models need.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control as ct
 import numpy as np
 
 from .errors import SpecError
+
+if TYPE_CHECKING:
+    import control as ct
 
 __all__ = ["MAX_POLES", "ModelStructure", "companion", "frequency_response", "multiplicative_bound"]
 
@@ -144,6 +147,8 @@ class ModelStructure:
             ``B(s) / (s^K A(s))``, continuous time, without the delay.
         """
         den, num = self.split(theta)
+        import control as ct
+
         return ct.tf(num, den)
 
 

@@ -40,3 +40,20 @@ def test_public_names_load_on_first_use():
     assert set(ilcdob.__all__) <= set(dir(ilcdob))
     with pytest.raises(AttributeError, match="no attribute 'nothing_here'"):
         ilcdob.nothing_here  # noqa: B018 - the attribute access is the test
+
+
+def test_identify_without_figures_loads_neither_python_control_nor_matplotlib(tmp_path):
+    """A fit of a CSV log (no ``--plot``) draws nothing and builds no LTI object: python-control (0.6-1.1 s of
+    CPU to import, matplotlib.pyplot with it) and matplotlib stay unloaded; a fleet, a figure or a
+    ``to_control()`` loads them when asked."""
+    import numpy as np
+
+    t = np.arange(600) * 0.01
+    u = np.sign(np.sin(2 * np.pi * 0.4 * t))
+    y = np.convolve(u, 0.02 * np.exp(-0.02 * np.arange(600)))[:600]  # a first-order lag, pole 2 rad/s
+    np.savetxt(tmp_path / "log.csv", np.column_stack([t, u, y]), delimiter=",", header="time,u,y", comments="")
+    run = (f"from ilcdob.app.cli import main\nassert main(['--quiet', 'identify', {str(tmp_path / 'log.csv')!r}, "
+           f"'--input', 'u', '--output', 'y', '--poles', '1', '--out', {str(tmp_path / 'model.json')!r}]) == 0")
+    loaded = _loaded_after(run)
+    assert "numpy" in loaded and "scipy" in loaded, loaded  # the probe ran the fit
+    assert "control" not in loaded and "matplotlib" not in loaded, loaded

@@ -29,17 +29,19 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ilcdob.atomic import remove_folders
 from ilcdob.errors import FleetError, SignalError, SpecError
-from ilcdob.fleet import DEFAULT_FLEET_PATH, Fleet, default_fleet, load_fleet
 from ilcdob.inputs import MAX_LOG_BYTES, check_input, read_bytes, read_json
 
 from .html import build_report, report_files
 from .output import OutputError, OutputFolder, Provenance, check_output_path, verify_manifest, write_file
+
+if TYPE_CHECKING:  # python-control and the loop models load with the first command that needs a fleet
+    from ilcdob.fleet import Fleet
 
 __all__ = ["Progress", "fleet_and_hash", "reproduce_to_folder", "identify_to_json",
            "identify_fleet_to_folder", "design_to_folder", "design_shortfalls", "check_to_json", "compare_to_folder", "extensions_to_folder", "campaign_to_folder",
@@ -63,6 +65,8 @@ def fleet_and_hash(path: str | Path | None, axis: str = "x") -> tuple[Fleet, str
     if axis != "x" and not path:
         raise SpecError(f"`--axis {axis}`: the built-in fleet describes the x axis only (the paper's); give a "
                         f"--fleet file with [system.{axis}] sections")
+    from ilcdob.fleet import DEFAULT_FLEET_PATH, default_fleet, load_fleet
+
     fleet = load_fleet(path, axis) if path else default_fleet()
     data = read_bytes(path if path else DEFAULT_FLEET_PATH, "fleet file", error=FleetError)
     return fleet, hashlib.sha256(data).hexdigest()
@@ -638,7 +642,6 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     """
     from ilcdob.identification.orders import compare_orders, fit_orders
     from ilcdob.identification.origin_zero import with_zero_at_origin
-    from ilcdob.identification.plots import fit_figures
     from ilcdob.identification.tfest import min_samples, tfest
     from ilcdob.signals import segments
 
@@ -663,6 +666,8 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     if plot is None:
         write_file(out, data)
     else:  # both outputs or neither: the figures are staged and sealed, the model written, then the swap
+        from ilcdob.identification.plots import fit_figures  # matplotlib: only when drawing
+
         with OutputFolder(plot, prov, option="--plot") as folder:
             folder.add_all(fit_figures(est, est_data, val_data))
             folder.seal()

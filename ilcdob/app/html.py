@@ -74,16 +74,18 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ilcdob.errors import IlcdobError
-from ilcdob.fleet import Fleet
 from ilcdob.inputs import read_bytes, read_text
 from ilcdob.names import html_text, quoted
 
 from .output import MANIFEST, ManifestError, verify_manifest
+
+if TYPE_CHECKING:
+    from ilcdob.fleet import Fleet
 
 __all__ = ["ReportError", "ReportOptions", "ReportInputs", "JsonInput", "JsonTable", "KNOWN_FILES",
            "discover_inputs", "json_tables", "build_report", "report_files", "THEOREM_SAMPLES"]
