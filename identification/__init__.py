@@ -18,16 +18,19 @@ structure and its uncertainty in :mod:`ilcdob.uncertainty` (both re-exported her
 import importlib
 from typing import Any
 
-# Re-exported lazily (PEP 562): ``import ilcdob.identification.tfest`` does not load the loaders'
-# pandas, the excitation tools' loop models or python-control.
+from ilcdob.signals import FlightData
+from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
+
+from .oe import simulate_zoh
+from .results import ResidualTest, TFEstimate, fit_percent
+from .tfest import FitOptions, tfest  # eager: the function, not its module, is ``identification.tfest``
+
+# The rest re-exported lazily (PEP 562): a fit does not load the loaders' pandas, the excitation tools'
+# loop models or python-control.
 _EXPORTS = {
-    "FlightData": "ilcdob.signals", "ModelStructure": "ilcdob.uncertainty",
-    "frequency_response": "ilcdob.uncertainty", "multiplicative_bound": "ilcdob.uncertainty",
     **dict.fromkeys(("Chirp", "StepSequence", "suggest_band", "suggest_band_for_loop", "write_setpoint_csv"),
                     ".excitation"),
     **dict.fromkeys(("load_csv", "load_dataflash", "load_flight", "load_parquet", "load_ulog"), ".loaders"),
-    "simulate_zoh": ".oe", **dict.fromkeys(("ResidualTest", "TFEstimate", "fit_percent"), ".results"),
-    "FitOptions": ".tfest", "tfest": ".tfest",
 }
 
 

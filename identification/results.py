@@ -578,7 +578,9 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
     * an estimation file fitting :data:`FILE_FIT_GAP` points or more below the median file;
     * samples left out of the fit as gross errors (``solver["gross_errors"]``, see
       ``FitOptions.outlier_sigmas``), named by file and sample;
-    * a start-up transient kept in the fit (``solver["startup_transients"]``).
+    * a start-up transient kept in the fit (``solver["startup_transients"]``);
+    * a landed or saturated segment, the input held at its extreme while the output stays still
+      (:mod:`.held`): among the gross errors (``held``), or left in the fit (``solver["held_inputs"]``).
 
     Parameters
     ----------
@@ -642,6 +644,10 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                    f"{est.fit_validation_rest:.1f} % from rest: the free response carries the score (a marginal or "
                    "very slow mode), or the held-out data do not start at rest")
     for d in est.solver.get("gross_errors", []):
+        if "held" in d:
+            out.append(_held_note(d, d["held"], est.ts, "were left out of the fit, the record cut there (keep them with "
+                                  "--keep-outliers, FitOptions(outlier_sigmas=None))"))
+            continue
         out.append(f"{d['samples']} samples of {d['source']} (samples {d['first']}-{d['last']}) lay far off the "
                    "model (gross errors: a glitch or corrupt samples in the log) and were left out of the fit, the "
                    "record cut there; check that file, or keep them with --keep-outliers "
@@ -651,6 +657,9 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                    "start-up transient (the vehicle not at rest when the log starts, or dynamics of the start the "
                    "structure lacks), not a glitch; kept in the fit: cut them from the log if they are not the "
                    "system's response to the input")
+    for d in est.solver.get("held_inputs", []):
+        out.append(_held_note(d, d, est.ts, "are kept in the fit and bias it: fit the flight without them "
+                                  "(--start/--stop, --segment)"))
     if len(est.file_fits) >= 3:
         median = float(np.median(est.file_fits))
         for i, f in enumerate(est.file_fits):
@@ -658,6 +667,15 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                 out.append(f"estimation file {i + 1} fits {f:.1f} %, the median file {median:.1f} %: check it for "
                            "corrupt samples, a different configuration or a wrong signal")
     return out
+
+
+def _held_note(where: dict, held: dict, ts: float, fate: str) -> str:
+    """The note of a held-input segment (:mod:`.held`): where, the held value, and what was done with it."""
+    t0, t1 = where["first"] * ts, where["last"] * ts
+    return (f"samples {where['first']}-{where['last']} of {where['source']} (t = {t0:.6g} to {t1:.6g} s from its "
+            f"start): the input is held at {held['value']:.6g} (its {held['extreme']}) while the output does not "
+            f"follow: a landed or saturated segment (the vehicle on the ground, a setpoint at its limit), not a "
+            f"glitch; these samples {fate}")
 
 
 def _poly(c: np.ndarray) -> str:

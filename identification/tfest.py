@@ -61,6 +61,7 @@ from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure
 
 from .oe import Discretisation, allpole_sos, delay_split, delayed_input, discretise, response, zoh_inputs
+from .held import held_runs, held_segments
 from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
@@ -218,6 +219,12 @@ def _trend_basis(n: int, structure: ModelStructure, opts: FitOptions) -> np.ndar
     return trend_basis(n, opts.trend)[:, covered:]
 
 
+def _gram(blocks: list[np.ndarray]) -> np.ndarray:
+    """``R R'`` of the rows ``R`` stacked from ``blocks`` (each ``(k_i, n)``), block by block: a record-long
+    signal is never copied into a stacked matrix (memory per sample, docs/identification.md, "Measured")."""
+    return np.block([[a @ b.T for b in blocks] for a in blocks])
+
+
 def _scaled_pinv(g: np.ndarray) -> np.ndarray:
     """Pseudo-inverse of a Gram matrix after Jacobi scaling (columns of any magnitude)."""
     if g.size == 0:
@@ -321,10 +328,7 @@ class _Model:
             try:
                 d = discretise(self.s, theta0, self.ts, delay, derivatives=False)
                 cols = [self.columns(d, e) for e in self.exps]
-                grams = []
-                for (xr, lr), e in zip(cols, self.exps):
-                    rows = np.vstack([xr, lr, e.y[None, :]])
-                    grams.append(rows @ rows.T)
+                grams = [_gram([xr, lr, e.y[None, :]]) for (xr, lr), e in zip(cols, self.exps)]
                 if not all(np.all(np.isfinite(g)) for g in grams):
                     return bad
                 coef_x, coef_l, _ = _eliminate(grams, self.nb, self.n_local)
@@ -371,10 +375,8 @@ class _Model:
     def reduced_normal(self, p: _Point) -> tuple[np.ndarray, np.ndarray]:
         """``(J'J, -J'r)`` of the projected residual in ``alpha`` (Kaufman's Jacobian)."""
         d = discretise(self.s, p.theta, self.ts, p.delay)
-        grams = []
-        for (xr, lr), e, loc in zip(self._cols(p, d), self.exps, p.locals_):
-            rows = np.vstack([xr, lr, e.y[None, :], self.sensitivities(p, d, e, loc)])
-            grams.append(rows @ rows.T)
+        grams = [_gram([xr, lr, e.y[None, :], self.sensitivities(p, d, e, loc)])
+                 for (xr, lr), e, loc in zip(self._cols(p, d), self.exps, p.locals_)]
         _, _, m = _eliminate(grams, self.nb, self.n_local)
         return m[1:, 1:], m[1:, 0]
 
@@ -387,11 +389,11 @@ class _Model:
         k = ng
         for (xr, lr), e, loc, nl in zip(self._cols(p, d), self.exps, p.locals_, self.n_local):
             sens = self.sensitivities(p, d, e, loc)
-            jg = np.vstack([sens[: self.nf], xr, sens[self.nf:]])
-            h[:ng, :ng] += jg @ jg.T
-            h[:ng, k:k + nl] = jg @ lr.T
-            h[k:k + nl, :ng] = h[:ng, k:k + nl].T
-            h[k:k + nl, k:k + nl] = lr @ lr.T
+            g = _gram([sens[: self.nf], xr, sens[self.nf:], lr])
+            h[:ng, :ng] += g[:ng, :ng]
+            h[:ng, k:k + nl] = g[:ng, ng:]
+            h[k:k + nl, :ng] = g[ng:, :ng]
+            h[k:k + nl, k:k + nl] = g[ng:, ng:]
             k += nl
         return h
 
@@ -476,6 +478,7 @@ def _levenberg_marquardt(model: _Model, start: _Point, delay_fixed: float, opts:
     def normal(q: _Point, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(over="ignore", invalid="ignore"):  # overflow ends the search as "numerical"
             hq, gq = model.reduced_normal(q)
+        q.cols = None  # not needed again (a rejected step reuses hq, gq): one record's worth less while a trial is held
         if sec is None:
             return hq, gq
         t = np.eye(hq.shape[0])
@@ -658,6 +661,10 @@ DEFAULT_DELAY_SHARE = 0.1
 #: ``[0, max_delay]``, at most one per sample); the LM refines the delay continuously from
 #: the best of them.
 DELAY_SWEEP_POINTS = 7
+#: A profile point whose criterion, warm-started from its neighbour, is this many times the best of the profile
+#: so far is not polished by its LM step: it cannot become the profile's minimum (measured on the 6000-sample
+#: closed-loop log: the coarse points beyond the first lie 6,000-190,000 times above the best).
+HOPELESS_DELAY = 100.0
 #: LM stops when a step lowers the criterion by less than this fraction of one sample's
 #: residual variance (the parameters then move by about sqrt(1e-3) = 3 % of their standard
 #: deviation), or by less than ``FitOptions.tol`` relative.
@@ -1091,7 +1098,7 @@ def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list
     # the worst cluster first: a fit distorted by a glitch spreads smaller errors that the refit removes
     limit = max(sigmas * scale, GROSS_ERROR_FLOOR * spread, 0.5 * worst)
     flags = [np.abs(r - centre) > limit for r in resid]
-    need, guard = min_samples(model.s), model.n
+    guard = model.n
     startup = []
     for e, r, f in zip(model.exps, resid, flags):
         k = _smooth_start(r - centre, f, guard)
@@ -1105,19 +1112,38 @@ def _without_gross_errors(model: _Model, p: _Point, sigmas: float) -> tuple[list
         if not f.any():
             pieces.append(e)
             continue
-        bad = np.convolve(f, np.ones(2 * guard + 1), mode="same") > 0
-        edges = np.flatnonzero(np.diff(np.concatenate([[True], bad, [True]]).astype(int)))
-        keep = [(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= need]
-        dropped = np.ones(e.n, bool)
-        for a, b in keep:
-            dropped[a:b] = False
-            pieces.append(_Exp(e.u[a:b], e.y[a:b], _trend_basis(b - a, model.s, model.opts),
-                               e.source if (a, b) == (0, e.n) else f"{e.source} [{a}:{b}]"))
-        idx = np.flatnonzero(dropped)
-        left.append({"source": e.source, "first": int(idx[0]), "last": int(idx[-1]), "samples": int(idx.size)})
+        kept, record = _cut(model, e, np.convolve(f, np.ones(2 * guard + 1), mode="same") > 0)
+        pieces += kept
+        left.append({**record, **_held_within(e, f)})
     if sum(d["samples"] for d in left) > MAX_OUTLIER_SHARE * flat.size or not pieces:
         return model.exps, [], startup
     return pieces, left, startup
+
+
+def _cut(model: _Model, e: _Exp, bad: np.ndarray) -> tuple[list[_Exp], dict]:
+    """``e`` without its ``bad`` samples: the good runs of at least :func:`min_samples` samples as experiments of
+    their own (named ``source [a:b]``), and the record of what was left out (``source``, ``first``/``last``
+    sample, ``samples``)."""
+    need = min_samples(model.s)
+    edges = np.flatnonzero(np.diff(np.concatenate([[True], bad, [True]]).astype(int)))
+    keep = [(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= need]
+    dropped = np.ones(e.n, bool)
+    pieces = []
+    for a, b in keep:
+        dropped[a:b] = False
+        pieces.append(_Exp(e.u[a:b], e.y[a:b], _trend_basis(b - a, model.s, model.opts),
+                           e.source if (a, b) == (0, e.n) else f"{e.source} [{a}:{b}]"))
+    idx = np.flatnonzero(dropped)
+    return pieces, {"source": e.source, "first": int(idx[0]), "last": int(idx[-1]), "samples": int(idx.size)}
+
+
+def _held_within(e: _Exp, flags: np.ndarray) -> dict:
+    """``{"held": {"value", "extreme"}}`` when a held-input run (:func:`.held.held_runs`) covers most of the
+    flagged samples of ``e`` (a landed or saturated segment, not a glitch), else empty."""
+    for a, b, value, extreme in held_runs(e.u, e.y):
+        if 2 * np.count_nonzero(flags[a:b]) > np.count_nonzero(flags):
+            return {"held": {"value": value, "extreme": extreme}}
+    return {}
 
 
 def _pair_frequency(a: np.ndarray, near: complex, default: float) -> float:
@@ -1146,15 +1172,17 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
                  deadline: float, say: Progress, refine: bool = True) -> list[_Point]:
     """The criterion minimised over the model at each delay of a grid on ``[0, max_delay]``,
     each point a short LM warm-started from its neighbour's solution (never a fit from
-    scratch per point), then (``refine``) coarse to fine around the best minimum: the delays half a step to
+    scratch per point; none where the warm start lies :data:`HOPELESS_DELAY` times above the best so far), then (``refine``) coarse to fine around the best minimum: the delays half a step to
     either side, the step halved until it is one sample. Returns the points at the local minima (the best one
     refined), best first, with the delay as their last parameter (docs/identification.md, "The search")."""
     fixed = _Model(structure, exps, ts, opts, estimate_delay=False)
     count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
     done, total = 0, count
 
+    floor = math.inf  # the profile's best criterion so far
+
     def sweep(delays: list[float], a: np.ndarray) -> list[_Point]:
-        nonlocal done
+        nonlocal done, floor
         out = []
         for d in delays:
             done += 1
@@ -1162,7 +1190,9 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
             if not math.isfinite(p0.sse):
                 say(done, total, f"delay sweep: {d:.3g} s, model diverges")
                 continue
-            p = _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
+            hopeless = p0.sse > HOPELESS_DELAY * floor
+            p = p0 if hopeless else _levenberg_marquardt(fixed, p0, float(d), opts, deadline, say, max_iter=1).point
+            floor = min(floor, p.sse)
             a = p.alpha
             p.cols = None                # keep the profile light: signals are recomputed for the starts
             out.append(p)
@@ -1354,10 +1384,14 @@ def _tfest(data: FlightData | list[FlightData], input: str, output: str, structu
     model, delay0 = _fit_problem(data, input, output, structure, opts, say)
     cands, ranking = _initial_points(model, delay0, say)
     runs: list[dict] = []
-    best = _search(model, _lm_starts(model, cands, deadline, say), delay0, deadline, say, runs)
+    starts = _lm_starts(model, cands, deadline, say)
+    del cands  # each holds a record's worth of signals (memory per sample: docs/identification.md, "Measured")
+    best = _search(model, starts, delay0, deadline, say, runs)
+    del starts
     model, best, left_out, startup = _refit_without_gross_errors(model, best, delay0, deadline, say, runs)
+    model, best, held = _refit_without_held_inputs(model, best, delay0, deadline, say, runs)
     _warn_if_stopped(best)
-    return _result(model, best, input, output, validation, runs, ranking, left_out, t_start, startup)
+    return _result(model, best, input, output, validation, runs, ranking, left_out + held, t_start, startup)
 
 
 def _fit_problem(data: FlightData | list[FlightData], input: str, output: str, structure: ModelStructure,
@@ -1638,6 +1672,46 @@ def _refit_without_gross_errors(model: _Model, best: _LMResult, delay0: float, d
     return model, best, left_out, startup or []
 
 
+def _refit_without_held_inputs(model: _Model, best: _LMResult, delay0: float, deadline: float, say: Progress,
+                               runs: list[dict]) -> tuple[_Model, _LMResult, list[dict]]:
+    """The fit again without the landed or saturated segments the fit shows (:func:`.held.held_segments`).
+
+    docs/identification.md, "Scores and notes". Such a segment can ruin the fit it is found by, so the refit
+    searches afresh (its starts from the cut record). Without ``FitOptions.outlier_sigmas``, or where the cut
+    would leave fewer samples than the structure needs, nothing is cut (the segments are then noted as kept).
+
+    Returns
+    -------
+    model, best
+        The criterion and fit on the cut record (unchanged without a cut).
+    left_out : list of dict
+        What was left out (``source``, ``first``, ``last``, ``samples``, ``held``: ``value`` and ``extreme``).
+    """
+    if model.opts.outlier_sigmas is None or not any(held_runs(e.u, e.y) for e in model.exps):
+        return model, best, []  # the model's output (a record's worth of columns) only where a run is held
+    held = held_segments([(e.u, e.y) for e in model.exps], _fitted(model, best.point),
+                         [e.source for e in model.exps], model.ts)
+    pieces, left = [], []
+    for e in model.exps:
+        bad = np.zeros(e.n, bool)
+        for d in (d for d in held if d["source"] == e.source):
+            bad[d["first"]:d["last"] + 1] = True
+        if not bad.any():
+            pieces.append(e)
+            continue
+        kept, record = _cut(model, e, bad)
+        pieces += kept
+        left.append({**record, "held": next({"value": d["value"], "extreme": d["extreme"]}
+                                            for d in held if d["source"] == e.source)})
+    if not left or not pieces:
+        return model, best, []
+    cut = _Model(model.s, pieces, model.ts, model.opts, model.estimate_delay)
+    samples = sum(d["samples"] for d in left)
+    say(0, 0, f"held input: {samples} samples of a landed or saturated segment left out; fitting again")
+    cands, _ = _initial_points(cut, delay0, say)
+    return cut, _search(cut, _lm_starts(cut, cands, deadline, say), delay0, deadline, say, runs), left
+
+
 #: Why a search that did not converge stopped, by its status (:func:`_warn_if_stopped`).
 _STOPPED = {"max_iter": "at its iteration limit", "time_limit": "at its time limit",
             "numerical": "where the sensitivities overflowed (the model order may exceed what the data support)"}
@@ -1750,8 +1824,9 @@ def _result(model: _Model, best: _LMResult, input: str, output: str, validation:
     -------
     TFEstimate
         With ``solver``: engine, status, iterations, starts, then ``ranking``, ``max_delay``
-        (delay estimated), ``delay_lower_bound_gain`` (:func:`_delay_pull`), ``gross_errors`` and
-        ``startup_transients`` where they apply, and ``seconds``, the wall time since ``t_start``.
+        (delay estimated), ``delay_lower_bound_gain`` (:func:`_delay_pull`), ``gross_errors`` (with ``held``
+        where a held input explains them), ``startup_transients`` and ``held_inputs`` (:func:`.held.held_segments`:
+        a landed or saturated segment left in the fit) where they apply, and ``seconds``, the wall time since ``t_start``.
 
     Raises
     ------
@@ -1759,18 +1834,22 @@ def _result(model: _Model, best: _LMResult, input: str, output: str, validation:
         A converged fit with a trend that explains less than :data:`MIN_RESPONSE_FIT` % of the output.
     """
     p, opts, exps = best.point, model.opts, model.exps
+    p.cols = model._cols(p)  # once for the delay's pull, the covariance and the fitted output
     pull = _delay_pull(model, p)
     sigma2, cov = _covariance(model, p)
+    fitted = _fitted(model, p)
+    held = held_segments([(e.u, e.y) for e in exps], fitted, [e.source for e in exps], model.ts)
     est = TFEstimate.from_fit(structure=model.s, theta=p.theta, delay=p.delay, covariance=cov,
                               delay_estimated=model.estimate_delay, sigma2=sigma2,
                               experiments=[(e.u, e.y) for e in exps], ts=model.ts, validation=validation,
-                              input=input, output=output, trend=opts.trend, fitted=_fitted(model, p),
+                              input=input, output=output, trend=opts.trend, fitted=fitted,
                               solver={"engine": "variable projection + Levenberg-Marquardt, filtered sensitivities",
                                       "status": best.status, "iterations": best.iterations,
                                       "starts": runs, **({"ranking": ranking} if ranking else {}),
                                       **({"max_delay": opts.max_delay} if model.estimate_delay else {}), **pull,
                                       **({"gross_errors": left_out} if left_out else {}),
                                       **({"startup_transients": startup} if startup else {}),
+                                      **({"held_inputs": held} if held else {}),
                                       "seconds": time.perf_counter() - t_start})
     if best.status == "converged" and opts.trend is not None and not est.fit_estimation >= MIN_RESPONSE_FIT:
         raise SignalError(f"{exps[0].source}: output `{output}` shows no response to input `{input}`: the best "

@@ -41,7 +41,7 @@ COVARIANCE_RTOL = 1e-6
 
 
 
-def is_lti(value: Any) -> bool:
+def _is_lti(value: Any) -> bool:
     """Whether ``value`` is a python-control system; python-control is not imported for the question (an LTI
     object exists only once its caller has imported it)."""
     ct = _modules.get("control")
@@ -227,7 +227,7 @@ class PlantSpec:
     delay: float = 0.0
 
     def __post_init__(self) -> None:
-        if is_lti(self.num):
+        if _is_lti(self.num):
             den_given = not (isinstance(self.den, tuple) and len(self.den) == 0)
             if den_given:
                 raise SpecError(f"`plant.den`: got {self.den!r} together with a python-control system as `num`; "
@@ -267,7 +267,7 @@ class PlantSpec:
             ``sys`` is not a TransferFunction/StateSpace, is discrete-time, MIMO or not
             strictly proper, or ``delay`` is negative.
         """
-        if not is_lti(sys):
+        if not _is_lti(sys):
             raise SpecError(f"`plant`: got {type(sys).__name__} {sys!r}; expected a python-control "
                             "TransferFunction or StateSpace")
         return cls(sys, delay=delay)
@@ -640,7 +640,7 @@ class SystemSpec:
             value = getattr(self, key)
             if value is None and key == "model":
                 continue
-            if is_lti(value):
+            if _is_lti(value):
                 try:
                     object.__setattr__(self, key, PlantSpec.from_lti(value))
                 except SpecError as exc:
