@@ -302,8 +302,8 @@ def test_c_prefix_is_checked(tmp_path, capsys):
 def test_design_cli_writes_the_folder(lagged_file, tmp_path, capsys):
     out = tmp_path / "ab"
     assert main(["design", "--fleet", str(lagged_file), "--from", "A", "--to", "B", "--out", str(out)]) == 0
-    assert {p.name for p in out.iterdir()} == {"filters.json", "filters.h", "filters.c", "README.md", "bode.png",
-                                               "manifest.json"}
+    assert {p.name for p in out.iterdir()} == {"filters.json", "filters.h", "filters.c", "filters.mat", "README.md",
+                                               "bode.png", "manifest.json"}
     filters = json.loads((out / "filters.json").read_text())
     assert filters["c"]["prefix"] == "ilcdob_a_b_" and "float" not in filters["c"]
     assert "num_den_omitted" in filters["L1"]

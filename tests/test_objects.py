@@ -196,6 +196,28 @@ def test_design_to_mat_holds_the_numbers_and_the_law(tmp_path):
     np.testing.assert_array_equal(apply_learning(rebuilt, e, 0.1 * e), apply_learning(f, e, 0.1 * e))
 
 
+def test_a_design_folder_writes_its_mat_and_design_to_mat_reads_a_folder(tmp_path):
+    """``ilcdob design`` writes ``filters.mat`` beside ``filters.json`` (closed form and fir); ``design_to_mat``
+    takes the folder as well as the parsed file, and refuses ``load_design``'s python-control filters with the
+    route that works (they leave the band, the correction and the limit out)."""
+    from ilcdob.app.cli import main
+
+    out = tmp_path / "d"
+    assert main(["--quiet", "design", "--from", "UAV1", "--to", "UAV2", "--out", str(out)]) == 0
+    f = json.loads((out / "filters.json").read_text())
+    written = scipy.io.loadmat(out / "filters.mat")
+    from_folder = scipy.io.loadmat(design_to_mat(out, tmp_path / "folder.mat"))
+    from_file = scipy.io.loadmat(design_to_mat(f, tmp_path / "file.mat"))
+    for m in (written, from_folder):
+        assert sorted(m) == sorted(from_file) and str(m["target_system"][0]) == "UAV2"
+        for key in (k for k in from_file if not k.startswith("__")):
+            np.testing.assert_array_equal(m[key], from_file[key], err_msg=key)
+    np.testing.assert_array_equal(written["L1_sos"], np.array(f["L1"]["sos"]))
+    with pytest.raises(SpecError, match=r"python-control filters of load_design .*pass the design folder itself"):
+        design_to_mat(load_design(out), tmp_path / "x.mat")
+    assert not (tmp_path / "x.mat").exists()
+
+
 def test_model_to_mat_holds_the_model(estimate, tmp_path):
     _, est = estimate
     model = json.loads(json.dumps(est.to_dict()))  # as model.json holds it

@@ -992,6 +992,9 @@ _FILE_TEXT = {
                  "of the functions running its filters alone (L1 and L2; robust-set: Ginv), with the sample time, "
                  "the band and the look-ahead of each filter",
     "filters.c": "their implementation (no allocation; compile it with your firmware or ground tool)",
+    "filters.mat": "the same law for MATLAB (scipy.io.savemat, version 5): L1 and L2 as sections, the learning band, "
+                   "the airframe correction and the limit, each variable described in its `description` "
+                   "(ilcdob.design_to_mat)",
     "lifted.npz": "numpy arrays: for norm-optimal its law d_f,j = L1 e_j-1 + L2 d_f,j-1 as Riccati gains "
                   "(ilcdob.design.methods.norm_optimal.NormOptimalLaw.from_arrays(numpy.load(...)).apply(e, d_f)) and, "
                   "with --lifted, the N x N matrices L1, L2; for robust the learning signal d_f, the predicted "
@@ -1193,7 +1196,7 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
 def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: str | None = None,
                  float_variant: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """The files of a design folder: ``filters.json``, ``filters.h``/``filters.c`` (when the design
-    has L1/L2) and ``README.md``.
+    has L1/L2 or law maps), ``filters.mat`` (L1/L2: :func:`~.objects.design_to_mat`) and ``README.md``.
 
     Parameters
     ----------
@@ -1209,7 +1212,7 @@ def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: st
     Returns
     -------
     tuple of (dict, dict)
-        The content map (file name -> text or JSON document), and the ``filters.json``
+        The content map (file name -> text, JSON document or a writer of the file), and the ``filters.json``
         content: ``filters`` plus, with C code, key ``c`` (:attr:`CCode.info`).
     """
     data = dict(filters)
@@ -1219,6 +1222,10 @@ def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: st
         code = c_code(filters, prefix, float_variant)
         data["c"] = code.info
         files = {"filters.h": code.header, "filters.c": code.source}
+    if all(k in filters for k in FILTER_KEYS):
+        from .objects import design_to_mat  # objects reads filters through this module
+
+        files["filters.mat"] = lambda path: design_to_mat(data, path, "filters.json")
     names = ["filters.json", *files, *others, "README.md"]
     files["README.md"] = design_readme(data, names, code)
     files["filters.json"] = data

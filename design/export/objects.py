@@ -279,10 +279,26 @@ def filter_tf(coeffs: Mapping[str, Any], ts: float, name: str = "L1", unit: str 
                             coefficients=coeffs, unit=unit)
 
 
-def _learning_filters(filters: Mapping[str, Any], source: str) -> dict[str, Any]:
-    """``filters`` checked (:func:`~ilcdob.design.export.c_export.check_filters`), with both ``L1`` and ``L2``."""
+def _read_design(folder: str | os.PathLike) -> tuple[dict[str, Any], str]:
+    """The ``filters.json`` content of a design folder (or of the file itself) and the file's name."""
+    path = Path(folder)
+    if path.is_dir():
+        path = path / DESIGN_FILE
+    data = read_json(path, DESIGN_FILE, error=SpecError, hint="give a folder written by `ilcdob design`")
+    return data, str(path)
+
+
+def _learning_filters(filters: Mapping[str, Any] | str | os.PathLike, source: str) -> dict[str, Any]:
+    """``filters`` (a ``filters.json`` content, or a design folder to read it from) checked
+    (:func:`~ilcdob.design.export.c_export.check_filters`), with both ``L1`` and ``L2``."""
+    if isinstance(filters, (str, os.PathLike)):
+        filters, source = _read_design(filters)
     if not isinstance(filters, Mapping) and isinstance(getattr(filters, "filters", None), Mapping):
         raise SpecError(f"{source}: got a {type(filters).__name__}; pass its `filters` (the filters.json content)")
+    if isinstance(filters, Mapping) and filters and all(isinstance(v, LearningFilterTF) for v in filters.values()):
+        raise SpecError(f"{source}: got the python-control filters of load_design ({', '.join(filters)}), which "
+                        "leave out the learning band, the airframe correction and the limit; pass the design folder "
+                        "itself (design_to_mat('folder/', 'design.mat')) or its filters.json content")
     filters = check_filters(filters, source)
     missing = [k for k in FILTER_KEYS if k not in filters]
     if missing:
@@ -342,11 +358,7 @@ def load_design(folder: str | os.PathLike) -> dict[str, LearningFilterTF]:
         The file is missing, unreadable, not JSON, or holds an invalid or missing entry (the
         message names the file and the key).
     """
-    path = Path(folder)
-    if path.is_dir():
-        path = path / DESIGN_FILE
-    data = read_json(path, DESIGN_FILE, error=SpecError, hint="give a folder written by `ilcdob design`")
-    return filters_tf(data, str(path))
+    return filters_tf(*_read_design(folder))
 
 
 def _matrix(value: Any, cols: int) -> np.ndarray:
@@ -380,7 +392,8 @@ def _filter_variables(filters: Mapping[str, Any], key: str) -> tuple[dict[str, A
     return values, notes
 
 
-def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: str = "design") -> Path:
+def design_to_mat(filters: Mapping[str, Any] | str | os.PathLike, path: str | os.PathLike,
+                  source: str = "design") -> Path:
     """Write a design's learning law (``filters.json`` content) as a ``.mat`` file.
 
     Variables (numbers as doubles; ``description`` lists each with its meaning and unit):
@@ -400,9 +413,11 @@ def design_to_mat(filters: Mapping[str, Any], path: str | os.PathLike, source: s
 
     Parameters
     ----------
-    filters : mapping
-        The ``filters.json`` content (e.g. ``PairDesign.filters``) of a closed-form or fir design;
-        checked by :func:`~ilcdob.design.export.c_export.check_filters`.
+    filters : mapping or str or os.PathLike
+        The ``filters.json`` content (e.g. ``PairDesign.filters``) of a closed-form or fir design, or the
+        folder ``ilcdob design`` wrote (or its ``filters.json``); checked by
+        :func:`~ilcdob.design.export.c_export.check_filters`. Not :func:`load_design`'s python-control
+        filters: they leave out the band, the airframe correction and the limit.
     path : str or os.PathLike
         The file, ending in ``.mat`` (written atomically, :func:`ilcdob.matfile.write_mat`).
     source : str
