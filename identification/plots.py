@@ -16,29 +16,33 @@ from ilcdob.signals import FlightData
 
 from .results import TFEstimate, fit_percent
 
-__all__ = ["fit_figures"]
+__all__ = ["fit_figures", "phase_deg"]
 
 #: Resolution of the figures (dots per inch), used when they are saved.
 DPI = 110
+#: The Bode legend says the uncertainty band is too narrow to see where its widest extent (dB) is below this
+#: share of the magnitude axis' span.
+BAND_VISIBLE = 0.01
 
 
-def _compare_axes(ax, fd: FlightData, est: TFEstimate, label: str) -> None:
+def _compare_axes(ax, fd: FlightData, est: TFEstimate, label: str, shown: str) -> None:
     y = fd[est.output]
     yhat = est.predict(fd[est.input], y)
     ax.plot(fd.t, y, color="k", lw=0.9, label="measured")
     ax.plot(fd.t, yhat, color="#dd8452", lw=0.9, ls="--", label=f"model ({fit_percent(y, yhat):.1f} % fit)")
     ax.set_title(f"{label}: {Path(fd.source).name}", fontsize=9)
-    ax.set_ylabel(f"{est.output} ({fd.units.get(est.output) or '-'})")
+    ax.set_ylabel(f"{shown} ({fd.units.get(est.output) or '-'})")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
 
 
-def _compare_figure(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData]) -> Figure:
+def _compare_figure(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData],
+                    shown: str) -> Figure:
     sets = [("estimation", fd) for fd in estimation] + [("validation", fd) for fd in validation]
     fig = Figure(figsize=(9, 2.4 * len(sets)), dpi=DPI)
     axes = fig.subplots(len(sets), 1, squeeze=False)
     for ax, (label, fd) in zip(axes[:, 0], sets):
-        _compare_axes(ax, fd, est, label)
+        _compare_axes(ax, fd, est, label, shown)
     axes[-1, 0].set_xlabel("time (s)")
     fig.tight_layout()
     return fig
@@ -70,12 +74,16 @@ def _bode_figure(est: TFEstimate, w: np.ndarray | None) -> Figure:
     axes[0].semilogx(w, mag, color="k", label="estimate")
     lo = 20 * np.log10(np.maximum(1 - bound, 1e-6))
     hi = 20 * np.log10(1 + bound)
-    axes[0].fill_between(w, mag + lo, mag + hi, color="#dd8452", alpha=0.35, label="3-sigma |Delta| band")
+    widest = float(np.max(bound))
+    unseen = float(np.max(hi - lo)) < BAND_VISIBLE * max(float(np.ptp(mag)), 1e-12)
+    axes[0].fill_between(w, mag + lo, mag + hi, color="#dd8452", alpha=0.35,
+                         label=f"3-sigma |Delta| band (at most {100 * widest:.2g} %"
+                               + (", too narrow to see at this scale)" if unseen else ")"))
     axes[0].set_ylabel("magnitude (dB)")
     axes[0].legend(fontsize=7)
-    axes[1].semilogx(w, np.degrees(np.unwrap(np.angle(g))), color="k")
+    ph = phase_deg(est, w)
+    axes[1].semilogx(w, ph, color="k")
     dphi = np.degrees(np.arcsin(np.clip(bound, 0, 1)))
-    ph = np.degrees(np.unwrap(np.angle(g)))
     axes[1].fill_between(w, ph - dphi, ph + dphi, color="#dd8452", alpha=0.35)
     axes[1].set_ylabel("phase (deg)")
     axes[1].set_xlabel("frequency (rad/s)")
@@ -86,8 +94,27 @@ def _bode_figure(est: TFEstimate, w: np.ndarray | None) -> Figure:
     return fig
 
 
+def phase_deg(est: TFEstimate, w: np.ndarray) -> np.ndarray:
+    """The model's phase at ``w`` (rad/s), degrees, continuous and anchored at its low-frequency asymptote.
+
+    Summed factor by factor, ``arg G(jw) = arg k + sum arg(jw - z_i) - sum arg(jw - p_i) - w tau``, each term
+    continuous in ``w``; an unwrapped ``angle`` of the product instead starts wherever the first sample's
+    principal value lies (``10 / (s^2 (s + 10))`` would read +180 deg falling to +90 deg, not -180 to -270).
+    A negative gain counts -180 deg.
+    """
+    w = np.asarray(w, float)
+    jw = 1j * w[:, None]
+    num, den = np.trim_zeros(np.asarray(est.num, float), "f"), np.asarray(est.den, float)
+    gain = num[0] / den[0]
+    out = (-180.0 if gain < 0 else 0.0) - np.degrees(w * est.delay)
+    for roots, sign in ((np.roots(num), 1.0), (np.roots(den), -1.0)):
+        if roots.size:
+            out = out + sign * np.degrees(np.angle(jw - roots[None, :])).sum(axis=1)
+    return out
+
+
 def fit_figures(est: TFEstimate, estimation: list[FlightData], validation: list[FlightData],
-                w: np.ndarray | None = None) -> dict[str, Figure]:
+                w: np.ndarray | None = None, signals: tuple[str, str] | None = None) -> dict[str, Figure]:
     """The figures of a fit, by file name.
 
     Parameters
@@ -101,16 +128,21 @@ def fit_figures(est: TFEstimate, estimation: list[FlightData], validation: list[
     w : numpy.ndarray, optional
         Frequencies of the Bode figure, rad/s (default: 300 log-spaced points from 0.01 rad/s
         to just below Nyquist).
+    signals : (str, str), optional
+        The input's and output's names as the user gave them, for the axis labels (default: the names
+        in ``est``, which the command line sets to ``u`` and ``y``).
 
     Returns
     -------
     dict of str to matplotlib.figure.Figure
         ``"compare.png"``: measured and simulated output of every experiment, with its fit
         percent; ``"residuals.png"``: residual autocorrelation and input-residual
-        cross-correlation with their 99 % bands; ``"bode.png"``: the model's Bode diagram with
-        the 3-sigma multiplicative uncertainty band (docs/identification.md). The figures are
+        cross-correlation with their 99 % bands; ``"bode.png"``: the model's Bode diagram (phase by
+        :func:`phase_deg`) with the 3-sigma multiplicative uncertainty band, its widest value in the legend
+        (docs/identification.md). The figures are
         not attached to pyplot; their resolution is :data:`DPI`.
     """
-    return {"compare.png": _compare_figure(est, list(estimation), list(validation)),
+    shown = signals[1] if signals else est.output
+    return {"compare.png": _compare_figure(est, list(estimation), list(validation), shown),
             "residuals.png": _residuals_figure(est),
             "bode.png": _bode_figure(est, w)}

@@ -669,7 +669,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
         from ilcdob.identification.plots import fit_figures  # matplotlib: only when drawing
 
         with OutputFolder(plot, prov, option="--plot") as folder:
-            folder.add_all(fit_figures(est, est_data, val_data))
+            folder.add_all(fit_figures(est, est_data, val_data, signals=(inputs.input, inputs.output)))
             folder.seal()
             write_file(out, data)
     return est, est_data, val_data
