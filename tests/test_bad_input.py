@@ -301,3 +301,13 @@ def test_design_rerun_with_another_method_leaves_no_stale_file(tmp_path, capsys)
     assert sorted(p.name for p in out.iterdir()) == ["README.md", "bode.png", "filters.json", "lifted.npz",
                                                     "manifest.json"]
     assert json.loads((out / "filters.json").read_text())["method"] == "norm-optimal"
+
+
+@pytest.mark.parametrize("command", [["check"], ["design", "--from", "UAV1", "--to", "UAV2", "--method", "fir"]])
+@pytest.mark.parametrize("value", ["2", "0", "-0.1", "nan"])
+def test_a_bound_outside_0_1_is_named_as_the_option(tmp_path, capsys, command, value):
+    """The command line's error names the option the user typed (``--bound``), not the library's parameter."""
+    assert main([command[0], "--bound", value, *command[1:], "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --bound: got '{value}', expected a relative error in (0, 1)" in err, err
+    assert "`bound`" not in err and not (tmp_path / "out").exists()

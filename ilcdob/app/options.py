@@ -88,6 +88,17 @@ def seed(text: str) -> int:
     return _number(text, int, lambda v: v >= 0, "a seed: an integer >= 0")
 
 
+def relative_bound(text: str) -> float:
+    """A multiplicative uncertainty bound: a relative error in (0, 1) (``|Delta(jw)| <= bound``).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        ``text`` is not such a number.
+    """
+    return _number(text, float, lambda v: 0 < v < 1, "a relative error in (0, 1), e.g. 0.3 for 30 %")
+
+
 def fit_percent(text: str) -> float:
     """A fit in %: a finite number <= 100 (100: a perfect fit; below 0: worse than the output's mean).
 
@@ -364,7 +375,7 @@ SCENARIOS = flag("--scenarios", type=scenario_ids, default=[1, 2, 3, 4], help="c
 METHOD_LIST = flag("--methods", type=method_names, help="comma-separated designs (default: "
                                                         "closed-form,fir,norm-optimal,robust)")
 SAMPLES = flag("--samples", type=positive, default=8, help="Delta-set samples per system")
-BOUND = flag("--bound", type=float, help="multiplicative uncertainty bound (default: identified)")
+BOUND = flag("--bound", type=relative_bound, help="multiplicative uncertainty bound (default: identified)")
 SCALE = flag("--scale", type=float, help="scale of the identified standard deviations (default 1; not with --bound)")
 RHO = flag("--rho", type=float, help="robust and robust-set only: guaranteed improvement factor (default 0.95)")
 BANDWIDTH = flag("--bandwidth", default="auto",
