@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ilcdob.display import html_table
+from ilcdob.display import html_table, polynomial_text as _poly
 from ilcdob.signals import FlightData
 from ilcdob.specs import IdentificationSpec
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
@@ -676,17 +676,6 @@ def _held_note(where: dict, held: dict, ts: float, fate: str) -> str:
             f"start): the input is held at {held['value']:.6g} (its {held['extreme']}) while the output does not "
             f"follow: a landed or saturated segment (the vehicle on the ground, a setpoint at its limit), not a "
             f"glitch; these samples {fate}")
-
-
-def _poly(c: np.ndarray) -> str:
-    n = len(c) - 1
-    terms = []
-    for i, v in enumerate(c):
-        p = n - i
-        if v == 0:
-            continue
-        terms.append(f"{v:.5g}" + ("" if p == 0 else " s" if p == 1 else f" s^{p}"))
-    return " + ".join(terms) if terms else "0"
 
 
 def trend_basis(n: int, degree: int) -> np.ndarray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from html import escape
 
-__all__ = ["html_table", "fmt"]
+__all__ = ["html_table", "fmt", "polynomial_text"]
 
 
 def fmt(value: object, digits: int = 4) -> str:
@@ -45,3 +45,24 @@ def html_table(title: str, header: Sequence[str], rows: Sequence[Sequence[object
     body = "".join("<tr>" + "".join(f"<td>{escape(fmt(c))}</td>" for c in r) + "</tr>" for r in rows)
     return (f"<table><caption style='text-align:left'><b>{escape(title)}</b></caption>"
             f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+
+
+def polynomial_text(c: Sequence[float], digits: int = 5) -> str:
+    """A polynomial in ``s``, highest power first: ``[1, 2.8, 4]`` -> ``"1 s^2 + 2.8 s + 4"`` (zero terms left out,
+    ``+ -`` written ``-``; ``"0"`` for none).
+
+    Parameters
+    ----------
+    c : sequence of float
+        Coefficients, highest power first.
+    digits : int
+        Significant digits of each coefficient.
+    """
+    n = len(c) - 1
+    terms = []
+    for i, v in enumerate(c):
+        if v == 0:
+            continue
+        p = n - i
+        terms.append(f"{v:.{digits}g}" + ("" if p == 0 else " s" if p == 1 else f" s^{p}"))
+    return " + ".join(terms).replace("+ -", "- ") or "0"

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .display import html_table, polynomial_text
 from .errors import ModelFileError, SpecError
 from .inputs import read_json
 from .uncertainty import ModelStructure
@@ -193,6 +194,24 @@ class IdentifiedModel:
         object.__setattr__(self, "sample_time", ts)
         for name in ("fit_estimation", "fit_validation", "noise_variance"):
             object.__setattr__(self, name, _number(name, getattr(self, name), optional=True))
+
+    def __repr__(self) -> str:
+        delay = f" exp(-{self.delay:.4g} s)" if self.delay else ""
+        held = "" if math.isnan(self.fit_validation) else f", held-out {self.fit_validation:.1f} %"
+        source = self.source if len(self.source) <= 40 else "..." + self.source[-37:]
+        return (f"<IdentifiedModel {source!r}: G(s) = ({polynomial_text(self.num, 4)}) / "
+                f"({polynomial_text(self.den, 4)}){delay}; Ts {self.sample_time:g} s{held}>")
+
+    def _repr_html_(self) -> str:
+        names = [f"a{i}" for i in range(self.poles - self.integrators - 1, -1, -1)] + \
+                [f"b{i}" for i in range(self.zeros, -1, -1)] + (["delay (s)"] if self.delay_estimated else [])
+        values = [*self.parameters, *([self.delay] if self.delay_estimated else [])]
+        rows = [[n, float(v), float(e)] for n, v, e in zip(names, values, self.std)]
+        rows += [["fit estimation (%)", self.fit_estimation, ""], ["fit held-out (%)", self.fit_validation, ""],
+                 ["sample time (s)", self.sample_time, ""]]
+        delay = f" exp(-{self.delay:.4g} s)" if self.delay else ""
+        return html_table(f"{self.source}: G(s) = ({polynomial_text(self.num, 4)}) / ({polynomial_text(self.den, 4)})"
+                          f"{delay}", ["", "value", "1 sigma"], rows)
 
     @property
     def transfer_function(self) -> ct.TransferFunction:

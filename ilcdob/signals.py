@@ -372,6 +372,14 @@ class FlightData:
         return (f"<FlightData {source!r}: {len(self)} samples, Ts {self.ts:g} s, t {self.t[0]:g} to {self.t[-1]:g} s; "
                 f"{len(names)} signal{'s' if len(names) != 1 else ''}: {', '.join(shown) or 'none'}{more}>")
 
+    def _repr_html_(self) -> str:
+        from .display import html_table
+
+        rows = [[n, self.units.get(n) or "?", float(np.min(x)), float(np.max(x)), float(np.mean(x))]
+                for n, x in self.signals.items()]
+        return html_table(f"{self.source}: {len(self)} samples, Ts {self.ts:g} s, t {self.t[0]:g} to {self.t[-1]:g} s",
+                          ["signal", "unit", "min", "max", "mean"], rows)
+
     @property
     def ts(self) -> float:
         """Sample time, s."""

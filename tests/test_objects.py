@@ -156,13 +156,20 @@ def test_reprs_are_one_short_line(estimate, closed_form):
                          (closed_form_filters(fleet.loop("UAV1"), fleet.loop("UAV2")).L1, ["poles", "advance"]),
                          (fleet_delta_sets(fleet, ["UAV1"])["UAV1"], ["'UAV1'", "sampled loops", "rad/s"]),
                          (closed_form.learning(0.01 * np.sin(np.arange(500) * 0.02), np.zeros(500)),
-                          ["500 samples", "m/s^2"])]:
+                          ["500 samples", "m/s^2"]),
+                         (model_from_dict(json.loads(json.dumps(est.to_dict())), "uav4.json"),
+                          ["'uav4.json'", "G(s) = (", "Ts 0.02 s"])]:
         text = repr(obj)
         assert "\n" not in text and len(text) <= 200, text
         assert all(n in text for n in needles), (needles, text)
     many = FlightData(np.arange(3) * 0.1, {f"a_very_long_signal_name_number_{i}": np.zeros(3) for i in range(50)},
                       source="x" * 300)
     assert len(repr(many)) <= 200 and "+4" in repr(many) and "50 signals" in repr(many)
+    # notebooks: a table each, the numbers of the object
+    html = data._repr_html_()
+    assert html.startswith("<table>") and "1500 samples" in html and "<td>thrust</td><td>N</td>" in html
+    model = model_from_dict(json.loads(json.dumps(est.to_dict())), "uav4.json")
+    assert model._repr_html_().startswith("<table>") and f"{model.std[0]:.4g}" in model._repr_html_()
 
 
 def test_design_to_mat_holds_the_numbers_and_the_law(tmp_path):

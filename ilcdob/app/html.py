@@ -80,6 +80,7 @@ import numpy as np
 
 from ilcdob.errors import IlcdobError
 from ilcdob.inputs import read_bytes, read_text
+from ilcdob.display import polynomial_text
 from ilcdob.names import html_text, quoted
 
 from .output import MANIFEST, ManifestError, verify_manifest
@@ -844,18 +845,6 @@ def _missing(what: str, expected: str) -> str:
     return f'<p class="missing"><strong>No input:</strong> {html_text(what)} Expected {html_text(expected)}.</p>'
 
 
-def _poly(c: tuple[float, ...]) -> str:
-    n = len(c) - 1
-    terms = []
-    for i, v in enumerate(c):
-        if v == 0:
-            continue
-        p = n - i
-        s = "" if p == 0 else ("s" if p == 1 else f"s^{p}")
-        terms.append(f"{v:.4g}" + (f" {s}" if s else ""))
-    return " + ".join(terms).replace("+ -", "- ") or "0"
-
-
 # ---------------------------------------------------------------------------------------------
 # sections
 
@@ -882,7 +871,7 @@ def _fleet_table(fleet: Fleet) -> dict[str, Any]:
         model = s.nominal_plant
         ident = s.identification
         c = s.controller
-        row = [s.name, f"({_poly(model.num)}) / ({_poly(model.den)})", f"{model.delay:.4g}",
+        row = [s.name, f"({polynomial_text(model.num, 4)}) / ({polynomial_text(model.den, 4)})", f"{model.delay:.4g}",
                f"{c.kp:.4g} / {c.ki:.4g} / {c.kd:.4g}", f"{s.dob.q_order}, {s.dob.q_time_constant:.4g}",
                "exact (model = plant)" if s.model is None else "differs from the true plant"]
         if ident is not None:
