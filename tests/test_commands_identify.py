@@ -248,3 +248,17 @@ def test_a_glitch_is_left_out_and_named_unless_kept(tmp_path, capsys):
     assert "gross_errors" not in fits["kept"]["solver"]
     val = {k: v["fit_percent"]["validation"] for k, v in fits.items()}
     assert val["cut"] >= val["clean"] - 0.5 and val["kept"] < val["clean"] - 3.0, val
+
+
+def test_an_order_sweep_names_the_order_on_every_progress_line(tmp_path, capsys):
+    """With several orders the "[k/n]" counters restart per fit; each line says which order (and which run from
+    the fit it contains) it belongs to."""
+    est = tmp_path / "chirp.csv"
+    _flight(est, 0, 4.0)
+    assert main(["identify", str(est), "--input", "acc_cmd", "--output", "x", "--integrators", "2", "--delay", "0.04",
+                 "--poles", "3..4", "--out", str(tmp_path / "m.json")]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("[")]
+    assert lines and all(": " in ln for ln in lines)
+    named = [ln.split("] ", 1)[1].split(": ", 1)[0] for ln in lines]
+    assert set(named) == {"3 poles, 0 zeros, 2 integrators", "4 poles, 0 zeros, 2 integrators",
+                          "4 poles, 0 zeros, 2 integrators, from the fit it contains"}, set(named)

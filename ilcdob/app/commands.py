@@ -597,6 +597,24 @@ def _identify_outputs(files: Sequence[str | Path], validate: Sequence[str | Path
     return out, plot
 
 
+def _order_fitter(est_data: list[Any], val_data: list[Any], structures: list[Any],
+                  progress: Progress | None) -> Callable[[Any, Any], Any]:
+    """``fit(structure, options)`` on ``identify``'s data; with several orders each progress line names its order."""
+    from ilcdob.identification.tfest import tfest
+
+    def fit(st: Any, opts: Any) -> Any:  # several orders: each progress line names the one it fits
+        named = progress
+        if progress is not None and len(structures) > 1:
+            counts = [(st.n_poles, "pole"), (st.n_zeros, "zero")] + ([(st.n_integrators, "integrator")]
+                                                                       if st.n_integrators else [])
+            label = (", ".join(f"{k} {word}{'s' if k != 1 else ''}" for k, word in counts)
+                     + (", from the fit it contains" if opts.initial is not None else ""))
+            named = lambda done, total, what: progress(done, total, f"{label}: {what}")  # noqa: E731
+        return tfest(est_data, "u", "y", st, opts, validation=val_data or None, progress=named)
+
+    return fit
+
+
 def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, structure: Any, options: Any, out: str | Path,
                      *, validate: Sequence[str | Path] = (), plot: str | Path | None = None,
                      progress: Progress | None = None, argv: Sequence[str] | None = None,
@@ -642,7 +660,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     """
     from ilcdob.identification.orders import compare_orders, fit_orders
     from ilcdob.identification.origin_zero import with_zero_at_origin
-    from ilcdob.identification.tfest import min_samples, tfest
+    from ilcdob.identification.tfest import min_samples
     from ilcdob.signals import segments
 
     out, plot = _identify_outputs(files, validate, out, plot)
@@ -653,8 +671,8 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
         need = max(min_samples(st) for st in structures)
         est_data = segments(est_data, inputs.segment, min_samples=need, name="--segment")
         val_data = segments(val_data, inputs.segment, min_samples=need, name="--segment")
-    fits = fit_orders(lambda st, opts: tfest(est_data, "u", "y", st, opts, validation=val_data or None,
-                                             progress=progress), structures, options)
+    fit = _order_fitter(est_data, val_data, structures, progress)
+    fits = fit_orders(fit, structures, options)
     est = compare_orders(fits, sum(len(fd) for fd in est_data)) if len(fits) > 1 else fits[0]
     est = with_zero_at_origin(est, est_data, val_data) if zero_at_origin else est
     prov = _provenance("identify", argv)
