@@ -93,3 +93,16 @@ def test_the_unfiltered_law_on_noisy_data_hits_the_limit_and_the_band_does_not(f
     assert raw.limit.peak > 100.0 and raw.limit.beyond > t.size // 2 and raw.limit.clipped
     auto = design_pair(fleet, "UAV1", "UAV2").learning(flight.measured_error, flight.d_f)
     assert auto.band.cutoff is not None and auto.limit.peak <= 0.6 and not auto.limit.clipped
+
+
+@pytest.mark.parametrize("where, cause", [(slice(0, 2), r"the trial's start \(all in its first 5 samples\).*--start"),
+                                          (slice(-3, None), r"the trial's end \(all in its last 5 samples\).*--stop"),
+                                          (slice(200, 203), r"sensor noise .*learning band 3 rad/s")])
+def test_the_cause_named_is_where_the_signal_leaves_the_limit(where, cause):
+    """A learning signal beyond the limit only at a trial's first samples comes from an error not at rest at
+    t = 0 (a step through the plant inverse), only at its last from an error still moving when the recording
+    stops; elsewhere the message keeps the noise-and-band advice."""
+    d = 0.1 * np.sin(np.arange(500) * 0.05)
+    d[where] = 20.0
+    with pytest.warns(LearningLimitWarning, match=cause):
+        enforce_limit(d, LimitSpec(acceleration=5.0), "clip", "learning signal of B", "3 rad/s")

@@ -114,9 +114,8 @@ def enforce_limit(d_f: object, limits: LimitSpec | None, policy: str = "clip", w
     if not beyond:
         return d_f, report
     msg = (f"{what}: peaks at {peak:.4g} m/s^2 (RMS {report.rms:.3g}), beyond the acceleration limit "
-           f"{report.limit_text} on {beyond} of {d_f.size} samples; likely cause: sensor noise through the plant "
-           f"inverse of the learning filter (learning band {band_text or 'unknown'}): lower the band "
-           "(--bandwidth RAD_S), give the sensor noise, or check the trial for spikes and steps")
+           f"{report.limit_text} on {beyond} of {d_f.size} samples; likely cause: "
+           + _likely_cause(np.flatnonzero(np.abs(d_f) > lim), d_f.size, band_text))
     if policy == "refuse":
         raise LearningLimitError(msg + "; refused (--on-limit refuse)")
     warnings.warn(msg + "; clipped to the limit (--on-limit refuse to stop instead)", LearningLimitWarning,
@@ -223,6 +222,25 @@ class Limit(Stage):
                   f"'{self.policy}') `learn` " + ("clips `d_next` to it and returns `LEARN_CLIPPED`." if clip else
                                                   "returns `LEARN_BEYOND_LIMIT` (do not fly `d_next`)."))
         return CParts(step=step, macros=macros, note=note, readme=readme)
+
+
+#: Where every sample beyond the limit lies within this share of a trial's first (or last) samples (at least
+#: three, on trials of 100 samples or more), the limit's message names the trial's start (end) as the cause.
+EDGE_SHARE = 0.01
+
+
+def _likely_cause(beyond: np.ndarray, n: int, band_text: str) -> str:
+    """The cause the limit's message names for the samples ``beyond`` it (indices) of an ``n``-sample signal."""
+    edge = max(3, int(EDGE_SHARE * n))
+    if n >= 100 and beyond.max() < edge:
+        return (f"the trial's start (all in its first {edge} samples): its error is not at rest at t = 0, a step "
+                "that the plant inverse of the learning filter turns into a spike; start the recording with the "
+                "vehicle at rest on its path, or cut the first samples (--start)")
+    if n >= 100 and beyond.min() >= n - edge:
+        return (f"the trial's end (all in its last {edge} samples): its error has not settled when the recording "
+                "stops; record past the end of the manoeuvre, or cut the last samples (--stop)")
+    return (f"sensor noise through the plant inverse of the learning filter (learning band {band_text or 'not stated'}"
+            "): lower the band (--bandwidth RAD_S), give the sensor noise, or check the trial for spikes and steps")
 
 
 def _band_text(entry: object) -> str:
