@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from ilcdob.display import time_text
 from ilcdob.signals import FlightData
 
 from .results import TFEstimate, fit_percent
@@ -20,6 +21,9 @@ __all__ = ["fit_figures", "phase_deg"]
 
 #: Resolution of the figures (dots per inch), used when they are saved.
 DPI = 110
+#: Time stamps from this size on are an absolute clock (epoch seconds): the compare figure counts from the first
+#: sample and states it, instead of ticks matplotlib offsets by "+1.7e9".
+ABSOLUTE_CLOCK_S = 1e6
 #: The Bode legend says the uncertainty band is too narrow to see where its widest extent (dB) is below this
 #: share of the magnitude axis' span.
 BAND_VISIBLE = 0.01
@@ -28,9 +32,11 @@ BAND_VISIBLE = 0.01
 def _compare_axes(ax, fd: FlightData, est: TFEstimate, label: str, shown: str) -> None:
     y = fd[est.output]
     yhat = est.predict(fd[est.input], y)
-    ax.plot(fd.t, y, color="k", lw=0.9, label="measured")
-    ax.plot(fd.t, yhat, color="#dd8452", lw=0.9, ls="--", label=f"model ({fit_percent(y, yhat):.1f} % fit)")
-    ax.set_title(f"{label}: {Path(fd.source).name}", fontsize=9)
+    t0 = float(fd.t[0]) if abs(float(fd.t[0])) >= ABSOLUTE_CLOCK_S else 0.0  # an epoch clock: from the first sample
+    ax.plot(fd.t - t0, y, color="k", lw=0.9, label="measured")
+    ax.plot(fd.t - t0, yhat, color="#dd8452", lw=0.9, ls="--", label=f"model ({fit_percent(y, yhat):.1f} % fit)")
+    ax.set_title(f"{label}: {Path(fd.source).name}" + (f" (time from t = {time_text(t0)} s)" if t0 else ""),
+                 fontsize=9)
     ax.set_ylabel(f"{shown} ({fd.units.get(est.output) or '-'})")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)

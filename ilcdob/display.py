@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from html import escape
 
-__all__ = ["html_table", "fmt", "polynomial_text"]
+__all__ = ["html_table", "fmt", "polynomial_text", "time_text"]
 
 
 def fmt(value: object, digits: int = 4) -> str:
@@ -66,3 +66,10 @@ def polynomial_text(c: Sequence[float], digits: int = 5) -> str:
         p = n - i
         terms.append(f"{v:.{digits}g}" + ("" if p == 0 else " s" if p == 1 else f" s^{p}"))
     return " + ".join(terms).replace("+ -", "- ") or "0"
+
+
+def time_text(t: float) -> str:
+    """A time stamp, s, to the microsecond and no further (``20.3218``, ``1710773350.123456``): what a message
+    prints can be typed back as ``--start``/``--stop`` (a log's epoch clock shown as ``1.71077e+09`` cannot)."""
+    text = f"{float(t):.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("", "-0") else text

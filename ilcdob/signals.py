@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_path
+from .display import time_text
 from .errors import SignalError, SpecError
 from .names import csv_field
 
@@ -216,7 +217,7 @@ def check_signal(x: object, t: np.ndarray, source: str, name: str) -> np.ndarray
     bad = np.flatnonzero(~np.isfinite(arr))
     if bad.size:
         raise SignalError(f"{source}: signal `{name}`: non-finite value {float(arr[bad[0]])!r} at "
-                          f"t = {t[bad[0]]:.6g} s (sample {bad[0]})")
+                          f"t = {time_text(t[bad[0]])} s (sample {bad[0]})")
     return arr
 
 
@@ -417,7 +418,7 @@ class FlightData:
         keep = (self.t >= lo - 1e-9) & (self.t <= hi + 1e-9)
         if np.count_nonzero(keep) < 2:
             raise SignalError(f"{self.source}: segment [{start}, {stop}] s holds fewer than 2 samples "
-                              f"(data span {self.t[0]:.6g} to {self.t[-1]:.6g} s)")
+                              f"(data span {time_text(self.t[0])} to {time_text(self.t[-1])} s)")
         return FlightData(self.t[keep], {n: x[keep] for n, x in self.signals.items()}, dict(self.units),
                           {**self.metadata, "segment": [lo, hi]}, self.source)
 

@@ -53,3 +53,14 @@ def test_the_compare_axis_names_the_signal_and_the_legend_the_band():
     assert figs["compare.png"].axes[0].get_ylabel() == "vehicle_local_position.x (m)"
     label = figs["bode.png"].axes[0].get_legend().get_texts()[1].get_text()
     assert label.startswith("3-sigma |Delta| band (at most ") and "too narrow to see" in label, label
+
+
+def test_a_log_on_an_epoch_clock_is_drawn_from_its_first_sample():
+    """A log stamped in epoch seconds (PX4's sample logs): the compare axis counts from the first sample and the
+    title states that sample's time to the microsecond, instead of ticks offset by "+1.7107733e9"."""
+    est, fd = _estimate([10.43], [1.0, 10.03, 0.0, 0.0], ts=0.125, n=400)  # steps exact in binary at 1.7e9 s
+    t0 = 1710773350.5
+    late = FlightData(fd.t + t0, dict(fd.signals), dict(fd.units))
+    ax = fit_figures(est, [late], [])["compare.png"].axes[0]
+    np.testing.assert_allclose(ax.lines[0].get_xdata(), fd.t, atol=1e-6)
+    assert "time from t = 1710773350.5 s" in ax.get_title()

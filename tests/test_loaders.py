@@ -249,7 +249,7 @@ def test_ulog_corrupt_truncated_and_empty_window(tmp_path):
     with pytest.raises(SignalError, match=r"cut\.ulg: signal `y`: .*no logged data"):
         load_ulog(cut, {"y": "vehicle_local_position.z"})
     with pytest.raises(SignalError, match=r"signal `y` \(vehicle_local_position\.z\): empty selection.*"
-                                          r"data span 20\.3218 to 26\.818 s"):
+                                          r"data span 20\.321827 to 26\.817979 s"):  # to the us: typed back as --start
         load_ulog(ULG, {"y": "vehicle_local_position.z"}, start=100.0, stop=200.0)
 
 

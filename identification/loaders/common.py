@@ -25,6 +25,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ilcdob.display import time_text
 from ilcdob.errors import SignalError
 from ilcdob.inputs import MAX_LOG_BYTES, check_input
 from ilcdob.signals import FlightData
@@ -293,7 +294,8 @@ def window_slice(t: np.ndarray, start: float | None, stop: float | None, source:
     hi = np.inf if stop is None else stop
     idx = np.flatnonzero((t >= lo - 1e-9) & (t <= hi + 1e-9))
     if idx.size == 0:
-        span = f"{np.nanmin(t):.6g} to {np.nanmax(t):.6g} s" if t.size and np.any(np.isfinite(t)) else "empty"
+        span = (f"{time_text(np.nanmin(t))} to {time_text(np.nanmax(t))} s" if t.size and np.any(np.isfinite(t))
+                else "empty")
         raise SignalError(f"{source}: {what}: empty selection: no samples in [start, stop] = "
                           f"[{start}, {stop}] s (data span {span})")
     return slice(max(int(idx[0]) - 1, 0), min(int(idx[-1]) + 2, t.size))
@@ -401,7 +403,7 @@ def checked_segment(fd: FlightData, start: float | None, stop: float | None) -> 
     hi = fd.t[-1] if stop is None else min(stop, fd.t[-1])
     if hi < lo:
         raise SignalError(f"{fd.source}: empty selection: [start, stop] = [{start}, {stop}] s does not "
-                          f"overlap the data span {fd.t[0]:.6g} to {fd.t[-1]:.6g} s")
+                          f"overlap the data span {time_text(fd.t[0])} to {time_text(fd.t[-1])} s")
     return fd.segment(start, stop)
 
 
