@@ -252,6 +252,10 @@ def resample_onto(t_src: np.ndarray, x: np.ndarray, t_new: np.ndarray) -> np.nda
     return np.interp(t_new, t_src, x)
 
 
+#: Largest denominator of the rational factor :meth:`FlightData.resampled` accepts between two sample times.
+RESAMPLE_MAX_DENOMINATOR = 1000
+
+
 @dataclass(frozen=True)
 class FlightData:
     """Named signals of one flight (or experiment) on a uniform time grid.
@@ -394,6 +398,50 @@ class FlightData:
             return self.signals[name]
         except KeyError:
             raise SignalError(f"{self.source}: no signal `{name}`; available: {sorted(self.signals)}") from None
+
+    def resampled(self, ts: float) -> "FlightData":
+        """The record on a grid of step ``ts`` from its first time stamp, every signal anti-aliased.
+
+        ``scipy.signal.resample_poly`` with the rational factor ``self.ts / ts`` (denominator at most
+        :data:`RESAMPLE_MAX_DENOMINATOR`): its Kaiser-window FIR removes what lies above the new Nyquist
+        frequency before decimating, and ``padtype="line"`` continues each end by its trend instead of zeros, so
+        the first and last samples carry no start-up transient of the filter.
+
+        Parameters
+        ----------
+        ts : float
+            The new sample time, s (> 0).
+
+        Returns
+        -------
+        FlightData
+            ``metadata["resampled"]`` records ``from_ts``, ``to_ts``, ``up``, ``down`` and the method; ``self``
+            itself where ``ts`` equals its sample time.
+
+        Raises
+        ------
+        SpecError
+            ``ts`` not a finite number > 0, or a ratio to the record's step no fraction up to the denominator
+            limit matches within 1e-6.
+        """
+        from fractions import Fraction
+
+        if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not (np.isfinite(ts) and ts > 0):
+            raise SpecError(f"`--resample`: got {ts!r}, expected the new sample time, a number > 0 (s)")
+        if abs(ts - self.ts) <= 1e-9 * ts:
+            return self
+        ratio = Fraction(self.ts / ts).limit_denominator(RESAMPLE_MAX_DENOMINATOR)
+        if ratio == 0 or abs(float(ratio) - self.ts / ts) > 1e-6 * self.ts / ts:
+            raise SpecError(f"`--resample`: {ts!r} s against the record's {self.ts:g} s is no ratio of integers up to "
+                            f"{RESAMPLE_MAX_DENOMINATOR}; choose a sample time that divides or multiplies it")
+        from scipy.signal import resample_poly
+
+        up, down = ratio.numerator, ratio.denominator
+        signals = {n: resample_poly(x, up, down, padtype="line") for n, x in self.signals.items()}
+        n = len(next(iter(signals.values())))
+        meta = {**self.metadata, "resampled": {"from_ts": self.ts, "to_ts": float(ts), "up": up, "down": down,
+                                               "method": "scipy.signal.resample_poly, padtype line"}}
+        return FlightData(self.t[0] + np.arange(n) * ts, signals, dict(self.units), meta, self.source)
 
     def segment(self, start: float | None = None, stop: float | None = None) -> "FlightData":
         """The samples with ``start <= t <= stop`` (s, same clock as ``t``).

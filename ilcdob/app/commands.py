@@ -505,12 +505,16 @@ class LogClock:
         Unit of that column: s, ms, us or ns (None: the file's ``# units:`` line, else s).
     start, stop : float or None
         Segment of the log, s on its clock.
+    resample : float or None
+        Sample time every file is resampled to, s (:meth:`ilcdob.signals.FlightData.resampled`: anti-aliased,
+        recorded in ``metadata["resampled"]``); None: as logged.
     """
 
     time: str | None = None
     time_unit: str | None = None
     start: float | None = None
     stop: float | None = None
+    resample: float | None = None
 
     def load_fields(self, files: Sequence[str | Path], fields: dict[str, str]) -> list[Any]:
         """Load ``files`` as FlightData with ``fields`` (signal name -> column or selector).
@@ -537,7 +541,8 @@ class LogClock:
                 raise SpecError(f"`--time-unit`: given with {logs[0]}; a flight log carries its own clock, so "
                                 "--time-unit applies to .csv/.parquet files only")
             kw["units"] = {"time": self.time_unit}
-        return [load_flight(f, fields, **kw) for f in files]
+        data = [load_flight(f, fields, **kw) for f in files]
+        return data if self.resample is None else [fd.resampled(self.resample) for fd in data]
 
 
 @dataclass(frozen=True)
@@ -680,6 +685,7 @@ def identify_to_json(files: Sequence[str | Path], inputs: IdentifyInputs, struct
     data["signals"] = {"input": inputs.input, "output": inputs.output}
     data["files"] = {"estimation": [str(f) for f in files], "validation": [str(f) for f in validate]}
     data["segment_s"] = None if inputs.segment is None else float(inputs.segment)
+    data["resampled_to_s"] = None if inputs.resample is None else float(inputs.resample)
     data["provenance"] = prov.to_dict()
     if plot is None:
         write_file(out, data)
@@ -1008,7 +1014,8 @@ def _design_trial(o: DesignOptions, chosen: Any, flt: Fleet) -> Any:
     _check_trial_values(o.trial, {f"{what[key][0]} (column `{column}`)": (data[key], what[key][1])
                                   for key, column in columns.items()})
     if abs(data.ts - flt.sample_time) > 1e-9:
-        raise SignalError(f"{o.trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
+        raise SignalError(f"{o.trial}: sample time {data.ts:g} s differs from the fleet's {flt.sample_time:g} s; "
+                          "log the trial at the fleet's rate (or resample it to that rate first)")
     if o.n is not None and o.n != len(data):
         raise SpecError(f"`--n`: got {o.n}, but the trial {o.trial} has {len(data)} samples; the learning signal is "
                         f"computed for the whole trial, so its matrices must be {len(data)} long: omit --n or give "
@@ -1442,7 +1449,8 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
         raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)}")
     flt, digest = fleet_and_hash(fleet, axis or "x")
     if abs(data.ts - flt.sample_time) > 1e-9:
-        raise SignalError(f"{trial}: sample time {data.ts} s differs from the fleet's {flt.sample_time} s")
+        raise SignalError(f"{trial}: sample time {data.ts:g} s differs from the fleet's {flt.sample_time:g} s; resample "
+                          f"the trial to the fleet's rate (--resample {flt.sample_time:g})")
     chosen = method_named(method, "--method")
     if fir_unattainable is not None:
         chosen = chosen.configured(MethodSettings(fir=FIROptions(unattainable=fir_unattainable)))
@@ -1482,7 +1490,8 @@ def _learning_signal(filters: dict[str, Any], origin: str, trial: str | Path, da
                         "or from a robust-set design's `law_maps`")
     ts = float(filters["sample_time"])
     if abs(data.ts - ts) > 1e-9:
-        raise SignalError(f"{trial}: sample time {data.ts} s differs from the filters' {ts} s")
+        raise SignalError(f"{trial}: sample time {data.ts:g} s differs from the filters' {ts:g} s; resample the trial "
+                          f"to the design's rate (--resample {ts:g}) or design at the trial's")
     d_f = apply_learning(filters, e, df_prev)
     limit = (filters.get("limit") or {}).get("acceleration_m_s2")
     return enforce_limit(d_f, None if limit is None else LimitSpec(acceleration=float(limit)), on_limit, what)

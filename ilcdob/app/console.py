@@ -213,12 +213,16 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                          max_iter=a.max_iter, stable=not a.allow_unstable,
                          outlier_sigmas=None if a.keep_outliers else FitOptions.outlier_sigmas)
     inputs = uc.IdentifyInputs(a.input, a.output, a.segment, time=a.time, time_unit=a.time_unit, start=a.start,
-                               stop=a.stop)
+                               stop=a.stop, resample=a.resample)
     with warnings.catch_warnings():  # the note below states a fit stopped short, with the options that help
         warnings.filterwarnings("ignore", message="tfest stopped", category=RuntimeWarning)
         est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out,
                                                       validate=a.validate, plot=a.plot, progress=con.progress,
                                                       argv=argv, zero_at_origin=a.zero_at_origin)
+    steps = sorted({fd.metadata["resampled"]["from_ts"] for fd in est_data + val_data if "resampled" in fd.metadata})
+    if steps:
+        con.note(f"--resample {a.resample:g} s: files logged every {', '.join(f'{v:g}' for v in steps)} s resampled "
+                 "(scipy.signal.resample_poly: anti-aliased, each end continued by its trend)")
     if a.segment is not None:
         con.note(f"--segment {a.segment:g} s: {len(est_data)} estimation and {len(val_data)} held-out windows, "
                  "each fitted with its own initial condition")
@@ -276,7 +280,7 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
 def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     columns = uc.TrialColumns(error=a.error, reference=a.reference, position=a.position, learning=a.learning,
-                              time=a.time, time_unit=a.time_unit, start=a.start, stop=a.stop)
+                              time=a.time, time_unit=a.time_unit, start=a.start, stop=a.stop, resample=a.resample)
     _, summary = uc.learn_to_folder(a.out, a.trial, columns, source=a.source, target=a.target, fleet=a.fleet,
                                     design=a.design, method=a.method, bandwidth=a.bandwidth, on_limit=a.on_limit,
                                     overwrite=a.overwrite, argv=argv, axis=a.axis,

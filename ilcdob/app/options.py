@@ -347,10 +347,24 @@ TIME_UNIT = flag("--time-unit", choices=("s", "ms", "us", "ns"),
                  help="unit of that column (default: the file's '# units:' line, else s)")
 
 
+def sample_time(text: str) -> float:
+    """A sample time, s: a finite number > 0.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        ``text`` is not such a number.
+    """
+    return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a sample time, a number > 0 (s)")
+
+
 def _clock(what: str) -> tuple[Flag, ...]:
-    """--time, --time-unit, --start and --stop (``what``: what the start and end are of)."""
+    """--time, --time-unit, --start, --stop and --resample (``what``: what the start and end are of)."""
     return (TIME, TIME_UNIT, flag("--start", type=float, help=f"{what} start, s (log clock)"),
-            flag("--stop", type=float, help=f"{what} end, s (log clock)"))
+            flag("--stop", type=float, help=f"{what} end, s (log clock)"),
+            flag("--resample", type=sample_time, metavar="TS",
+                 help="resample every file to this sample time, s, anti-aliased (scipy.signal.resample_poly), "
+                      "e.g. a log's rate to the fleet's (default: as logged)"))
 
 
 # -- options several commands take ---------------------------------------------------------------------------------
