@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -388,6 +389,12 @@ def _append(path: Path, name: str, block: str, model_ts: float, sample_time: flo
         if sample_time is not None and file_ts != sample_time:
             raise FleetError(f"{path}: `sample_time`: got {sample_time!r}, but the fleet's sample_time is "
                              f"{file_ts!r} s; a system is added at the fleet's sample time (omit it)")
+        if isinstance(file_ts, (int, float)) and abs(model_ts - file_ts) > 1e-9 * abs(file_ts):
+            warnings.warn(f"{path}: system {name!r}: its model was identified at a sample time of {model_ts:.6g} s, "
+                          f"the fleet flies at {file_ts:g} s; the model's continuous form is sampled at the fleet's "
+                          f"rate, which holds where its log resolved the band the loop needs: if it did not, identify "
+                          f"it from a log at the fleet's rate (identify --resample {file_ts:g})", UserWarning,
+                          stacklevel=4)
         new_text = text + ("" if text.endswith("\n") or not text else "\n") + "\n" + block
     else:
         # a sample time measured from time stamps carries float roundoff (0.019999999999999997)

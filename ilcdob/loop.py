@@ -142,7 +142,7 @@ def loop_eigenvalues(a_minus_i: np.ndarray, blocks: dict | None) -> np.ndarray:
     return np.concatenate([np.linalg.eigvals(reduced).astype(complex), np.full(k, -1.0 + 0j)])
 
 
-def _check_stable(a_minus_i: np.ndarray, what: str, system: str, blocks: dict | None = None) -> None:
+def _check_stable(a_minus_i: np.ndarray, what: str, system: str, ts: float, blocks: dict | None = None) -> None:
     """UnstableLoopError when an eigenvalue ``z = 1 + lambda`` of the loop, ``lambda`` an eigenvalue of
     ``A - I`` (:func:`loop_eigenvalues`), has ``|z| >= STABILITY_MARGIN``; ``|z|^2 - 1 =
     2 Re(lambda) + |lambda|^2`` is compared without forming ``1 + lambda``."""
@@ -154,9 +154,10 @@ def _check_stable(a_minus_i: np.ndarray, what: str, system: str, blocks: dict | 
     if np.any(bad):
         listed = ", ".join(f"{1.0 + p:.4g} (|z|={math.sqrt(1.0 + x):.4f})" for p, x in zip(lam[bad], excess[bad]))
         raise UnstableLoopError(
-            f"system {system!r}: the {what} is unstable; closed-loop poles outside the unit circle: "
-            f"{listed}. Lower the controller gains, raise controller.derivative_filter or slow the DOB "
-            f"(larger dob.q_time_constant)."
+            f"system {system!r}: the {what} is unstable at the sample time {ts:g} s; closed-loop poles outside the "
+            f"unit circle: {listed}. Lower the controller gains, raise controller.derivative_filter or slow the DOB "
+            f"(larger dob.q_time_constant), or check the sample time: gains tuned at one rate can be unstable at a "
+            f"slower one (a fleet file made from a model takes the model's rate)."
         )
 
 
@@ -314,9 +315,9 @@ def _build_loop(spec: SystemSpec, ts: float) -> LoopSystem:
         a_plain, a_plain_m1, b_plain, c_plain, d_plain = _pid_loop(blocks)
         a_cl, a_cl_m1, b_cl, c_cl, d_cl = _dob_loop(blocks)
     _finite_or_raise([a_plain, a_plain_m1, b_plain, c_plain, d_plain], "PID loop without DOB", spec.name)
-    _check_stable(a_plain_m1, "PID loop without DOB", spec.name)
+    _check_stable(a_plain_m1, "PID loop without DOB", spec.name, ts)
     _finite_or_raise([a_cl, a_cl_m1, b_cl, c_cl, d_cl], "DOB loop", spec.name)
-    _check_stable(a_cl_m1, "DOB loop", spec.name, blocks)
+    _check_stable(a_cl_m1, "DOB loop", spec.name, ts, blocks)
     closed = ct.ss(a_cl, b_cl, c_cl, d_cl, ts, inputs=["r", "d", "d_f"], outputs=["y", "e", "d_hat", "u2"])
     plain = ct.ss(a_plain, b_plain, c_plain, d_plain, ts, inputs=["r", "d", "d_f"], outputs=["y", "e"])
     return LoopSystem(spec=spec, ts=ts, P=p, C=c, Q=q, M=m, closed_loop=closed, open_loop_pid=plain,

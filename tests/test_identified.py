@@ -400,3 +400,16 @@ def test_readme_example_runs_and_identifies_the_vehicles(tmp_path, monkeypatch):
     df_prev = np.zeros_like(t)
     got, want = design.learn(e_prev, df_prev), true_design.learn(e_prev, df_prev)
     assert np.linalg.norm(got - want) < 0.05 * np.linalg.norm(want)
+
+
+def test_a_model_at_another_rate_is_named_and_an_unstable_loop_names_its_sample_time(tmp_path):
+    """Adding a model identified at 0.01 s to a 0.02 s fleet warns with both rates and the option that fits at the
+    fleet's; a loop that is unstable says at which sample time (gains tuned at one rate can fail at a slower one)."""
+    fleet_path = tmp_path / "fleet.toml"
+    fleet_path.write_text(Path(ilcdob.fleet.DEFAULT_FLEET_PATH).read_text())
+    model = _write_model(tmp_path / "uav4.json", ts=0.01)
+    with pytest.warns(UserWarning, match=r"system 'UAV4': its model was identified at a sample time of 0.01 s, the "
+                                         r"fleet flies at 0.02 s.*identify --resample 0.02"):
+        ilcdob.add_system(fleet_path, "UAV4", model, ilcdob.PIDSpec(1.2, 0.12, 1.53, 0.05), ilcdob.DOBSpec(3, 0.15))
+    with pytest.raises(ilcdob.errors.FleetError, match=r"unstable at the sample time 0.02 s.*check the sample time"):
+        ilcdob.add_system(fleet_path, "UAV5", model, ilcdob.PIDSpec(300.0, 0.12, 1.53, 0.05), ilcdob.DOBSpec(3, 0.15))
