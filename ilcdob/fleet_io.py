@@ -27,7 +27,7 @@ from .errors import FleetError
 from .fleet import MODEL_FILE_KEY, Fleet, fleet_from_dict, read_fleet_file
 from .identified import load_model
 from .inputs import parse_toml
-from .specs import DOBSpec, NoiseSpec, PIDSpec, SystemSpec, UncertaintySpec
+from .specs import DOBSpec, LimitSpec, NoiseSpec, PIDSpec, SensorSpec, SystemSpec, UncertaintySpec
 
 __all__ = ["fleet_to_toml", "system_table", "system_to_toml", "toml_value", "add_system", "add_channel_system",
            "model_reference"]
@@ -139,11 +139,17 @@ def system_table(spec: SystemSpec, model_file: str | None = None) -> dict[str, A
             "fit_estimation": i.fit_estimation, "fit_validation": i.fit_validation, "source": i.source}
     if spec.uncertainty is not None:
         table["uncertainty"] = {"bound": spec.uncertainty.bound}
-    if spec.limits is not None:
-        table["limits"] = {k: getattr(spec.limits, k) for k in ("tilt", "thrust_to_weight", "acceleration")
-                           if getattr(spec.limits, k) is not None}
-    if spec.sensor is not None:
-        table["sensor"] = {"noise_std": spec.sensor.noise_std}
+    return {**table, **_limit_tables(spec.limits, spec.sensor)}
+
+
+def _limit_tables(limits: LimitSpec | None, sensor: SensorSpec | None) -> dict[str, Any]:
+    """The ``limits`` and ``sensor`` tables of a system (each only when given)."""
+    table: dict[str, Any] = {}
+    if limits is not None:
+        table["limits"] = {k: getattr(limits, k) for k in ("tilt", "thrust_to_weight", "acceleration")
+                           if getattr(limits, k) is not None}
+    if sensor is not None:
+        table["sensor"] = {"noise_std": sensor.noise_std}
     return table
 
 
@@ -229,7 +235,8 @@ def model_reference(model: str | Path, fleet_path: str | Path) -> str:
 
 def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSpec, dob: DOBSpec, *,
                sample_time: float | None = None, noise: NoiseSpec | None = None,
-               uncertainty: UncertaintySpec | None = None) -> Fleet:
+               uncertainty: UncertaintySpec | None = None, limits: LimitSpec | None = None,
+               sensor: SensorSpec | None = None) -> Fleet:
     """Add a system flying an identified model to a fleet file, creating the file if needed.
 
     The system's plant is ``plant = { model = "<model, relative to the fleet file>" }``: its
@@ -261,6 +268,10 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         The system's own process noise (default: none).
     uncertainty : UncertaintySpec, optional
         A stated model-error bound, used ahead of the covariance for the Delta set.
+    limits : LimitSpec, optional
+        The vehicle's acceleration limit (a learning signal beyond it is clipped or refused).
+    sensor : SensorSpec, optional
+        Its position sensor's white noise (sets the learning band without a trial).
 
     Returns
     -------
@@ -290,13 +301,14 @@ def add_system(path: str | Path, name: str, model: str | Path, controller: PIDSp
         table["noise"] = {"amplitude": noise.amplitude, "frequency": noise.frequency, "phase": noise.phase}
     if uncertainty is not None:
         table["uncertainty"] = {"bound": uncertainty.bound}
-    return _add_table(path, table, identified.sample_time, sample_time)
+    return _add_table(path, {**table, **_limit_tables(limits, sensor)}, identified.sample_time, sample_time)
 
 
 def add_channel_system(path: str | Path, name: str, model: str | Path, channel: str, *,
                        channel_gain: float | dict[str, Any] | None = None, airframe: str | Path | None = None,
                        dob: DOBSpec | None = None, sample_time: float | None = None,
-                       reference_map: str | Path | None = None) -> Fleet:
+                       reference_map: str | Path | None = None, limits: LimitSpec | None = None,
+                       sensor: SensorSpec | None = None) -> Fleet:
     """Add a vehicle on its own controller to a fleet file (:mod:`ilcdob.fleet`'s ``channel`` systems), creating
     the file if needed; validated, locked and written as :func:`add_system` does.
 
@@ -322,6 +334,8 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
         As :func:`add_system`.
     reference_map : str or pathlib.Path, optional
         The ``model.json`` of the reference map (reference -> position as the flight stack flies it).
+    limits, sensor : LimitSpec or SensorSpec, optional
+        As :func:`add_system`.
 
     Returns
     -------
@@ -349,7 +363,7 @@ def add_channel_system(path: str | Path, name: str, model: str | Path, channel: 
             table[key] = {MODEL_FILE_KEY: model_reference(file, path)}
     if dob is not None:
         table["dob"] = {"q_order": dob.q_order, "q_time_constant": dob.q_time_constant}
-    return _add_table(path, table, identified.sample_time, sample_time)
+    return _add_table(path, {**table, **_limit_tables(limits, sensor)}, identified.sample_time, sample_time)
 
 
 def _fleet_target(path: str | Path, name: object) -> Path:
@@ -376,6 +390,15 @@ def _add_table(path: Path, table: dict[str, Any], model_ts: float, sample_time: 
         raise
 
 
+def _warn_rates(path: Path, name: str, model_ts: float, fleet_ts: float) -> None:
+    """Warn where a model was identified at another sample time than the fleet flies."""
+    if abs(model_ts - fleet_ts) > 1e-9 * abs(fleet_ts):
+        warnings.warn(f"{path}: system {name!r}: its model was identified at a sample time of {model_ts:.6g} s, the "
+                      f"fleet flies at {fleet_ts:g} s; the model's continuous form is sampled at the fleet's rate, "
+                      "which holds where its log resolved the band the loop needs: if it did not, identify it from a "
+                      f"log at the fleet's rate (identify --resample {fleet_ts:g})", UserWarning, stacklevel=5)
+
+
 def _append(path: Path, name: str, block: str, model_ts: float, sample_time: float | None) -> Fleet:
     """Append ``block`` to the fleet file (created when missing), validated, written atomically."""
     if path.exists():
@@ -389,16 +412,13 @@ def _append(path: Path, name: str, block: str, model_ts: float, sample_time: flo
         if sample_time is not None and file_ts != sample_time:
             raise FleetError(f"{path}: `sample_time`: got {sample_time!r}, but the fleet's sample_time is "
                              f"{file_ts!r} s; a system is added at the fleet's sample time (omit it)")
-        if isinstance(file_ts, (int, float)) and abs(model_ts - file_ts) > 1e-9 * abs(file_ts):
-            warnings.warn(f"{path}: system {name!r}: its model was identified at a sample time of {model_ts:.6g} s, "
-                          f"the fleet flies at {file_ts:g} s; the model's continuous form is sampled at the fleet's "
-                          f"rate, which holds where its log resolved the band the loop needs: if it did not, identify "
-                          f"it from a log at the fleet's rate (identify --resample {file_ts:g})", UserWarning,
-                          stacklevel=4)
+        if isinstance(file_ts, (int, float)):
+            _warn_rates(path, name, model_ts, file_ts)
         new_text = text + ("" if text.endswith("\n") or not text else "\n") + "\n" + block
     else:
         # a sample time measured from time stamps carries float roundoff (0.019999999999999997)
         ts = float(f"{model_ts:.12g}") if sample_time is None else sample_time
+        _warn_rates(path, name, model_ts, ts)
         new_text = (f"# Fleet file (schema: ilcdob.fleet); systems added with `ilcdob fleet add`\n"
                     f"sample_time = {toml_value(float(ts))}   # s\n\n" + block)
     data = parse_toml(new_text, path, "fleet file", error=FleetError,

@@ -413,3 +413,23 @@ def test_a_model_at_another_rate_is_named_and_an_unstable_loop_names_its_sample_
         ilcdob.add_system(fleet_path, "UAV4", model, ilcdob.PIDSpec(1.2, 0.12, 1.53, 0.05), ilcdob.DOBSpec(3, 0.15))
     with pytest.raises(ilcdob.errors.FleetError, match=r"unstable at the sample time 0.02 s.*check the sample time"):
         ilcdob.add_system(fleet_path, "UAV5", model, ilcdob.PIDSpec(300.0, 0.12, 1.53, 0.05), ilcdob.DOBSpec(3, 0.15))
+
+
+def test_fleet_add_states_the_vehicles_limit_and_sensor(tmp_path, capsys):
+    """``fleet add --tilt/--thrust-to-weight/--acceleration-limit --sensor-noise`` write the system's ``limits`` and
+    ``sensor`` tables, which the fleet then checks learning signals against (g tan 30 deg = 5.66 m/s^2); an
+    invalid one is refused with nothing written."""
+    model = str(_write_model(tmp_path / "uav4.json", ts=0.02))
+    fleet_path = tmp_path / "fleet.toml"
+    assert _add(fleet_path, "UAV4", model, "--tilt", "30", "--sensor-noise", "0.0005") == 0
+    assert _add(fleet_path, "UAV5", model, "--acceleration-limit", "4.5") == 0
+    a, b = ilcdob.load_fleet(fleet_path).systems
+    assert a.limits == ilcdob.LimitSpec(tilt=30.0) and a.sensor == ilcdob.SensorSpec(0.0005)
+    assert a.limits.max_acceleration == pytest.approx(9.80665 * np.tan(np.radians(30.0)))
+    assert b.limits == ilcdob.LimitSpec(acceleration=4.5) and b.sensor is None
+    before = fleet_path.read_bytes()
+    capsys.readouterr()
+    assert _add(fleet_path, "UAV6", model, "--tilt", "95") == 2
+    err = capsys.readouterr().err
+    assert "system 'UAV6'" in err and "limits.tilt" in err and "95" in err and "nothing written" in err
+    assert fleet_path.read_bytes() == before

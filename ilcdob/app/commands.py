@@ -1787,7 +1787,8 @@ def campaign_to_folder(out: str | Path, options: Any, *, fleet: str | Path | Non
 def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controller: Any, dob: Any,
                  sample_time: float | None = None, channel: str | None = None,
                  channel_gain: float | dict[str, Any] | None = None,
-                 airframe: str | Path | None = None, reference_map: str | Path | None = None) -> Fleet:
+                 airframe: str | Path | None = None, reference_map: str | Path | None = None,
+                 limits: Any = None, sensor: Any = None) -> Fleet:
     """Add a system flying an identified ``model.json`` to a fleet file (created if needed): ilcdob's PID + DOB
     loop, or with ``channel`` a vehicle on its own controller (:func:`ilcdob.fleet_io.add_channel_system`).
 
@@ -1814,6 +1815,10 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
         With ``channel``: the airframe's ``model.json``.
     reference_map : str or Path, optional
         With ``channel``: the reference map's ``model.json`` (reference -> position).
+    limits : ilcdob.specs.LimitSpec, optional
+        The vehicle's acceleration limit.
+    sensor : ilcdob.specs.SensorSpec, optional
+        Its position sensor's noise.
 
     Returns
     -------
@@ -1826,8 +1831,9 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
     check_output_path(fleet_file, folder=False, inputs=inputs, option="FLEET.toml")
     if channel is not None:
         return add_channel_system(fleet_file, name, model, channel, channel_gain=channel_gain, airframe=airframe,
-                                  dob=dob, sample_time=sample_time, reference_map=reference_map)
-    return add_system(fleet_file, name, model, controller, dob, sample_time=sample_time)
+                                  dob=dob, sample_time=sample_time, reference_map=reference_map, limits=limits,
+                                  sensor=sensor)
+    return add_system(fleet_file, name, model, controller, dob, sample_time=sample_time, limits=limits, sensor=sensor)
 
 
 def report_to_html(dirs: Sequence[str | Path], out: str | Path) -> Path:

@@ -406,6 +406,21 @@ def _identify_fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int
     return 0
 
 
+def _limit_specs(a: argparse.Namespace, path: object) -> tuple[Any, Any]:
+    """``fleet add``'s --tilt / --thrust-to-weight / --acceleration-limit and --sensor-noise as specs (None: not
+    given)."""
+    from ilcdob.specs import LimitSpec, SensorSpec
+
+    given = {"tilt": a.tilt, "thrust_to_weight": a.thrust_to_weight, "acceleration": a.acceleration_limit}
+    try:
+        limits = LimitSpec(**given) if any(v is not None for v in given.values()) else None
+        sensor = None if a.sensor_noise is None else SensorSpec(a.sensor_noise)
+    except SpecError as exc:
+        raise SpecError(f"{path}: system {a.name!r} (--tilt/--thrust-to-weight/--acceleration-limit, "
+                        f"--sensor-noise): {exc}; nothing written") from exc
+    return limits, sensor
+
+
 def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     from pathlib import Path
 
@@ -414,7 +429,7 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
     path = Path(a.fleet_file)
     created = not path.exists()
-    model_ts = load_model(a.model).sample_time
+    load_model(a.model)  # an unreadable model is refused before the options are checked
     pid = {"--kp": a.kp, "--ki": a.ki, "--kd": a.kd, "--derivative-filter": a.derivative_filter}
     own = {"--channel-gain": a.channel_gain, "--cascade-gains": a.cascade_gains,
            "--cascade-gains-from": a.cascade_gains_from, "--airframe": a.airframe, "--reference-map": a.reference_map}
@@ -451,18 +466,17 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     except SpecError as exc:
         raise SpecError(f"{path}: system {a.name!r} (--kp/--ki/--kd/--derivative-filter, --q-order/"
                         f"--q-time-constant): {exc}; nothing written") from exc
+    limits, sensor = _limit_specs(a, path)
     if a.channel is not None:
         fleet = uc.add_to_fleet(path, a.name, a.model, None, dob, sample_time=a.sample_time, channel=a.channel,
                                 channel_gain=_given(cascade, a.channel_gain), airframe=a.airframe,
-                                reference_map=a.reference_map)
+                                reference_map=a.reference_map, limits=limits, sensor=sensor)
     else:
-        fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time)
+        fleet = uc.add_to_fleet(path, a.name, a.model, controller, dob, sample_time=a.sample_time, limits=limits,
+                                sensor=sensor)
     if created:
         origin = "--sample-time" if a.sample_time is not None else f"the sample_time of {a.model}"
         con.note(f"created {path} with sample time {fleet.sample_time:g} s (from {origin})")
-    if model_ts != fleet.sample_time:
-        con.note(f"note: {a.model} was identified from data sampled at {model_ts:g} s; the fleet runs at "
-                 f"{fleet.sample_time:g} s (the continuous-time model is discretised at the fleet's)")
     con.note(f"added {a.name} to {path}: systems {fleet.names}")
     return 0
 

@@ -607,7 +607,15 @@ _FLEET_ADD = Command(
         flag("--reference-map", help="with --channel: model.json of the reference map, reference -> position as "
                                      "the flight stack flies it (the exact-reference law; default on the position "
                                      "channel: the channel map)"),
-        flag("--sample-time", type=float, help="new file: sample time, s (default: model's)")),
+        flag("--sample-time", type=float, help="new file: sample time, s (default: model's)"),
+        flag("--tilt", type=float, help="the vehicle's tilt limit, deg: its acceleration limit g tan(tilt), which a "
+                                        "learning signal is checked against (or --thrust-to-weight, "
+                                        "--acceleration-limit; default: none)"),
+        flag("--thrust-to-weight", type=float, help="the vehicle's thrust-to-weight ratio (> 1): its acceleration "
+                                                    "limit g sqrt(ratio^2 - 1)"),
+        flag("--acceleration-limit", type=float, help="the vehicle's horizontal acceleration limit, m/s^2"),
+        flag("--sensor-noise", type=float, help="white noise of its position sensor (1 sigma), m: sets the learning "
+                                                "band without a trial (default: none)")),
     describe=False)
 
 #: Every command, in the order ``ilcdob --help`` lists them (a nested one after its parent).
