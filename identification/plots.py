@@ -107,6 +107,18 @@ def phase_deg(est: TFEstimate, w: np.ndarray) -> np.ndarray:
     continuous in ``w``; an unwrapped ``angle`` of the product instead starts wherever the first sample's
     principal value lies (``10 / (s^2 (s + 10))`` would read +180 deg falling to +90 deg, not -180 to -270).
     A negative gain counts -180 deg.
+
+    Parameters
+    ----------
+    est : TFEstimate
+        The model (``num``, ``den``, ``delay``).
+    w : numpy.ndarray
+        Frequencies, rad/s.
+
+    Returns
+    -------
+    numpy.ndarray
+        The phase at each frequency, deg.
     """
     w = np.asarray(w, float)
     jw = 1j * w[:, None]

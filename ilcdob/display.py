@@ -70,6 +70,12 @@ def polynomial_text(c: Sequence[float], digits: int = 5) -> str:
 
 def time_text(t: float) -> str:
     """A time stamp, s, to the microsecond and no further (``20.3218``, ``1710773350.123456``): what a message
-    prints can be typed back as ``--start``/``--stop`` (a log's epoch clock shown as ``1.71077e+09`` cannot)."""
+    prints can be typed back as ``--start``/``--stop`` (a log's epoch clock shown as ``1.71077e+09`` cannot).
+
+    Parameters
+    ----------
+    t : float
+        The time, s.
+    """
     text = f"{float(t):.6f}".rstrip("0").rstrip(".")
     return "0" if text in ("", "-0") else text

@@ -1196,14 +1196,14 @@ def design_readme(filters: dict[str, Any], files: Sequence[str], code: CCode | N
 def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: str | None = None,
                  float_variant: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """The files of a design folder: ``filters.json``, ``filters.h``/``filters.c`` (when the design
-    has L1/L2 or law maps), ``filters.mat`` (L1/L2: :func:`~.objects.design_to_mat`) and ``README.md``.
+    has L1/L2 or law maps) and ``README.md``.
 
     Parameters
     ----------
     filters : dict
         ``filters.json`` content; not modified.
     others : sequence of str
-        Other files of the folder (``lifted.npz``, ``learning_signal.csv``), for the README.
+        Other files of the folder (``filters.mat``, ``lifted.npz``, ``learning_signal.csv``), for the README.
     prefix : str, optional
         C symbol prefix (default :func:`default_c_prefix`).
     float_variant : bool
@@ -1212,7 +1212,7 @@ def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: st
     Returns
     -------
     tuple of (dict, dict)
-        The content map (file name -> text, JSON document or a writer of the file), and the ``filters.json``
+        The content map (file name -> text or JSON document), and the ``filters.json``
         content: ``filters`` plus, with C code, key ``c`` (:attr:`CCode.info`).
     """
     data = dict(filters)
@@ -1222,10 +1222,6 @@ def design_files(filters: dict[str, Any], others: Sequence[str] = (), prefix: st
         code = c_code(filters, prefix, float_variant)
         data["c"] = code.info
         files = {"filters.h": code.header, "filters.c": code.source}
-    if all(k in filters for k in FILTER_KEYS):
-        from .objects import design_to_mat  # objects reads filters through this module
-
-        files["filters.mat"] = lambda path: design_to_mat(data, path, "filters.json")
     names = ["filters.json", *files, *others, "README.md"]
     files["README.md"] = design_readme(data, names, code)
     files["filters.json"] = data

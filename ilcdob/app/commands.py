@@ -896,6 +896,10 @@ fir_unattainable, lifted
         if entry is not None:
             filters["whole_trial"] = entry
     others = _design_outputs(design, data, filters, flt, source, target, options)
+    if "L1" in filters and "L2" in filters:
+        from ilcdob.design.export.objects import design_to_mat
+
+        others = {"filters.mat": lambda path: design_to_mat(filters, path, "filters.json"), **others}
     files, written = design_files(filters, list(others), prefix=options.c_prefix, float_variant=options.c_float)
     output.write(others, files, digest=digest, law=options.law)
     return design, written

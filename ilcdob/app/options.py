@@ -358,13 +358,15 @@ def sample_time(text: str) -> float:
     return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a sample time, a number > 0 (s)")
 
 
+RESAMPLE = flag("--resample", type=sample_time, metavar="TS",
+                help="resample every file to this sample time, s, anti-aliased (scipy.signal.resample_poly), e.g. "
+                     "a log's rate to the fleet's (default: as logged)")
+
+
 def _clock(what: str) -> tuple[Flag, ...]:
     """--time, --time-unit, --start, --stop and --resample (``what``: what the start and end are of)."""
     return (TIME, TIME_UNIT, flag("--start", type=float, help=f"{what} start, s (log clock)"),
-            flag("--stop", type=float, help=f"{what} end, s (log clock)"),
-            flag("--resample", type=sample_time, metavar="TS",
-                 help="resample every file to this sample time, s, anti-aliased (scipy.signal.resample_poly), "
-                      "e.g. a log's rate to the fleet's (default: as logged)"))
+            flag("--stop", type=float, help=f"{what} end, s (log clock)"), RESAMPLE)
 
 
 # -- options several commands take ---------------------------------------------------------------------------------
