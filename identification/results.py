@@ -645,8 +645,8 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
                    "very slow mode), or the held-out data do not start at rest")
     for d in est.solver.get("gross_errors", []):
         if "held" in d:
-            out.append(_held_note(d, d["held"], est.ts, "were left out of the fit, the record cut there (keep them with "
-                                  "--keep-outliers, FitOptions(outlier_sigmas=None))"))
+            out.append(_held_note(d, d["held"], est.ts, "were left out of the fit, the record cut there (keep them "
+                                  "with --keep-outliers, FitOptions(outlier_sigmas=None))"))
             continue
         out.append(f"{d['samples']} samples of {d['source']} (samples {d['first']}-{d['last']}) lay far off the "
                    "model (gross errors: a glitch or corrupt samples in the log) and were left out of the fit, the "

@@ -60,8 +60,8 @@ from ilcdob.errors import IlcdobError, SignalError, SpecError
 from ilcdob.signals import FlightData
 from ilcdob.uncertainty import ModelStructure
 
-from .oe import Discretisation, allpole_sos, delay_split, delayed_input, discretise, response, zoh_inputs
 from .held import held_runs, held_segments
+from .oe import Discretisation, allpole_sos, delay_split, delayed_input, discretise, response, zoh_inputs
 from .results import TFEstimate, trend_basis
 from .srivc import srivc
 
@@ -1172,8 +1172,8 @@ def _delay_sweep(structure: ModelStructure, exps: list[_Exp], ts: float, opts: F
                  deadline: float, say: Progress, refine: bool = True) -> list[_Point]:
     """The criterion minimised over the model at each delay of a grid on ``[0, max_delay]``,
     each point a short LM warm-started from its neighbour's solution (never a fit from
-    scratch per point; none where the warm start lies :data:`HOPELESS_DELAY` times above the best so far), then (``refine``) coarse to fine around the best minimum: the delays half a step to
-    either side, the step halved until it is one sample. Returns the points at the local minima (the best one
+    scratch per point; none where the warm start lies :data:`HOPELESS_DELAY` times above the best so far),
+    then (``refine``) coarse to fine around the best minimum: the delays half a step to either side, the step halved until it is one sample. Returns the points at the local minima (the best one
     refined), best first, with the delay as their last parameter (docs/identification.md, "The search")."""
     fixed = _Model(structure, exps, ts, opts, estimate_delay=False)
     count = int(np.clip(round(opts.max_delay / ts) + 1, 2, DELAY_SWEEP_POINTS))
@@ -1693,16 +1693,16 @@ def _refit_without_held_inputs(model: _Model, best: _LMResult, delay0: float, de
                          [e.source for e in model.exps], model.ts)
     pieces, left = [], []
     for e in model.exps:
-        bad = np.zeros(e.n, bool)
-        for d in (d for d in held if d["source"] == e.source):
-            bad[d["first"]:d["last"] + 1] = True
-        if not bad.any():
+        runs_of = [d for d in held if d["source"] == e.source]
+        if not runs_of:
             pieces.append(e)
             continue
+        bad = np.zeros(e.n, bool)
+        for d in runs_of:
+            bad[d["first"]:d["last"] + 1] = True
         kept, record = _cut(model, e, bad)
         pieces += kept
-        left.append({**record, "held": next({"value": d["value"], "extreme": d["extreme"]}
-                                            for d in held if d["source"] == e.source)})
+        left.append({**record, "held": {"value": runs_of[0]["value"], "extreme": runs_of[0]["extreme"]}})
     if not left or not pieces:
         return model, best, []
     cut = _Model(model.s, pieces, model.ts, model.opts, model.estimate_delay)
@@ -1825,8 +1825,9 @@ def _result(model: _Model, best: _LMResult, input: str, output: str, validation:
     TFEstimate
         With ``solver``: engine, status, iterations, starts, then ``ranking``, ``max_delay``
         (delay estimated), ``delay_lower_bound_gain`` (:func:`_delay_pull`), ``gross_errors`` (with ``held``
-        where a held input explains them), ``startup_transients`` and ``held_inputs`` (:func:`.held.held_segments`:
-        a landed or saturated segment left in the fit) where they apply, and ``seconds``, the wall time since ``t_start``.
+        where a held input explains them), ``startup_transients`` and ``held_inputs``
+        (:func:`.held.held_segments`: a landed or saturated segment left in the fit) where they apply, and
+        ``seconds``, the wall time since ``t_start``.
 
     Raises
     ------

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_path
-from .display import time_text
+from .display import html_table, time_text
 from .errors import SignalError, SpecError
 from .names import csv_field
 
@@ -378,8 +378,6 @@ class FlightData:
                 f"{len(names)} signal{'s' if len(names) != 1 else ''}: {', '.join(shown) or 'none'}{more}>")
 
     def _repr_html_(self) -> str:
-        from .display import html_table
-
         rows = [[n, self.units.get(n) or "?", float(np.min(x)), float(np.max(x)), float(np.mean(x))]
                 for n, x in self.signals.items()]
         return html_table(f"{self.source}: {len(self)} samples, Ts {self.ts:g} s, t {self.t[0]:g} to {self.t[-1]:g} s",

@@ -40,12 +40,12 @@ GRAVITY = 9.80665
 COVARIANCE_RTOL = 1e-6
 
 
-
 def _is_lti(value: Any) -> bool:
     """Whether ``value`` is a python-control system; python-control is not imported for the question (an LTI
     object exists only once its caller has imported it)."""
     ct = _modules.get("control")
     return ct is not None and isinstance(value, ct.LTI)
+
 
 def _real(name: str, value: object) -> float:
     """``value`` as a float; SpecError naming ``name`` for text, booleans and other non-numbers."""

@@ -3,8 +3,8 @@ compare axis, and a legend that says how wide the uncertainty band is.
 
 The truth of the phase is written here from the factors: ``10.43 / (s^2 (s + 10.03))`` has
 ``arg G(jw) = -180 deg - atan(w / 10.03)`` (from -180 to -270 deg); with a right-half-plane zero,
-``(1 - s/4.5) / (s^2 (0.1 s + 1))`` (here ``10 (1 - 0.2222 s) / (s^2 (s + 10))``) has ``-180 - atan(w / 4.5) - atan(0.1 w)`` (to -360 deg); a delay adds
-``-w tau``.
+``(1 - s/4.5) / (s^2 (0.1 s + 1))`` (written ``10 (1 - 0.2222 s) / (s^2 (s + 10))``) has
+``-180 - atan(w / 4.5) - atan(0.1 w)`` (to -360 deg); a delay adds ``-w tau``.
 """
 
 from __future__ import annotations

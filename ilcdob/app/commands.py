@@ -1453,8 +1453,8 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
         raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)}")
     flt, digest = fleet_and_hash(fleet, axis or "x")
     if abs(data.ts - flt.sample_time) > 1e-9:
-        raise SignalError(f"{trial}: sample time {data.ts:g} s differs from the fleet's {flt.sample_time:g} s; resample "
-                          f"the trial to the fleet's rate (--resample {flt.sample_time:g})")
+        raise SignalError(f"{trial}: sample time {data.ts:g} s differs from the fleet's {flt.sample_time:g} s; "
+                          f"resample the trial to the fleet's rate (--resample {flt.sample_time:g})")
     chosen = method_named(method, "--method")
     if fir_unattainable is not None:
         chosen = chosen.configured(MethodSettings(fir=FIROptions(unattainable=fir_unattainable)))
