@@ -413,7 +413,7 @@ class FlightData:
         Returns
         -------
         FlightData
-            ``metadata["resampled"]`` records ``from_ts``, ``to_ts``, ``up``, ``down`` and the method; ``self``
+            ``metadata["rate_change"]`` records ``from_ts``, ``to_ts``, ``up``, ``down`` and the method; ``self``
             itself where ``ts`` equals its sample time.
 
         Raises
@@ -437,7 +437,7 @@ class FlightData:
         up, down = ratio.numerator, ratio.denominator
         signals = {n: resample_poly(x, up, down, padtype="line") for n, x in self.signals.items()}
         n = len(next(iter(signals.values())))
-        meta = {**self.metadata, "resampled": {"from_ts": self.ts, "to_ts": float(ts), "up": up, "down": down,
+        meta = {**self.metadata, "rate_change": {"from_ts": self.ts, "to_ts": float(ts), "up": up, "down": down,
                                                "method": "scipy.signal.resample_poly, padtype line"}}
         return FlightData(self.t[0] + np.arange(n) * ts, signals, dict(self.units), meta, self.source)
 

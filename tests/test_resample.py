@@ -28,7 +28,7 @@ def test_resampling_removes_what_lies_above_the_new_nyquist():
     fd, _ = _record()
     r = fd.resampled(0.02)
     slow = np.sin(2 * np.pi * 0.5 * r.t)
-    assert r.ts == pytest.approx(0.02) and len(r) == 500 and r.metadata["resampled"]["down"] == 5
+    assert r.ts == pytest.approx(0.02) and len(r) == 500 and r.metadata["rate_change"]["down"] == 5
     # measured: 3.2e-3 from the fifth sample in (the Kaiser FIR's ripple); 0.14 on the first sample, where the line
     # continuing the record carries the 100 Hz part's 0.25 (no filter knows a signal before its first sample)
     assert np.max(np.abs(r["x"] - slow)[5:-5]) < 5e-3 and np.max(np.abs(r["x"] - slow)) < 0.3
@@ -39,7 +39,7 @@ def test_resampling_removes_what_lies_above_the_new_nyquist():
 def test_rational_and_unusable_ratios():
     fd, _ = _record()
     up = fd.resampled(0.006)  # 2 / 3
-    assert (up.metadata["resampled"]["up"], up.metadata["resampled"]["down"]) == (2, 3)
+    assert (up.metadata["rate_change"]["up"], up.metadata["rate_change"]["down"]) == (2, 3)
     assert fd.resampled(0.004) is fd
     with pytest.raises(SpecError, match=r"`--resample`: .*no ratio of integers"):
         fd.resampled(0.004 * 1.0001234567)  # 1 / 1.0001234567: no fraction of denominators <= 1000 within 1e-6

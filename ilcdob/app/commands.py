@@ -507,7 +507,7 @@ class LogClock:
         Segment of the log, s on its clock.
     resample : float or None
         Sample time every file is resampled to, s (:meth:`ilcdob.signals.FlightData.resampled`: anti-aliased,
-        recorded in ``metadata["resampled"]``); None: as logged.
+        recorded in ``metadata["rate_change"]``); None: as logged.
     """
 
     time: str | None = None

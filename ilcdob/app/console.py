@@ -219,7 +219,8 @@ def _identify(a: argparse.Namespace, argv: list[str], con: Console) -> int:
         est, est_data, val_data = uc.identify_to_json(a.files, inputs, structure, options, a.out,
                                                       validate=a.validate, plot=a.plot, progress=con.progress,
                                                       argv=argv, zero_at_origin=a.zero_at_origin)
-    steps = sorted({fd.metadata["resampled"]["from_ts"] for fd in est_data + val_data if "resampled" in fd.metadata})
+    steps = sorted({fd.metadata["rate_change"]["from_ts"] for fd in est_data + val_data
+                    if "rate_change" in fd.metadata})
     if steps:
         con.note(f"--resample {a.resample:g} s: files logged every {', '.join(f'{v:g}' for v in steps)} s resampled "
                  "(scipy.signal.resample_poly: anti-aliased, each end continued by its trend)")
