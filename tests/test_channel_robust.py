@@ -74,6 +74,7 @@ def test_robust_refuses_a_mixed_pair_and_a_vehicle_without_an_uncertainty_set():
         design_pair(flt, "a", "c", "fir")
 
 
+@pytest.mark.slow  # 11 s (-m slow); robust-set's whole trials of the stated set run by default in test_whole_trial
 def test_robust_set_guarantees_the_disc_on_whole_trials(tmp_path):
     """`ilcdob design --method robust-set --bound 0.3` between the two vehicles: over the disc ``|Delta| <= W``, the
     continuous ``|Delta(jw)| <= 0.3`` on the sampled map (``W`` from the aliases' sum, tests/lti_truth.py), the

@@ -186,6 +186,7 @@ def test_reproduce_rejects_bad_arguments():
         reproduce_nonlinear(fleet="fleet.toml")
 
 
+@pytest.mark.slow  # 8 s (-m slow); the nonlinear reproduction's acceptance runs by default in this module
 def test_cli_reproduce_nonlinear_writes_the_schema(tmp_path):
     out = tmp_path / "nl"
     assert main(["reproduce", "--plant", "nonlinear", "--scenarios", "3", "--iterations", "1", "--no-figures",
