@@ -376,3 +376,19 @@ def test_learn_accepts_a_jittered_but_complete_trial(fleet, tmp_path):
     got, want = (np.fromfile(tmp_path / d / "learning_signal.bin", dtype="<f8") for d in ("l", "whole"))
     assert got.size == want.size == 500
     assert np.sqrt(np.mean((got - want) ** 2)) < 0.1 * np.sqrt(np.mean(want ** 2))
+
+
+def test_design_and_learn_print_what_they_wrote_as_indented_json(fleet, tmp_path, capsys):
+    """stdout is a JSON summary a reader can scan (one key per line) and a script can parse: the pair, the
+    method, the band; learn's names its files."""
+    assert main(["--quiet", "design", "--from", "UAV1", "--to", "UAV2", "--out", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    summary = json.loads(out)
+    assert out.count("\n") > 10 and '\n  "method": "closed-form",\n' in out
+    assert (summary["from"], summary["to"]) == ("UAV1", "UAV2") and set(summary["band"]) >= {"cutoff_rad_s", "reason"}
+    trial = tmp_path / "trial.csv"
+    _trial(fleet, trial, n=500)
+    assert main(["--quiet", "learn", str(trial), "--from", "UAV1", "--to", "UAV2", "--error", "error", "--learning",
+                 "learning", "--out", str(tmp_path / "l")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") > 5 and json.loads(out)["learning_signal"]

@@ -271,7 +271,7 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                if k not in ("L1", "L2", "band", "disturbance", "closed_form", "law_maps", "F")}
     summary["band"] = {k: written["band"][k] for k in ("cutoff_rad_s", "source", "reason")}
     summary["disturbance"] = written["disturbance"]["at"]
-    print(json.dumps(summary))
+    print(json.dumps(summary, indent=2))  # what was written, for a reader and for a script (json.loads)
     con.note(f"wrote {a.out}")
     short = uc.design_shortfalls(written)
     if short:
@@ -286,7 +286,8 @@ def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
                                     design=a.design, method=a.method, bandwidth=a.bandwidth, on_limit=a.on_limit,
                                     overwrite=a.overwrite, argv=argv, axis=a.axis,
                                     fir_unattainable=a.fir_unattainable)
-    print(json.dumps({k: summary[k] for k in ("from", "to", "axis", "filters", "trial", "learning_signal", "limit")}))
+    print(json.dumps({k: summary[k] for k in ("from", "to", "axis", "filters", "trial", "learning_signal", "limit")},
+                     indent=2))
     con.note(f"wrote {a.out}")
     return 0
 
