@@ -392,3 +392,10 @@ def test_design_and_learn_print_what_they_wrote_as_indented_json(fleet, tmp_path
                  "learning", "--out", str(tmp_path / "l")]) == 0
     out = capsys.readouterr().out
     assert out.count("\n") > 5 and json.loads(out)["learning_signal"]
+
+
+def test_design_reports_its_steps(tmp_path, capsys):
+    """A design takes seconds (whole trials, the figure, the C code): stderr says what it is doing."""
+    assert main(["design", "--from", "UAV1", "--to", "UAV2", "--out", str(tmp_path / "d")]) == 0
+    err = capsys.readouterr().err
+    assert "[0/4] designing UAV1 -> UAV2 (closed-form)" in err and f"[4/4] wrote {tmp_path / 'd'}" in err, err

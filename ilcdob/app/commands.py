@@ -838,7 +838,8 @@ def design_to_folder(out: str | Path, source: str, target: str, *, fleet: str | 
                      trial: str | Path | None = None, c_prefix: str | None = None, c_float: bool = False,
                      bandwidth: object = "auto", disturbance: str = "command", on_limit: str = "clip",
                      overwrite: bool = False, argv: Sequence[str] | None = None, axis: str = "x",
-                     fir_unattainable: str | None = None, lifted: bool = False) -> tuple[Any, dict[str, Any]]:
+                     fir_unattainable: str | None = None, lifted: bool = False,
+                     progress: Progress | None = None) -> tuple[Any, dict[str, Any]]:
     """Design the learning filters of ``target`` from ``source`` and write the design folder.
 
     Written, as a unit: ``filters.json``, the C code (``filters.h``/``.c``,
@@ -861,6 +862,9 @@ fir_unattainable, lifted
         Replace a non-empty folder that ilcdob did not write.
     argv : sequence of str, optional
         Command line, recorded in ``manifest.json``.
+    progress : callable, optional
+        ``progress(done, total, what)`` at each of the four steps (the design, its whole trials, the figures and
+        code, the folder written).
 
     Returns
     -------
@@ -886,22 +890,24 @@ fir_unattainable, lifted
     chosen, options = _checked_design_options(options)
     output = _Output("design", out, overwrite, argv)
     flt, digest = output.check_and_load(fleet, options.axis, {"--trial": options.trial})
+    say = progress or (lambda *_: None)
     data = _design_trial(options, chosen, flt)
+    say(0, 4, f"designing {source} -> {target} ({chosen.name})")
     design = _pair_design(flt, source, target, chosen, options, data)
     filters = {**design.filters, "axis": options.axis}
+    say(1, 4, "flying whole trials of the stated set")
     if chosen.name in _WHOLE_TRIAL_METHODS and options.law == "paper" and options.disturbance == "command":
         from ilcdob.design.checks.whole_trial import pair_whole_trial
 
         entry = pair_whole_trial(flt, design, source, target)
         if entry is not None:
             filters["whole_trial"] = entry
+    say(2, 4, "drawing the Bode figure, writing the C code")
     others = _design_outputs(design, data, filters, flt, source, target, options)
-    if "L1" in filters and "L2" in filters:
-        from ilcdob.design.export.objects import design_to_mat
-
-        others = {"filters.mat": lambda path: design_to_mat(filters, path, "filters.json"), **others}
     files, written = design_files(filters, list(others), prefix=options.c_prefix, float_variant=options.c_float)
+    say(3, 4, f"writing {out}")
     output.write(others, files, digest=digest, law=options.law)
+    say(4, 4, f"wrote {out}")
     return design, written
 
 
@@ -1058,7 +1064,7 @@ def _pair_design(flt: Fleet, source: str, target: str, chosen: Any, o: DesignOpt
 def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet, source: str, target: str,
                     o: DesignOptions) -> dict[str, Any]:
     """The design folder's files besides filters.json, C code and README.md: lifted.npz, learning_signal.csv,
-    reference_terms.csv and bode.png, as the design has them. With a trial (``data``), also sets
+    reference_terms.csv, bode.png and filters.mat, as the design has them. With a trial (``data``), also sets
     ``filters["trial"]``, the learning signal's summary (:func:`_learn_from_trial`)."""
     from ilcdob.design.checks.figure import pair_bode_figure
     from ilcdob.signals import FlightData
@@ -1080,6 +1086,10 @@ def _design_outputs(design: Any, data: Any, filters: dict[str, Any], flt: Fleet,
             {"e_ref_source": "m", "correction": design.reference.unit},
             source=f"reference terms of {source} -> {target} for {o.trial}").to_csv
     others["bode.png"] = pair_bode_figure(flt, source, target, design.band, o.method)
+    if "L1" in filters and "L2" in filters:
+        from ilcdob.design.export.objects import design_to_mat
+
+        others["filters.mat"] = lambda path: design_to_mat(filters, path, "filters.json")
     return others
 
 

@@ -263,7 +263,7 @@ def _design(a: argparse.Namespace, argv: list[str], con: Console) -> int:
         a.out, a.source, a.target, fleet=a.fleet, method=a.method, rho=a.rho, samples=a.samples, bound=a.bound,
         n=a.n, law=a.law, trial=a.trial, c_prefix=a.c_prefix, c_float=a.c_float, bandwidth=a.bandwidth,
         disturbance=a.disturbance, on_limit=a.on_limit, overwrite=a.overwrite, argv=argv, axis=a.axis,
-        fir_unattainable=a.fir_unattainable, lifted=a.lifted)
+        fir_unattainable=a.fir_unattainable, lifted=a.lifted, progress=con.progress)
     band = written.get("band", {})
     cutoff = band.get("cutoff_rad_s")
     con.note(f"ilcdob: learning band {'off' if cutoff is None else f'{cutoff:.4g} rad/s'} ({band.get('reason', '')})")
