@@ -399,3 +399,12 @@ def test_design_reports_its_steps(tmp_path, capsys):
     assert main(["design", "--from", "UAV1", "--to", "UAV2", "--out", str(tmp_path / "d")]) == 0
     err = capsys.readouterr().err
     assert "[0/4] designing UAV1 -> UAV2 (closed-form)" in err and f"[4/4] wrote {tmp_path / 'd'}" in err, err
+
+
+def test_learn_reports_its_steps(fleet, tmp_path, capsys):
+    trial = tmp_path / "trial.csv"
+    _trial(fleet, trial, n=500)
+    assert main(["learn", str(trial), "--from", "UAV1", "--to", "UAV2", "--error", "error", "--learning", "learning",
+                 "--out", str(tmp_path / "l")]) == 0
+    err = capsys.readouterr().err
+    assert "[0/2] the filters: designed from the fleet" in err and f"[2/2] wrote {tmp_path / 'l'}" in err, err

@@ -1315,7 +1315,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                     target: str | None = None, fleet: str | Path | None = None, design: str | Path | None = None,
                     method: str = "closed-form", bandwidth: object = "auto", on_limit: str = "clip",
                     overwrite: bool = False, argv: Sequence[str] | None = None,
-                    axis: str | None = None, fir_unattainable: str | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+                    axis: str | None = None, fir_unattainable: str | None = None,
+                    progress: Progress | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """The next vehicle's learning signal from a recorded trial of the previous one (the paper's law).
 
     Computed from the filters' coefficients exactly as the emitted C function ``<prefix>learn``
@@ -1362,16 +1363,20 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     fir_unattainable : {"no-harm", "refuse"}, optional
         ``method="fir"`` without ``design``: :attr:`ilcdob.design.methods.fir.FIROptions.unattainable` (refused with
         ``design`` or another method).
+    progress : callable, optional
+        ``progress(done, total, what)`` at each step (the filters, the signal, the folder written).
 
     Returns
     -------
     (numpy.ndarray, dict)
         The learning signal (m/s^2) and the ``learning.json`` content.
     """
+    say = progress or (lambda *_: None)
     output = _Output("learn", out, overwrite, argv)
     output.check({"trial": trial, "--fleet": fleet, "--design": design})
     data, e, df_prev = columns.load(trial)
     digest = None
+    say(0, 2, f"the filters: {'from ' + str(design) if design is not None else 'designed from the fleet'}")
     if design is not None:
         _refuse_with_design(fleet=fleet, method=method, bandwidth=bandwidth, fir_unattainable=fir_unattainable)
         filters, source, target, origin = _filters_of_folder(design, source, target, axis)
@@ -1379,10 +1384,12 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
         filters, origin, digest = _filters_designed_here(
             trial, data, e, df_prev, source=source, target=target, fleet=fleet, axis=axis, method=method,
             bandwidth=bandwidth, on_limit=on_limit, fir_unattainable=fir_unattainable)
+    say(1, 2, f"the learning signal of {target} from {source}'s trial ({len(data)} samples)")
     d_f, report = _learning_signal(filters, origin, trial, data, e, df_prev, on_limit,
                                    f"learning signal of {target} from {source}")
     files, summary = _learning_files(filters, origin, source, target, trial, columns, data, d_f, report)
     output.write(files, digest=digest, law="paper")
+    say(2, 2, f"wrote {out}")
     return d_f, summary
 
 
