@@ -408,3 +408,9 @@ def test_learn_reports_its_steps(fleet, tmp_path, capsys):
                  "--out", str(tmp_path / "l")]) == 0
     err = capsys.readouterr().err
     assert "[0/2] the filters: designed from the fleet" in err and f"[2/2] wrote {tmp_path / 'l'}" in err, err
+
+
+def test_check_reports_its_steps(capsys):
+    assert main(["check"]) == 0
+    err = capsys.readouterr().err
+    assert "[0/2] the Delta sets and learning bands of 3 pair(s)" in err and "[2/2] checked" in err, err

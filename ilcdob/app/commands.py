@@ -1555,7 +1555,7 @@ def _learning_files(filters: dict[str, Any], origin: str, source: Any, target: A
 
 def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, order: Sequence[str] | None = None,
                   bound: float | None = None, scale: float = 1.0, samples: int = 8, bandwidth: object = "auto",
-                  argv: Sequence[str] | None = None, axis: str = "x") -> list[Any]:
+                  argv: Sequence[str] | None = None, axis: str = "x", progress: Progress | None = None) -> list[Any]:
     """Will learning help? Per pair and frequency the exact worst-case error ratio of the law as
     applied (closed-form filters with each pair's learning band) over the Delta set's disc, the
     ratio for a stated plant, and the paper's first-order condition (paper Sec. III), optionally
@@ -1583,6 +1583,8 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
         Command line, recorded in the file.
     axis : {"x", "y", "z"}
         The axis checked (the fleet file's section).
+    progress : callable, optional
+        ``progress(done, total, what)`` before the Delta sets and before the exact worst cases.
 
     Returns
     -------
@@ -1599,9 +1601,14 @@ def check_to_json(out: str | Path | None, *, fleet: str | Path | None = None, or
         flt.loop(name)  # unknown names: a clear error
     if set(order) & set(flt.own_controller):
         return _check_channel_fleet(out, flt, order, digest, bound=bound, scale=scale, bandwidth=bandwidth, argv=argv)
+    say = progress or (lambda *_: None)
+    pairs = learning_pairs(flt.names, order)
+    say(0, 2, f"the Delta sets and learning bands of {len(pairs)} pair(s)")
     deltas = fleet_delta_sets(flt, order, k=samples, bound=bound, scale=scale)
-    bands = {(s, t): pair_band(flt, s, t, bandwidth, deltas=deltas) for s, t in learning_pairs(flt.names, order)}
+    bands = {(s, t): pair_band(flt, s, t, bandwidth, deltas=deltas) for s, t in pairs}
+    say(1, 2, f"the exact worst case of {len(pairs)} pair(s) over their Delta sets")
     checks = theorem_check(flt, order, deltas, bands=bands)
+    say(2, 2, "checked")
     if out is not None:
         _write_check(out, order, all(c.holds_exact for c in checks), checks, argv, digest,
                      rule="improvement guaranteed for a pair when the exact worst case of |e_j / e'_j| over "

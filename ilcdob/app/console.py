@@ -300,7 +300,7 @@ def _check(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
     order = [s.strip() for s in a.order.split(",")] if a.order else None
     checks = uc.check_to_json(a.out, fleet=a.fleet, order=order, bound=a.bound, scale=_given(a.scale, 1.0),
-                              bandwidth=a.bandwidth, argv=argv, axis=a.axis)
+                              bandwidth=a.bandwidth, argv=argv, axis=a.axis, progress=con.progress)
     if checks and isinstance(checks[0], ChannelPairCheck):
         print(format_channel_table(checks))
         failing = [f"{c.source} -> {c.target} (exact worst ratio {c.worst_ratio:.4g} at {c.worst_w:.4g} rad/s)"
