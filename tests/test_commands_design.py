@@ -414,3 +414,26 @@ def test_check_reports_its_steps(capsys):
     assert main(["check"]) == 0
     err = capsys.readouterr().err
     assert "[0/2] the Delta sets and learning bands of 3 pair(s)" in err and "[2/2] checked" in err, err
+
+
+def test_learn_takes_the_disturbance_that_design_takes(fleet, tmp_path, capsys):
+    """``learn --disturbance airframe`` runs the law of ``design --trial --disturbance airframe`` (to 1e-9 of the
+    peak: the coefficients' route against the design's; the wind law needs drag poles the built-in models lack),
+    which differs from the law at the command; with ``--design`` the folder fixes it and the option is refused."""
+    trial = tmp_path / "trial.csv"
+    _trial(fleet, trial, n=500)
+    common = ["--from", "UAV1", "--to", "UAV2", "--quiet"]
+    assert main(["design", *common, "--trial", str(trial), "--disturbance", "airframe", "--out", str(tmp_path / "d")]) == 0
+    want = load_csv(tmp_path / "d" / "learning_signal.csv", {"d_f": "learning"})["d_f"]
+    learn = ["learn", str(trial), *common, "--error", "error", "--learning", "learning"]
+    assert main([*learn, "--disturbance", "airframe", "--out", str(tmp_path / "w")]) == 0
+    assert main([*learn, "--out", str(tmp_path / "c")]) == 0
+    airframe = np.fromfile(tmp_path / "w" / "learning_signal.bin", dtype="<f8")
+    command = np.fromfile(tmp_path / "c" / "learning_signal.bin", dtype="<f8")
+    np.testing.assert_allclose(airframe, want, rtol=0, atol=1e-9 * np.max(np.abs(want)))
+    # the attitude chain's correction at 0.94 rad/s is small but there: measured 0.76 % of the peak
+    assert np.max(np.abs(airframe - command)) > 0.002 * np.max(np.abs(command))
+    assert "disturbance airframe" in json.loads((tmp_path / "w" / "learning.json").read_text())["filters"]
+    capsys.readouterr()
+    assert main([*learn, "--design", str(tmp_path / "d"), "--disturbance", "wind", "--out", str(tmp_path / "x")]) == 2
+    assert "--disturbance would be ignored" in capsys.readouterr().err

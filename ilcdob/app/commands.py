@@ -1315,7 +1315,7 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
                     target: str | None = None, fleet: str | Path | None = None, design: str | Path | None = None,
                     method: str = "closed-form", bandwidth: object = "auto", on_limit: str = "clip",
                     overwrite: bool = False, argv: Sequence[str] | None = None,
-                    axis: str | None = None, fir_unattainable: str | None = None,
+                    axis: str | None = None, fir_unattainable: str | None = None, disturbance: str = "command",
                     progress: Progress | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """The next vehicle's learning signal from a recorded trial of the previous one (the paper's law).
 
@@ -1363,6 +1363,8 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     fir_unattainable : {"no-harm", "refuse"}, optional
         ``method="fir"`` without ``design``: :attr:`ilcdob.design.methods.fir.FIROptions.unattainable` (refused with
         ``design`` or another method).
+    disturbance : {"command", "airframe", "wind"}
+        Where the disturbance acts (:func:`ilcdob.design.pair.design_pair`); refused with ``design``.
     progress : callable, optional
         ``progress(done, total, what)`` at each step (the filters, the signal, the folder written).
 
@@ -1375,15 +1377,10 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     output = _Output("learn", out, overwrite, argv)
     output.check({"trial": trial, "--fleet": fleet, "--design": design})
     data, e, df_prev = columns.load(trial)
-    digest = None
     say(0, 2, f"the filters: {'from ' + str(design) if design is not None else 'designed from the fleet'}")
-    if design is not None:
-        _refuse_with_design(fleet=fleet, method=method, bandwidth=bandwidth, fir_unattainable=fir_unattainable)
-        filters, source, target, origin = _filters_of_folder(design, source, target, axis)
-    else:
-        filters, origin, digest = _filters_designed_here(
-            trial, data, e, df_prev, source=source, target=target, fleet=fleet, axis=axis, method=method,
-            bandwidth=bandwidth, on_limit=on_limit, fir_unattainable=fir_unattainable)
+    filters, source, target, origin, digest = _learn_filters(
+        design, trial, data, e, df_prev, source=source, target=target, fleet=fleet, axis=axis, method=method,
+        bandwidth=bandwidth, on_limit=on_limit, fir_unattainable=fir_unattainable, disturbance=disturbance)
     say(1, 2, f"the learning signal of {target} from {source}'s trial ({len(data)} samples)")
     d_f, report = _learning_signal(filters, origin, trial, data, e, df_prev, on_limit,
                                    f"learning signal of {target} from {source}")
@@ -1393,14 +1390,31 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     return d_f, summary
 
 
+def _learn_filters(design: str | Path | None, trial: str | Path, data: Any, e: np.ndarray, df_prev: np.ndarray, *,
+                   source: str | None, target: str | None, fleet: str | Path | None, axis: str | None, method: str,
+                   bandwidth: object, on_limit: str, fir_unattainable: str | None,
+                   disturbance: str) -> tuple[dict[str, Any], Any, Any, str, str | None]:
+    """The filters ``learn`` runs, with the pair, where they come from and the fleet file's SHA-256 (None for a
+    design folder): a folder's (the options that design here refused), else designed here from the fleet."""
+    if design is not None:
+        _refuse_with_design(fleet=fleet, method=method, bandwidth=bandwidth, fir_unattainable=fir_unattainable,
+                            disturbance=disturbance)
+        return (*_filters_of_folder(design, source, target, axis), None)
+    filters, origin, digest = _filters_designed_here(
+        trial, data, e, df_prev, source=source, target=target, fleet=fleet, axis=axis, method=method,
+        bandwidth=bandwidth, on_limit=on_limit, fir_unattainable=fir_unattainable, disturbance=disturbance)
+    return filters, source, target, origin, digest
+
+
 def _refuse_with_design(*, fleet: str | Path | None, method: str, bandwidth: object,
-                        fir_unattainable: str | None) -> None:
+                        fir_unattainable: str | None, disturbance: str = "command") -> None:
     """Refuse ``learn --design`` with the options that design here (its filters.json fixes filters and band)."""
     from ilcdob.design.methods import DEFAULT_METHOD
 
     ignored = [name for name, given in (("--fleet", fleet is not None), ("--method", method != DEFAULT_METHOD),
                                         ("--bandwidth", bandwidth != "auto"),
-                                        ("--fir-unattainable", fir_unattainable is not None)) if given]
+                                        ("--fir-unattainable", fir_unattainable is not None),
+                                        ("--disturbance", disturbance != "command")) if given]
     if ignored:
         raise SpecError(f"`--design`: its filters.json fixes the filters and their band; {', '.join(ignored)} "
                         "would be ignored: give either --design, or --fleet/--method/--bandwidth to design here")
@@ -1441,8 +1455,8 @@ def _filters_of_folder(design: str | Path, source: str | None, target: str | Non
 
 def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev: np.ndarray, *, source: str | None,
                            target: str | None, fleet: str | Path | None, axis: str | None, method: str,
-                           bandwidth: object, on_limit: str,
-                           fir_unattainable: str | None) -> tuple[dict[str, Any], str, str]:
+                           bandwidth: object, on_limit: str, fir_unattainable: str | None,
+                           disturbance: str = "command") -> tuple[dict[str, Any], str, str]:
     """The pair's filters designed from the fleet, the learning band fixed to the trial (``e``, m; ``df_prev``, m/s^2).
 
     Returns
@@ -1475,11 +1489,12 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
     chosen = method_named(method, "--method")
     if fir_unattainable is not None:
         chosen = chosen.configured(MethodSettings(fir=FIROptions(unattainable=fir_unattainable)))
-    made = design_pair(flt, source, target, chosen, band=bandwidth, on_limit=on_limit)
+    made = design_pair(flt, source, target, chosen, band=bandwidth, on_limit=on_limit, disturbance=disturbance)
     if made.choose is not None:
         _check_noise_samples(trial, e.size)
         made = design_with_band(made, made.band_for(e, df_prev))
-    return {**made.filters, "axis": axis or "x"}, f"designed here ({method})", digest
+    where = "" if disturbance == "command" else f", disturbance {disturbance}"
+    return {**made.filters, "axis": axis or "x"}, f"designed here ({method}{where})", digest
 
 
 def _learning_signal(filters: dict[str, Any], origin: str, trial: str | Path, data: Any, e: np.ndarray,

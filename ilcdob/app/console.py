@@ -285,7 +285,8 @@ def _learn(a: argparse.Namespace, argv: list[str], con: Console) -> int:
     _, summary = uc.learn_to_folder(a.out, a.trial, columns, source=a.source, target=a.target, fleet=a.fleet,
                                     design=a.design, method=a.method, bandwidth=a.bandwidth, on_limit=a.on_limit,
                                     overwrite=a.overwrite, argv=argv, axis=a.axis,
-                                    fir_unattainable=a.fir_unattainable, progress=con.progress)
+                                    fir_unattainable=a.fir_unattainable, disturbance=a.disturbance,
+                                    progress=con.progress)
     print(json.dumps({k: summary[k] for k in ("from", "to", "axis", "filters", "trial", "learning_signal", "limit")},
                      indent=2))
     con.note(f"wrote {a.out}")

@@ -358,6 +358,10 @@ def sample_time(text: str) -> float:
     return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a sample time, a number > 0 (s)")
 
 
+DISTURBANCE = flag("--disturbance", choices=("command", "airframe", "wind"), default="command",
+                   help="where the disturbance acts: added to the command (the paper's loop), on the airframe (adds "
+                        "the attitude-chain correction), or a wind velocity through each airframe's drag (also scales "
+                        "by the ratio of the models' drag poles)")
 RESAMPLE = flag("--resample", type=sample_time, metavar="TS",
                 help="resample every file to this sample time, s, anti-aliased (scipy.signal.resample_poly), e.g. "
                      "a log's rate to the fleet's (default: as logged)")
@@ -507,10 +511,7 @@ _DESIGN = Command(
         flag("--c-prefix", help="prefix of the C symbols (default: ilcdob_<from>_<to>_, then <axis>_ for y and z)"),
         flag("--c-float", action="store_true", help="also emit float C functions, with their measured error"),
         BANDWIDTH,
-        flag("--disturbance", choices=("command", "airframe", "wind"), default="command",
-             help="where the disturbance acts: added to the command (the paper's loop), on the airframe (adds the "
-                  "attitude-chain correction), or a wind velocity through each airframe's drag (also scales by the "
-                  "ratio of the models' drag poles)"),
+        DISTURBANCE,
         ON_LIMIT.but(help="a learning signal beyond the fleet's acceleration limit of --to: clip it (with a warning) "
                           "or refuse it (exit 1)")))
 
@@ -534,7 +535,7 @@ _LEARN = Command(
         flag("--reference", help="instead of --error: reference position, m (same forms)"),
         flag("--position", help="with --reference: measured position, m (same forms)"),
         flag("--learning", help="learning signal the trial flew, m/s^2 (default: none)"),
-        _clock("trial"), BANDWIDTH, ON_LIMIT))
+        _clock("trial"), BANDWIDTH, DISTURBANCE.but(help="without --design: " + DISTURBANCE.help), ON_LIMIT))
 
 _CHECK = Command(
     "check", "will learning help? per pair and frequency the exact worst case of the error ratio |e_j/e'_j| over the "
