@@ -189,10 +189,13 @@ def test_parquet_timestamp_time_column_and_errors(tmp_path):
 # ----------------------------------------------------------------------------- ULog
 
 def _raw_ulog(topic: str, field: str, instance: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """pyulog's samples of one field, time in s from the log's ``start_timestamp`` (the loader's clock)."""
     from pyulog import ULog
 
-    d = ULog(str(ULG), [topic]).get_dataset(topic, instance)
-    return d.data["timestamp"] * 1e-6, d.data[field].astype(float)
+    log = ULog(str(ULG), [topic])
+    d = log.get_dataset(topic, instance)
+    # signed: a topic may stamp a sample before start_timestamp (actuator_outputs here, by 3.8 ms)
+    return (d.data["timestamp"].astype(np.int64) - log.start_timestamp) * 1e-6, d.data[field].astype(float)
 
 
 def test_ulog_real_log_matches_raw_topics():
@@ -202,8 +205,10 @@ def test_ulog_real_log_matches_raw_topics():
     assert fd.units == {"z": "m", "thrust": ""}
     tz, z = _raw_ulog("vehicle_local_position", "z")
     tt, thr = _raw_ulog("vehicle_attitude_setpoint", "thrust_body[2]")
-    # pinned from the upstream file (pyulog 1.3.0): 636 position samples starting at 20321827 us
-    assert z.size == 636 and tz[0] == pytest.approx(20.321827, abs=1e-12)
+    # pinned from the upstream file (pyulog 1.3.0): 636 position samples starting at 20321827 us, the log at
+    # 20309082 us (start_timestamp, kept in the metadata): 0.012745 s into the log
+    assert z.size == 636 and tz[0] == pytest.approx(0.012745, abs=1e-12)
+    assert fd.metadata["start_timestamp_s"] == pytest.approx(20.309082, abs=1e-12)
     # grid: overlap of both topics, finest median step (the ~100 Hz position topic)
     assert fd.t[0] == pytest.approx(max(tz[0], tt[0]), abs=1e-12)
     assert fd.ts == pytest.approx(np.median(np.diff(tz)), rel=1e-12)
@@ -216,13 +221,13 @@ def test_ulog_real_log_matches_raw_topics():
 
 def test_ulog_multi_instance_and_segment():
     fd = load_ulog(ULG, {"o0": "actuator_outputs.output[0]", "o1": "actuator_outputs:1.output[0]"},
-                   ts=0.05, start=22.0, stop=25.0)
+                   ts=0.05, start=1.7, stop=4.7)  # s from the log's start
     t0, x0 = _raw_ulog("actuator_outputs", "output[0]", 0)
     t1, x1 = _raw_ulog("actuator_outputs", "output[0]", 1)
     assert not np.allclose(x0[:20], x1[:20])          # the two instances really differ
-    # the grid is anchored at start: 22.00, 22.05, ..., 25.00 s
+    # the grid is anchored at start: 1.70, 1.75, ..., 4.70 s
     assert fd.ts == pytest.approx(0.05) and len(fd) == 61
-    np.testing.assert_allclose(fd.t, 22.0 + 0.05 * np.arange(61), atol=1e-9)
+    np.testing.assert_allclose(fd.t, 1.7 + 0.05 * np.arange(61), atol=1e-9)
     np.testing.assert_allclose(fd["o0"], np.interp(fd.t, t0, x0), atol=1e-9)
     np.testing.assert_allclose(fd["o1"], np.interp(fd.t, t1, x1), atol=1e-9)
 
@@ -249,7 +254,7 @@ def test_ulog_corrupt_truncated_and_empty_window(tmp_path):
     with pytest.raises(SignalError, match=r"cut\.ulg: signal `y`: .*no logged data"):
         load_ulog(cut, {"y": "vehicle_local_position.z"})
     with pytest.raises(SignalError, match=r"signal `y` \(vehicle_local_position\.z\): empty selection.*"
-                                          r"data span 20\.321827 to 26\.817979 s"):  # to the us: typed back as --start
+                                          r"data span 0\.012745 to 6\.508897 s"):  # to the us: typed back as --start
         load_ulog(ULG, {"y": "vehicle_local_position.z"}, start=100.0, stop=200.0)
 
 

@@ -24,9 +24,9 @@ Modules
 
 Conventions
 -----------
-Time is in s on the log's own clock (seconds since boot for ULog and DataFlash, the time
-column as written for CSV/Parquet); it is **not** shifted to start at zero, so ``start`` and
-``stop`` (s) are read on that same clock. Signals from topics or message types logged at
+Time is in s: for ULog from the log's start (``timestamp - start_timestamp``, the absolute origin kept in
+``metadata["start_timestamp_s"]``), for DataFlash since boot (its ``TimeUS`` clock), for CSV/Parquet the time
+column as written; ``start`` and ``stop`` (s) are read on that same clock. Signals from topics or message types logged at
 different rates are linearly interpolated onto one grid whose step is the finest median
 step among them (or ``ts`` when given) and which spans the time all of them overlap
 (:meth:`FlightData.from_samples`). Table sources (CSV, Parquet) keep their own samples when

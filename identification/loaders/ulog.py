@@ -1,9 +1,11 @@
 """PX4 ULog loader (:func:`load_ulog`, via pyulog).
 
 Signals are addressed as ``"topic.field"`` (``"topic:instance.field"`` for a topic
-logged in several instances). Time is in s since boot (the ULog ``timestamp`` clock, µs /
-1e6); it is **not** shifted to start at zero, so ``start`` and ``stop`` are read on that
-same clock. Topics logged at different rates are linearly interpolated onto one grid whose
+logged in several instances). Time is in s since the log's start: the ULog ``timestamp`` clock (µs since
+boot, or since the epoch on some logs) less the file's ``start_timestamp``, which ``metadata`` keeps in s
+(``start_timestamp_s``); ``start`` and ``stop`` are read on that clock, so a window is typed as seen in a log
+viewer that counts from the start. A topic may log a few samples stamped just before ``start_timestamp``
+(negative times of a few ms). Topics logged at different rates are linearly interpolated onto one grid whose
 step is the finest median step among them (or ``ts`` when given) and which spans the time
 all of them overlap; with ``start`` the grid starts exactly there when every selected
 signal has data at that time (``t = start + k ts``). Units come from a small table of
@@ -139,12 +141,13 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
     ts : float, optional
         Sample time of the common grid, s; default the finest median step of the topics.
     start, stop : float, optional
-        Keep ``start <= t <= stop``, s since boot (the ULog ``timestamp`` clock).
+        Keep ``start <= t <= stop``, s since the log's start (``timestamp - start_timestamp``).
 
     Returns
     -------
     FlightData
-        Time in s since boot (``timestamp`` in µs / 1e6). ``metadata`` holds ``format``,
+        Time in s since the log's start (``(timestamp - start_timestamp)`` in µs / 1e6). ``metadata`` holds
+        ``start_timestamp_s`` (the absolute origin), ``format``,
         ``fields``, the original topic rates, the vehicle/software info strings, the
         ``dropouts`` (count, total ms), pyulog's ``file_corruption`` flag and ``parser_reports``
         (lines pyulog printed about damaged messages, swallowed).
@@ -187,7 +190,7 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
             present = [f for f in d.data if f != "timestamp"]
             raise SignalError(f"{source}: signal `{name}`: topic {label!r} has no field {field!r}; "
                               f"fields: {listing(present)}")
-        t = np.asarray(d.data["timestamp"], dtype=float) * 1e-6
+        t = (np.asarray(d.data["timestamp"], dtype=float) - ulog.start_timestamp) * 1e-6  # s from the log's start
         x = np.asarray(d.data[field], dtype=float)
         series[name] = (t, x)
         what[name] = f"signal `{name}` ({label}.{field})"
@@ -197,7 +200,7 @@ def load_ulog(path: str | os.PathLike, fields: Mapping[str, str] | Sequence[str]
             if k in ("sys_name", "ver_hw", "ver_sw", "ver_sw_release", "sys_uuid", "sys_os_name")}
     drop_ms = [float(getattr(dr, "duration", 0.0)) for dr in ulog.dropouts]
     meta = {"format": "ulog", "fields": dict(spec), "info": info,
-            "start_timestamp_s": ulog.start_timestamp * 1e-6,
+            "start_timestamp_s": ulog.start_timestamp * 1e-6, "time": "s since the log's start (start_timestamp_s)",
             "dropouts": {"count": len(drop_ms), "total_ms": float(sum(drop_ms))},
             "file_corruption": bool(ulog.file_corruption), "parser_reports": printed.lines}
     return from_series(series, what, sig_units, meta, ts, start, stop, source)
