@@ -481,3 +481,16 @@ def test_the_report_shows_a_run_on_the_vehicles_own_controllers(tmp_path):
     (broken / "results.json").write_text(json.dumps(data))
     with pytest.raises(ReportError, match='key "runs\\[0\\].ratios"'):
         build_report([broken])
+
+
+def test_the_report_names_each_section_as_it_renders_it(paper_dir, json_dirs, tmp_path):
+    """``report`` takes seconds per section (figures embedded): the progress names each of them once, in the
+    order they appear; the HTML is the same with or without it."""
+    from ilcdob.app.html import build_report
+
+    seen = []
+    with_progress = build_report([paper_dir, *json_dirs], progress=lambda *step: seen.append(step))
+    assert [d for d, _, _ in seen] == list(range(len(seen))) and all(t == len(seen) for _, t, _ in seen)
+    assert seen[0][2] == "report section: fleet and identified models"
+    assert seen[-1][2] == "report section: campaign statistics"
+    assert with_progress == build_report([paper_dir, *json_dirs])

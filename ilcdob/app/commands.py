@@ -1879,7 +1879,7 @@ def add_to_fleet(fleet_file: str | Path, name: str, model: str | Path, controlle
     return add_system(fleet_file, name, model, controller, dob, sample_time=sample_time, limits=limits, sensor=sensor)
 
 
-def report_to_html(dirs: Sequence[str | Path], out: str | Path) -> Path:
+def report_to_html(dirs: Sequence[str | Path], out: str | Path, progress: Progress | None = None) -> Path:
     """One self-contained HTML report from output folders of reproduce, compare and campaign.
 
     Parameters
@@ -1888,10 +1888,12 @@ def report_to_html(dirs: Sequence[str | Path], out: str | Path) -> Path:
         Output folders.
     out : str or Path
         HTML file to write (atomically).
+    progress : callable, optional
+        ``progress(done, total, what)`` per section.
 
     Returns
     -------
     Path
     """
     check_output_path(out, folder=False, inputs={"folder": list(dirs)})
-    return write_file(out, build_report(dirs))
+    return write_file(out, build_report(list(dirs), progress=progress))

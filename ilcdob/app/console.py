@@ -485,7 +485,7 @@ def _fleet(a: argparse.Namespace, argv: list[str], con: Console) -> int:
 
 
 def _report(a: argparse.Namespace, argv: list[str], con: Console) -> int:
-    con.note(f"wrote {uc.report_to_html(a.dirs, a.out)}")
+    con.note(f"wrote {uc.report_to_html(a.dirs, a.out, progress=con.progress)}")
     return 0
 
 

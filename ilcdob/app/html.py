@@ -72,6 +72,7 @@ import io
 import json
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -1220,7 +1221,8 @@ def _left_out(section: _Section) -> str:
             + (f" (<code>{html_text(command.group(1))}</code>)" if command else f" ({html_text(section.expected)})"))
 
 
-def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -> str:
+def build_report(dirs: list[str | Path], options: ReportOptions | None = None,
+                 progress: Callable[[int, int, str], None] | None = None) -> str:
     """The HTML text of the report of the folders ``dirs`` (see the module docstring).
 
     Parameters
@@ -1228,6 +1230,8 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
     dirs : list of str or Path
         Output folders of ``ilcdob reproduce``, ``ilcdob compare`` and ``ilcdob campaign``.
     options : ReportOptions, optional
+    progress : callable, optional
+        ``progress(done, total, what)`` before each section is rendered (figures are embedded as they come).
 
     Returns
     -------
@@ -1248,11 +1252,19 @@ def build_report(dirs: list[str | Path], options: ReportOptions | None = None) -
                     if (r.folder / "fleet.json").is_file() else None for r in inputs.results]
     theorems = [_read_theorem(r.folder) for r in inputs.results]
     reproduce_cmd = f"results.json from `{KNOWN_FILES['results.json']}`"
-    sections = [_fleet_section(inputs.results, fleet_tables, reproduce_cmd),
-                _bode_section(inputs.results, reproduce_cmd),
-                *(_plant_section_of(inputs.results, plant) for plant in PLANTS),
-                _theorem_section(inputs.results, theorems, reproduce_cmd), _own_section(list(inputs.own)),
-                _compare_section(inputs.compare), _campaign_section(inputs.campaign)]
+    makers = [("fleet and identified models", lambda: _fleet_section(inputs.results, fleet_tables, reproduce_cmd)),
+              ("Bode figures", lambda: _bode_section(inputs.results, reproduce_cmd)),
+              *((f"the {plant} plant", lambda plant=plant: _plant_section_of(inputs.results, plant))
+                for plant in PLANTS),
+              ("the Theorem check", lambda: _theorem_section(inputs.results, theorems, reproduce_cmd)),
+              ("vehicles on their own controllers", lambda: _own_section(list(inputs.own))),
+              ("design comparison", lambda: _compare_section(inputs.compare)),
+              ("campaign statistics", lambda: _campaign_section(inputs.campaign))]
+    sections = []
+    for k, (what, make) in enumerate(makers):
+        if progress is not None:
+            progress(k, len(makers), f"report section: {what}")
+        sections.append(make())
     return _document(sections, list(inputs.provenance), options.title)
 
 
