@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ilcdob.display import html_table, polynomial_text as _poly
+from ilcdob.display import html_table, polynomial_text as _poly, time_text
 from ilcdob.signals import FlightData
 from ilcdob.specs import IdentificationSpec
 from ilcdob.uncertainty import ModelStructure, frequency_response, multiplicative_bound
@@ -436,8 +436,7 @@ class TFEstimate:
 
     def _repr_html_(self) -> str:
         std = np.sqrt(np.clip(np.diag(np.asarray(self.covariance)), 0.0, None))
-        names = [f"a{i}" for i in range(self.structure.n_free_poles - 1, -1, -1)] + \
-                [f"b{i}" for i in range(self.structure.n_zeros, -1, -1)] + (["delay (s)"] if self.delay_estimated else [])
+        names = self.structure.parameter_names + (["delay (s)"] if self.delay_estimated else [])
         values = [*np.asarray(self.theta, float), *([self.delay] if self.delay_estimated else [])]
         rows = [[n, float(v), float(e)] for n, v, e in zip(names, values, std)]
         rows += [["fit estimation (%)", self.fit_estimation, ""],
@@ -450,10 +449,7 @@ class TFEstimate:
         """Human-readable summary (parameters with 1-sigma, fit, residual tests)."""
         lines = [f"G(s) = ({_poly(self.num)}) / ({_poly(self.den)})"
                  + (f" * exp(-{self.delay:.4g} s)" if self.delay else "")]
-        names = [f"a{i}" for i in range(self.structure.n_free_poles - 1, -1, -1)] + \
-                [f"b{j}" for j in range(self.structure.n_zeros, -1, -1)]
-        if self.delay_estimated:
-            names.append("delay")
+        names = self.structure.parameter_names + (["delay"] if self.delay_estimated else [])
         vals = list(self.theta) + ([self.delay] if self.delay_estimated else [])
         for nme, v, sd in zip(names, vals, self.std):
             lines.append(f"  {nme:>5} = {v: .6g} +- {sd:.3g} (1 sigma)")
@@ -671,8 +667,8 @@ def fit_diagnostics(est: TFEstimate) -> list[str]:
 
 def _held_note(where: dict, held: dict, ts: float, fate: str) -> str:
     """The note of a held-input segment (:mod:`.held`): where, the held value, and what was done with it."""
-    t0, t1 = where["first"] * ts, where["last"] * ts
-    return (f"samples {where['first']}-{where['last']} of {where['source']} (t = {t0:.6g} to {t1:.6g} s from its "
+    t0, t1 = time_text(where["first"] * ts), time_text(where["last"] * ts)
+    return (f"samples {where['first']}-{where['last']} of {where['source']} (t = {t0} to {t1} s from its "
             f"start): the input is held at {held['value']:.6g} (its {held['extreme']}) while the output does not "
             f"follow: a landed or saturated segment (the vehicle on the ground, a setpoint at its limit), not a "
             f"glitch; these samples {fate}")

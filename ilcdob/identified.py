@@ -203,8 +203,7 @@ class IdentifiedModel:
                 f"({polynomial_text(self.den, 4)}){delay}; Ts {self.sample_time:g} s{held}>")
 
     def _repr_html_(self) -> str:
-        names = [f"a{i}" for i in range(self.poles - self.integrators - 1, -1, -1)] + \
-                [f"b{i}" for i in range(self.zeros, -1, -1)] + (["delay (s)"] if self.delay_estimated else [])
+        names = self.structure.parameter_names + (["delay (s)"] if self.delay_estimated else [])
         values = [*self.parameters, *([self.delay] if self.delay_estimated else [])]
         rows = [[n, float(v), float(e)] for n, v, e in zip(names, values, self.std)]
         rows += [["fit estimation (%)", self.fit_estimation, ""], ["fit held-out (%)", self.fit_validation, ""],

@@ -75,6 +75,11 @@ class ModelStructure:
         """Number of transfer-function parameters (free denominator + numerator)."""
         return self.n_free_poles + self.n_zeros + 1
 
+    @property
+    def parameter_names(self) -> list[str]:
+        """Names of the parameters in their order: ``a_{k-1} .. a0`` (free denominator), then ``b_m .. b0``."""
+        return [f"a{i}" for i in range(self.n_free_poles - 1, -1, -1)] + [f"b{i}" for i in range(self.n_zeros, -1, -1)]
+
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Parameters -> polynomials.
 

@@ -1023,9 +1023,8 @@ def _design_trial(o: DesignOptions, chosen: Any, flt: Fleet) -> Any:
             "a": ("acceleration", "m/s^2")}
     _check_trial_values(o.trial, {f"{what[key][0]} (column `{column}`)": (data[key], what[key][1])
                                   for key, column in columns.items()})
-    if abs(data.ts - flt.sample_time) > 1e-9:
-        raise SignalError(f"{o.trial}: sample time {data.ts:g} s differs from the fleet's {flt.sample_time:g} s; "
-                          "log the trial at the fleet's rate (or resample it to that rate first)")
+    _check_trial_rate(o.trial, data.ts, flt.sample_time, "the fleet's",
+                      "log the trial at the fleet's rate (or resample it to that rate first)")
     if o.n is not None and o.n != len(data):
         raise SpecError(f"`--n`: got {o.n}, but the trial {o.trial} has {len(data)} samples; the learning signal is "
                         f"computed for the whole trial, so its matrices must be {len(data)} long: omit --n or give "
@@ -1390,6 +1389,12 @@ def learn_to_folder(out: str | Path, trial: str | Path, columns: TrialColumns, *
     return d_f, summary
 
 
+def _check_trial_rate(trial: str | Path, got: float, want: float, whose: str, remedy: str) -> None:
+    """SignalError naming both sample times (s) and ``remedy`` where a trial's differs from ``whose``."""
+    if abs(got - want) > 1e-9:
+        raise SignalError(f"{trial}: sample time {got:g} s differs from {whose} {want:g} s; {remedy}")
+
+
 def _learn_filters(design: str | Path | None, trial: str | Path, data: Any, e: np.ndarray, df_prev: np.ndarray, *,
                    source: str | None, target: str | None, fleet: str | Path | None, axis: str | None, method: str,
                    bandwidth: object, on_limit: str, fir_unattainable: str | None,
@@ -1483,9 +1488,8 @@ def _filters_designed_here(trial: str | Path, data: Any, e: np.ndarray, df_prev:
     if fir_unattainable is not None and fir_unattainable not in UNATTAINABLE:
         raise SpecError(f"`--fir-unattainable`: got {fir_unattainable!r}, expected one of {list(UNATTAINABLE)}")
     flt, digest = fleet_and_hash(fleet, axis or "x")
-    if abs(data.ts - flt.sample_time) > 1e-9:
-        raise SignalError(f"{trial}: sample time {data.ts:g} s differs from the fleet's {flt.sample_time:g} s; "
-                          f"resample the trial to the fleet's rate (--resample {flt.sample_time:g})")
+    _check_trial_rate(trial, data.ts, flt.sample_time, "the fleet's",
+                      f"resample the trial to the fleet's rate (--resample {flt.sample_time:g})")
     chosen = method_named(method, "--method")
     if fir_unattainable is not None:
         chosen = chosen.configured(MethodSettings(fir=FIROptions(unattainable=fir_unattainable)))
@@ -1525,9 +1529,8 @@ def _learning_signal(filters: dict[str, Any], origin: str, trial: str | Path, da
                         "`ilcdob learn` computes the paper's law from L1/L2 filters (closed-form or fir designs) "
                         "or from a robust-set design's `law_maps`")
     ts = float(filters["sample_time"])
-    if abs(data.ts - ts) > 1e-9:
-        raise SignalError(f"{trial}: sample time {data.ts:g} s differs from the filters' {ts:g} s; resample the trial "
-                          f"to the design's rate (--resample {ts:g}) or design at the trial's")
+    _check_trial_rate(trial, data.ts, ts, "the filters'",
+                      f"resample the trial to the design's rate (--resample {ts:g}) or design at the trial's")
     d_f = apply_learning(filters, e, df_prev)
     limit = (filters.get("limit") or {}).get("acceleration_m_s2")
     return enforce_limit(d_f, None if limit is None else LimitSpec(acceleration=float(limit)), on_limit, what)

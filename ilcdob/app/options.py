@@ -99,6 +99,17 @@ def relative_bound(text: str) -> float:
     return _number(text, float, lambda v: 0 < v < 1, "a relative error in (0, 1), e.g. 0.3 for 30 %")
 
 
+def sample_time(text: str) -> float:
+    """A sample time, s: a finite number > 0.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        ``text`` is not such a number.
+    """
+    return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a sample time, a number > 0 (s)")
+
+
 def fit_percent(text: str) -> float:
     """A fit in %: a finite number <= 100 (100: a perfect fit; below 0: worse than the output's mean).
 
@@ -345,17 +356,6 @@ def flags_of(command: Command) -> list[Flag]:
 TIME = flag("--time", help="time column of CSV/Parquet files (default: time)")
 TIME_UNIT = flag("--time-unit", choices=("s", "ms", "us", "ns"),
                  help="unit of that column (default: the file's '# units:' line, else s)")
-
-
-def sample_time(text: str) -> float:
-    """A sample time, s: a finite number > 0.
-
-    Raises
-    ------
-    argparse.ArgumentTypeError
-        ``text`` is not such a number.
-    """
-    return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a sample time, a number > 0 (s)")
 
 
 DISTURBANCE = flag("--disturbance", choices=("command", "airframe", "wind"), default="command",
